@@ -1,0 +1,38 @@
+# Two commands: `make demo` and `make test`. Both set up .venv (CPython 3.11) first.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+OUT    ?= runs/demo
+
+.PHONY: setup demo test lint bench bench-smoke clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml requirements.lock
+	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "swarm-sitl needs CPython 3.11 (pybullet 3.2.7 has wheels only up to 3.11); set PYTHON=/path/to/python3.11")'
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --only-binary :all: -r requirements.lock
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/swarm-sitl run hil_configs/demo.toml --out $(OUT)
+
+test: $(STAMP)
+	$(BIN)/ruff check bridge firmware_sim swarm_logic tests
+	$(BIN)/lint-imports
+	$(BIN)/python -m pytest -n 2 -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check bridge firmware_sim swarm_logic tests
+	$(BIN)/lint-imports
+
+bench: $(STAMP)
+	$(BIN)/swarm-sitl bench
+
+bench-smoke: $(STAMP)
+	$(BIN)/swarm-sitl bench --quick
+
+clean:
+	rm -rf $(VENV) runs build *.egg-info .pytest_cache .ruff_cache

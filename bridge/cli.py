@@ -1,0 +1,130 @@
+"""``swarm-sitl``: run, validate, benchmark and inspect SITL sessions."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from bridge.config import ConfigError, load_config
+
+
+def _speed(v: str) -> float | str:
+    if v == "max":
+        return "max"
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--speed: expected a positive number or 'max', got {v!r}") from None
+    if f <= 0:
+        raise argparse.ArgumentTypeError("--speed must be > 0")
+    return f
+
+
+def _overrides(a: argparse.Namespace) -> dict[str, Any]:
+    return {
+        "robots.count": a.robots,
+        "session.duration_s": a.duration,
+        "session.seed": a.seed,
+        "session.speed": a.speed,
+        "session.robots_per_process": a.robots_per_process,
+    }
+
+
+def cmd_run(a: argparse.Namespace) -> int:
+    from bridge.launcher import run_session
+
+    out = a.out or f"runs/{Path(a.config).stem}"
+    res = run_session(a.config, _overrides(a), out, progress=None if a.quiet else sys.stderr)
+    if res.summary.get("error"):
+        print(res.summary["error"].strip().splitlines()[-1], file=sys.stderr)
+    return res.code
+
+
+def cmd_validate(a: argparse.Namespace) -> int:
+    from bridge.plan import make_plan
+
+    cfg = load_config(a.config, _overrides(a))
+    plan = make_plan(cfg, a.config)
+    print(f"{a.config}: ok: {len(plan.robots)} robots, {len(plan.procs) + 1} processes, "
+          f"{cfg.session.duration_s} s at quantum {cfg.session.quantum_ms} ms, seed {cfg.session.seed}")
+    return 0
+
+
+def cmd_digest(a: argparse.Namespace) -> int:
+    from bridge.recorder import file_digest
+
+    d, n = file_digest(a.recording)
+    print(json.dumps({"digest": d, "messages": n}))
+    return 0
+
+
+def cmd_plot(a: argparse.Namespace) -> int:
+    from bridge.plan import Plan
+    from bridge.plot import plot_session
+
+    rec = Path(a.recording)
+    plan = Plan.from_json(json.loads((rec.parent / "plan.json").read_text()))
+    out = a.out or str(rec.with_name("trajectories.png"))
+    plot_session(rec, plan, out)
+    print(out)
+    return 0
+
+
+def cmd_bench(a: argparse.Namespace) -> int:
+    from bridge.bench import run_bench
+
+    return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+
+    def session_args(p: argparse.ArgumentParser) -> None:
+        p.add_argument("config", help="session config (TOML), e.g. hil_configs/demo.toml")
+        p.add_argument("--robots", type=int, help="robot count (configs with one [[robots]] group)")
+        p.add_argument("--duration", type=float, help="simulated seconds")
+        p.add_argument("--seed", type=int)
+        p.add_argument("--speed", type=_speed, help="real-time factor to pace to, or 'max'")
+        p.add_argument("--robots-per-process", type=int, help="pack K robots into each firmware/logic process")
+
+    p = sub.add_parser("run", help="run one session")
+    session_args(p)
+    p.add_argument("--out", help="output directory (default runs/<config name>)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(fn=cmd_run)
+
+    p = sub.add_parser("validate", help="check a config without running it")
+    session_args(p)
+    p.set_defaults(fn=cmd_validate)
+
+    p = sub.add_parser("bench", help="real-time factor and barrier cost at several robot counts and packings")
+    p.add_argument("--quick", action="store_true", help="a small smoke subset (for CI)")
+    p.add_argument("--duration", type=float, help="simulated seconds per case")
+    p.add_argument("--out", default="runs/bench")
+    p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    p.set_defaults(fn=cmd_bench)
+
+    p = sub.add_parser("digest", help="recompute the digest of a recording")
+    p.add_argument("recording")
+    p.set_defaults(fn=cmd_digest)
+
+    p = sub.add_parser("plot", help="draw trajectories.png from a recording (plan.json beside it)")
+    p.add_argument("recording")
+    p.add_argument("--out")
+    p.set_defaults(fn=cmd_plot)
+
+    a = ap.parse_args(argv)
+    try:
+        code = a.fn(a)
+    except ConfigError as e:
+        print(f"config error: {e}", file=sys.stderr)
+        code = 2
+    sys.exit(code)
+
+
+if __name__ == "__main__":
+    main()

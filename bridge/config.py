@@ -1,0 +1,235 @@
+"""Session configuration: TOML files in ``hil_configs/``, validated with pydantic.
+
+Every error names the file, the field and the reason, e.g.
+``hil_configs/demo.toml: robots[0].count: Input should be greater than 0``.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from bridge.profiles import PROFILES, RobotProfile
+
+
+class ConfigError(Exception):
+    """A config that cannot be used; the message names file, field and reason."""
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=False)
+
+
+class SessionCfg(_Model):
+    name: str = "session"
+    duration_s: float = Field(60.0, gt=0, le=30 * 24 * 3600)
+    seed: int = Field(1, ge=0, lt=2**63)
+    quantum_ms: float = Field(10.0, gt=0, le=1000)
+    speed: float | Literal["max"] = "max"
+    robots_per_process: int = Field(1, ge=1)
+    on_robot_failure: Literal["continue", "stop"] = "continue"
+    hang_timeout_s: float = Field(20.0, gt=0, description="wall seconds a process may take for one quantum")
+    startup_timeout_s: float = Field(120.0, gt=0)
+    poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
+
+    @field_validator("speed")
+    @classmethod
+    def _speed_positive(cls, v: float | str) -> float | str:
+        if v != "max" and not (isinstance(v, float | int) and v > 0):
+            raise ValueError('must be a positive number or "max"')
+        return v
+
+    @property
+    def quantum_ns(self) -> int:
+        return round(self.quantum_ms * 1e6)
+
+
+class WorldCfg(_Model):
+    physics_hz: float = Field(240.0, gt=0, le=10000)
+    solver_iterations: int = Field(10, ge=1, le=200)
+
+
+class ArenaCfg(_Model):
+    width_m: float = Field(10.0, gt=0, le=1000, description="extent along x")
+    length_m: float = Field(20.0, gt=0, le=1000, description="extent along y")
+    wall_height_m: float = Field(0.5, gt=0)
+    wall_thickness_m: float = Field(0.1, gt=0)
+    map: str | None = Field(None, description="monochrome bitmap, dark pixels are obstacles")
+    map_resolution_m: float = Field(0.05, gt=0, description="metres per map pixel")
+    map_threshold: int = Field(128, ge=1, le=255)
+
+
+class BoxObstacle(_Model):
+    type: Literal["box"]
+    x: float
+    y: float
+    size: tuple[float, float, float] = Field(description="full extents x, y, z in metres")
+    yaw_deg: float = 0.0
+
+    @field_validator("size")
+    @classmethod
+    def _positive(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if min(v) <= 0:
+            raise ValueError("all extents must be > 0")
+        return v
+
+
+class CylinderObstacle(_Model):
+    type: Literal["cylinder"]
+    x: float
+    y: float
+    radius: float = Field(gt=0)
+    height: float = Field(0.5, gt=0)
+
+
+Obstacle = Annotated[BoxObstacle | CylinderObstacle, Field(discriminator="type")]
+
+
+class LightSource(_Model):
+    """A light spot: illuminance adds a Gaussian of ``peak_lux`` and ``sigma_m`` to the ambient."""
+
+    x: float
+    y: float
+    peak_lux: float = Field(gt=0)
+    sigma_m: float = Field(gt=0)
+
+
+class LightCfg(_Model):
+    ambient_lux: float = Field(50.0, ge=0)
+    sources: list[LightSource] = []
+
+
+class Placement(_Model):
+    kind: Literal["grid", "random", "explicit"] = "grid"
+    origin: tuple[float, float] = (1.0, 1.0)
+    spacing_m: float = Field(0.5, gt=0)
+    columns: int = Field(5, ge=1)
+    region: tuple[float, float, float, float] | None = Field(
+        None, description="x_min, y_min, x_max, y_max for random placement (default: whole arena)"
+    )
+    min_separation_m: float = Field(0.3, gt=0)
+    poses: list[tuple[float, float, float]] = Field([], description="explicit [x, y, yaw_deg] per robot")
+    yaw_deg: float | Literal["random"] = "random"
+
+
+class RobotGroup(_Model):
+    profile: str = "eswarbot"
+    count: int = Field(1, ge=1, le=10000)
+    behaviour: str = "random_walk"
+    params: dict[str, Any] = {}
+    placement: Placement = Placement()
+
+    @field_validator("profile")
+    @classmethod
+    def _known_profile(cls, v: str) -> str:
+        if v not in PROFILES:
+            raise ValueError(f"unknown robot profile {v!r}; known: {', '.join(sorted(PROFILES))}")
+        return v
+
+
+class Config(_Model):
+    session: SessionCfg = SessionCfg()
+    world: WorldCfg = WorldCfg()
+    arena: ArenaCfg = ArenaCfg()
+    obstacles: list[Obstacle] = []
+    light: LightCfg = LightCfg()
+    robots: list[RobotGroup] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _quantum_fits_physics(self) -> Config:
+        steps = self.session.quantum_ms * 1e-3 * self.world.physics_hz
+        if steps < 1 - 1e-9:
+            raise ValueError(
+                f"session.quantum_ms = {self.session.quantum_ms} is shorter than one physics step "
+                f"(world.physics_hz = {self.world.physics_hz})"
+            )
+        return self
+
+    @property
+    def robot_count(self) -> int:
+        return sum(g.count for g in self.robots)
+
+    def profile(self, group: RobotGroup) -> RobotProfile:
+        return PROFILES[group.profile]
+
+
+def _loc(loc: tuple[Any, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("box", "cylinder", "function-after[_positive(), tuple[float, float, float]]"):
+            continue  # discriminator tags add nothing for a reader
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def _format(path: str, err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        msg = e["msg"].removeprefix("Value error, ")
+        lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+    return "\n".join(lines)
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
+    """Read and validate ``path``; ``overrides`` are command-line values (``session.seed`` etc.)."""
+    p = Path(path)
+    try:
+        raw = tomllib.loads(p.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{p}: not valid TOML: {e}") from None
+    for dotted, value in (overrides or {}).items():
+        if value is None:
+            continue
+        if dotted == "robots.count":
+            groups = raw.get("robots", [])
+            if len(groups) != 1:
+                raise ConfigError(f"{p}: robots: --robots needs exactly one [[robots]] group, found {len(groups)}")
+            groups[0]["count"] = value
+            continue
+        section, key = dotted.split(".")
+        raw.setdefault(section, {})[key] = value
+    try:
+        cfg = Config.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(_format(str(p), e)) from None
+    base = p.parent
+    if cfg.arena.map is not None:
+        mp = (base / cfg.arena.map).resolve()
+        if not mp.is_file():
+            raise ConfigError(f"{p}: arena.map: no such file {cfg.arena.map!r} (relative to the config)")
+        cfg.arena.map = str(mp)
+    _check_geometry(str(p), cfg)
+    return cfg
+
+
+def _check_geometry(path: str, cfg: Config) -> None:
+    w, length = cfg.arena.width_m, cfg.arena.length_m
+    for i, ob in enumerate(cfg.obstacles):
+        if not (0 <= ob.x <= w and 0 <= ob.y <= length):
+            raise ConfigError(f"{path}: obstacles[{i}]: centre ({ob.x}, {ob.y}) is outside the {w} x {length} m arena")
+    for i, light in enumerate(cfg.light.sources):
+        if not (math.isfinite(light.x) and math.isfinite(light.y)):
+            raise ConfigError(f"{path}: light.sources[{i}]: position must be finite")
+    for i, g in enumerate(cfg.robots):
+        pl = g.placement
+        if pl.kind == "explicit":
+            if len(pl.poses) != g.count:
+                raise ConfigError(
+                    f"{path}: robots[{i}].placement.poses: {len(pl.poses)} poses for count = {g.count}"
+                )
+            for j, (x, y, _) in enumerate(pl.poses):
+                if not (0 < x < w and 0 < y < length):
+                    raise ConfigError(f"{path}: robots[{i}].placement.poses[{j}]: ({x}, {y}) is outside the arena")
+        if pl.region is not None:
+            x0, y0, x1, y1 = pl.region
+            if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= length):
+                raise ConfigError(f"{path}: robots[{i}].placement.region: must lie inside the arena with x0<x1, y0<y1")

@@ -1,0 +1,384 @@
+"""The world process: clock authority, message router, physics and recorder of a session.
+
+One quantum k (time t = k * q) flows like this:
+
+1. deliver what is due at t: CAN frames that finished on a bus, LLC pin writes of quantum k-1; record
+   each (sim-time order, canonical order within a time);
+2. find the entities due at t: their wake time has come, or a message arrived and they wait on messages;
+3. send each process hosting a due entity one ``tick`` with the entities' inputs (LLC: the physical
+   sensor values at t and the frames delivered to it; logic: the frames delivered to it);
+4. step physics from t to t+q while the processes compute;
+5. wait for every ticked process's ``done`` (a process that dies, hangs or raises becomes a failed
+   robot, handled by the failure policy);
+6. offer the outputs to the media: frames go on the robot's CAN bus and arrive at k+1 or later, pin
+   writes take effect at k+1.
+
+Nothing produced in quantum k is seen before k+1, and every delivery is ordered by time, bus and wire
+order, so the recording does not depend on process packing, speed or machine load.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import queue
+import signal
+import statistics
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bridge import transport
+from bridge.can_medium import CanMedium
+from bridge.config import Config
+from bridge.plan import Plan, entity, robot_of
+from bridge.profiles import PROFILES
+from bridge.recorder import Recorder
+from bridge.world import World
+from swarm_logic.interfaces import eswarbot_llc_db
+
+
+class Hub:
+    def __init__(self, plan: Plan, session_dir: str, out_dir: str, namespace: str) -> None:
+        self.plan = plan
+        self.cfg = cfg = Config.model_validate(plan.config)
+        self.q_ns = cfg.session.quantum_ns
+        self.end_ns = -(-round(cfg.session.duration_s * 1e9) // self.q_ns) * self.q_ns
+        self.out = Path(out_dir)
+        self.endpoint = transport.endpoint_for(session_dir)
+        self.namespace = namespace
+        self.world = World(cfg, plan.robots)
+        self.rec = Recorder(self.out / "session.mcap", {"config": json.dumps(plan.config, sort_keys=True),
+                                                        "robots": str(len(plan.robots))})
+        self.n = len(plan.robots)
+        self.procs = {p.name: p for p in plan.procs}
+        self.proc_of: dict[str, str] = {}
+        for p in plan.procs:
+            for e in p.entities():
+                self.proc_of[e] = p.name
+        self.ents = sorted(self.proc_of)
+        self.next_wake: dict[str, int | None] = dict.fromkeys(self.ents, 0)
+        for r, rp in enumerate(plan.robots):  # robots boot at staggered times, spreading LLC loops over quanta
+            period = round(1e9 / PROFILES[rp.profile].llc_loop_hz)
+            self.next_wake[entity(r, "llc")] = (r * self.q_ns) % max(period, self.q_ns) // self.q_ns * self.q_ns
+        self.wom: dict[str, bool] = dict.fromkeys(self.ents, False)
+        self.inbox: dict[str, list] = {e: [] for e in self.ents}
+        self.seq: dict[str, int] = dict.fromkeys(self.ents, 0)
+        self.can = [CanMedium(f"r{r:03d}/can0") for r in range(self.n)]
+        self.can_nodes = [(entity(r, "llc"), entity(r, "logic")) for r in range(self.n)]
+        self.deliveries: dict[int, list[tuple]] = defaultdict(list)
+        self.dead: set[int] = set()
+        self.live_procs: set[str] = set(self.procs)
+        self.pids: dict[str, int] = {}
+        self.failures: list[dict[str, Any]] = []
+        self.stop_reason: str | None = None
+        self.failed_stop = False
+        self.counts: dict[str, int] = defaultdict(int)
+        self.barrier_us: list[float] = []
+        self.ticks = 0
+        self.k = 0
+        self.q: queue.SimpleQueue = queue.SimpleQueue()
+        self._names = {m.frame_id: m.name for m in eswarbot_llc_db().messages}
+        self._topics = {r: (f"/r{r:03d}/can0", f"/r{r:03d}/llc/pins")
+                        for r in range(self.n)}
+
+    # -- lifecycle ---------------------------------------------------------------------------------
+    def open(self) -> None:
+        self.session = transport.open_session(self.endpoint, self.namespace, listen=True)
+        s = self.session
+        self._subs = [
+            transport.queue_subscriber(s, "done/*", self.q),
+            transport.queue_subscriber(s, "hello/*", self.q),
+            transport.queue_subscriber(s, "control", self.q),
+        ]
+        self.status_pub = transport.publisher(s, "status")
+        self.tick_pub = {p: transport.publisher(s, f"tick/{p}") for p in self.procs}
+
+    def status(self, **msg: Any) -> None:
+        self.status_pub.put(transport.pack(msg))
+
+    def wait_for_participants(self) -> None:
+        t0 = time.monotonic()
+        timeout = self.cfg.session.startup_timeout_s
+        self.status(op="listening")
+        missing = set(self.procs)
+        while missing:
+            left = timeout - (time.monotonic() - t0)
+            if left <= 0:
+                raise TimeoutError(f"processes did not join within {timeout:.0f} s: {', '.join(sorted(missing))}")
+            try:
+                key, data = self.q.get(timeout=min(left, 0.5))
+            except queue.Empty:
+                continue
+            msg = transport.unpack(data)
+            if key.startswith("hello/"):
+                p = key.split("/", 1)[1]
+                if p in missing:
+                    self.pids[p] = int(msg["pid"])
+                    transport.wait_matched(self.tick_pub[p], timeout, f"tick/{p}")
+                    missing.discard(p)
+            elif key == "control":
+                if msg.get("op") == "dead":
+                    raise RuntimeError(f"process {msg.get('proc')} exited during start-up ({msg.get('detail')})")
+                if msg.get("op") == "stop":
+                    raise KeyboardInterrupt
+        self.startup_wall_s = time.monotonic() - t0
+        self.status(op="started", startup_s=self.startup_wall_s)
+
+    # -- failures ------------------------------------------------------------------------------------
+    def robot_failed(self, r: int, t_ns: int, kind: str, detail: str) -> None:
+        if r in self.dead:
+            return
+        self.dead.add(r)
+        self.world.kill(r)
+        for role in ("llc", "logic"):
+            e = entity(r, role)
+            self.next_wake[e] = None
+            self.wom[e] = False
+            self.inbox[e].clear()
+        rec = {"robot": r, "t_s": t_ns / 1e9, "kind": kind, "detail": detail[-2000:]}
+        self.failures.append(rec)
+        self.rec.write(t_ns, "/session/events", "swarm_sitl.Event", {"kind": kind, "robot": r, "detail": rec["detail"]})
+        self.status(op="event", **rec)
+        if self.cfg.session.on_robot_failure == "stop":
+            self.failed_stop = True
+            self.stop_reason = f"robot {r} failed ({kind}) and on_robot_failure = stop"
+
+    def proc_failed(self, proc: str, t_ns: int, kind: str, detail: str) -> None:
+        if proc not in self.live_procs:
+            return
+        self.live_procs.discard(proc)
+        pid = self.pids.get(proc)
+        if pid and kind == "hung":
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        for r in self.procs[proc].robots:
+            self.robot_failed(r, t_ns, kind, f"process {proc}: {detail}")
+
+    # -- one quantum ---------------------------------------------------------------------------------
+    def _deliver(self, t: int) -> None:
+        items = self.deliveries.pop(t, None)
+        if not items:
+            return
+        rec, world = self.rec, self.world
+        for item in items:
+            kind = item[0]
+            if kind == "can":
+                _, r, d = item
+                topic = self._topics[r][0]
+                rec.write_json(t, topic, "swarm_sitl.CanFrame", (
+                    f'{{"id":{d.arbitration_id},"data":"{d.data.hex()}","src":"{d.src}",'
+                    f'"name":"{self._names.get(d.arbitration_id, "")}","wire_end_ns":{d.wire_end_ns}}}').encode())
+                self.counts["can_frames"] += 1
+                if r in self.dead:
+                    continue
+                for node in self.can_nodes[r]:
+                    if node != d.src:
+                        self.inbox[node].append(["can0", d.arbitration_id, d.data, d.extended, t])
+            else:  # pin writes of the LLC's previous loop
+                _, r, pins = item
+                self.counts["pin_writes"] += 1
+                if r in self.dead:
+                    continue
+                world.set_pwm(r, *pins["pwm"])
+                world.set_led(r, tuple(pins["led"]))
+
+    def _due(self, t: int) -> dict[str, list[str]]:
+        due: dict[str, list[str]] = defaultdict(list)
+        nw, wom, inbox, proc_of = self.next_wake, self.wom, self.inbox, self.proc_of
+        for e in self.ents:
+            w = nw[e]
+            if (w is not None and w <= t) or (wom[e] and inbox[e]):
+                due[proc_of[e]].append(e)
+        return due
+
+    def _collect(self, waiting: set[str], t: int) -> dict[str, dict]:
+        results: dict[str, dict] = {}
+        hang = self.cfg.session.hang_timeout_s
+        deadline = time.monotonic() + hang
+        while waiting:
+            try:
+                key, data = self.q.get(timeout=max(0.01, deadline - time.monotonic()))
+            except queue.Empty:
+                for p in sorted(waiting):
+                    self.proc_failed(p, t, "hung", f"no answer for quantum at t={t / 1e9:.3f} s within {hang} s")
+                break
+            if key.startswith("done/"):
+                p = key[5:]
+                if p not in waiting:
+                    continue
+                try:
+                    msg = transport.unpack(data)
+                except Exception:
+                    self.counts["malformed_done"] += 1
+                    continue
+                if msg.get("k") != self.k:
+                    self.counts["stale_done"] += 1
+                    continue
+                results[p] = msg
+                waiting.discard(p)
+            elif key == "control":
+                self._control(data, t)
+                waiting &= self.live_procs
+        return results
+
+    def _control(self, data: bytes, t: int) -> None:
+        try:
+            msg = transport.unpack(data)
+        except Exception:
+            return
+        op = msg.get("op")
+        if op == "stop":
+            self.stop_reason = self.stop_reason or msg.get("reason", "stop requested")
+        elif op == "dead":
+            self.proc_failed(str(msg.get("proc")), t, "died", str(msg.get("detail", "")))
+
+    def _outputs(self, t: int, results: dict[str, dict], sensed: dict[str, dict]) -> None:
+        q = self.q_ns
+        merged: dict[str, dict] = {}
+        for res in results.values():
+            merged.update(res.get("ents", {}))
+        touched: set[int] = set()
+        for e in sorted(merged):
+            r = robot_of(e)
+            if r in self.dead:
+                continue
+            res = merged[e]
+            if e in sensed:  # one record per LLC loop: what its pins read, and what it wrote
+                pins_io = dict(sensed[e])
+                if res.get("pins") is not None:
+                    pins_io.update(res["pins"])
+                self.rec.write(t, self._topics[r][1], "swarm_sitl.LlcPins", pins_io)
+            if res.get("err"):
+                self.robot_failed(r, t, "raised", res["err"])
+                continue
+            w = res.get("wake")
+            if w is not None:
+                w = max(t + q, -(-int(w) // q) * q)
+            self.next_wake[e] = w
+            self.wom[e] = bool(res.get("wom"))
+            for bus, arb_id, data, ext in res.get("out", ()):
+                if bus != "can0":
+                    self.counts["unknown_bus"] += 1
+                    continue
+                self.seq[e] += 1
+                self.can[r].offer(e, self.seq[e], int(arb_id), bytes(data), bool(ext))
+                touched.add(r)
+            pins = res.get("pins")
+            if pins is not None:
+                self.deliveries[t + q].append(("pins", r, pins))
+        for r in range(self.n):
+            if r in touched or self.can[r].pending:
+                for d in self.can[r].transmit(t, q):
+                    self.deliveries[d.t_ns].append(("can", r, d))
+
+    def run(self) -> dict[str, Any]:
+        q = self.q_ns
+        world, rec = self.world, self.rec
+        speed = self.cfg.session.speed
+        poses_every = self.cfg.session.poses_every_quanta
+        wall0 = time.monotonic()
+        next_status = 0
+        while self.stop_reason is None:
+            t = self.k * q
+            if t >= self.end_ns:
+                break
+            self._deliver(t)
+            due = self._due(t)
+            for p in list(due):
+                if p not in self.live_procs:
+                    del due[p]
+            t_pub = time.perf_counter()
+            sensed: dict[str, dict] = {}
+            for p in sorted(due):
+                run: dict[str, Any] = {}
+                for e in due[p]:
+                    entry: dict[str, Any] = {"in": self.inbox[e]}
+                    self.inbox[e] = []
+                    if e.endswith("/llc"):
+                        r = robot_of(e)
+                        s = world.sensors(r)
+                        entry["sens"] = {"enc": list(s.encoders), "sonar_m": s.sonar_m, "lux": s.lux,
+                                         "battery_v": s.battery_v}
+                        sensed[e] = entry["sens"]
+                    run[e] = entry
+                self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
+            if self.k % poses_every == 0:
+                rec.write(t, "/world/poses", "swarm_sitl.Poses", {
+                    "x": np.round(world.pos[:, 0], 5).tolist(), "y": np.round(world.pos[:, 1], 5).tolist(),
+                    "yaw": np.round(world.yaw, 5).tolist(), "alive": world.alive.tolist(), "led": world.led.tolist(),
+                })
+            world.step_quantum(t, q)
+            if due:
+                results = self._collect(set(due), t)
+                self.barrier_us.append((time.perf_counter() - t_pub) * 1e6)
+                self._outputs(t, results, sensed)
+                self.ticks += 1
+            else:
+                self._drain_control(t)
+            self.k += 1
+            if t >= next_status:
+                next_status += 1_000_000_000
+                self.status(op="progress", t=(t + q) / 1e9, alive=self.n - len(self.dead), ticks=self.k)
+            if speed != "max":
+                ahead = (t + q) / 1e9 / float(speed) - (time.monotonic() - wall0)
+                if ahead > 0:
+                    time.sleep(ahead)
+        self.sim_end_ns = self.k * q
+        self.wall_s = time.monotonic() - wall0
+        return self.result()
+
+    def _drain_control(self, t: int) -> None:
+        while True:
+            try:
+                key, data = self.q.get_nowait()
+            except queue.Empty:
+                return
+            if key == "control":
+                self._control(data, t)
+
+    def shutdown(self) -> None:
+        """Tell every live process to stop and wait (briefly) for their goodbyes."""
+        stop = transport.pack({"k": self.k, "stop": True})
+        waiting = set(self.live_procs)
+        for p in sorted(waiting):
+            self.tick_pub[p].put(stop)
+        deadline = time.monotonic() + 3.0
+        while waiting and time.monotonic() < deadline:
+            try:
+                key, _ = self.q.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            if key.startswith("done/"):
+                waiting.discard(key[5:])
+
+    def result(self) -> dict[str, Any]:
+        lat = sorted(self.barrier_us)
+        return {
+            "sim_time_s": self.sim_end_ns / 1e9,
+            "world_wall_s": self.wall_s,
+            "quanta": self.k,
+            "ticks": self.ticks,
+            "messages": self.rec.count,
+            "message_counts": dict(self.counts),
+            "digest": self.rec.digest,
+            "barrier_us_median": statistics.median(lat) if lat else None,
+            "barrier_us_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
+            "startup_s": getattr(self, "startup_wall_s", None),
+            "failures": self.failures,
+            "stop_reason": self.stop_reason,
+            "failed_stop": self.failed_stop,
+            "robots": [
+                {"id": r, "alive": bool(self.world.alive[r]), "distance_m": round(float(self.world.odometer[r]), 3),
+                 "final_pose": [round(float(self.world.pos[r, 0]), 3), round(float(self.world.pos[r, 1]), 3),
+                                round(float(self.world.yaw[r]), 3)],
+                 "battery_v": round(float(self.world.battery_v[r]), 3),
+                 "can_frames": self.can[r].frames,
+                 "can_bus_load": round(self.can[r].bits / 500_000 / max(self.sim_end_ns / 1e9, 1e-9), 4)}
+                for r in range(self.n)
+            ],
+        }

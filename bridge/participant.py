@@ -1,0 +1,79 @@
+"""The loop every participant process runs: wait for a tick, run the due entities, answer ``done``.
+
+A participant never advances time by itself: it computes quantum k only when the world's tick for k
+arrives, and the world starts k+1 only when every ticked participant has answered. It exits when the
+world says stop, and also when its parent (the launcher) disappears.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import queue
+import signal
+import sys
+import traceback
+from typing import Any, Protocol
+
+from bridge import transport
+
+PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(sig: int = signal.SIGKILL) -> None:
+    """Ask the kernel to send ``sig`` to this process when its parent dies (Linux); no orphans, ever."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, sig, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
+class Host(Protocol):
+    def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]: ...
+
+    def stop(self) -> None: ...
+
+
+def serve(proc: str, endpoint: str, namespace: str, host: Host, parent_pid: int) -> int:
+    session = transport.open_session(endpoint, namespace, listen=False)
+    q: queue.SimpleQueue = queue.SimpleQueue()
+    _sub = transport.queue_subscriber(session, f"tick/{proc}", q, "tick")
+    done = transport.publisher(session, f"done/{proc}")
+    hello = transport.publisher(session, f"hello/{proc}")
+    transport.wait_matched(done, 60, f"done/{proc}")
+    transport.wait_matched(hello, 60, f"hello/{proc}")
+    hello.put(transport.pack({"proc": proc, "pid": os.getpid()}))
+    code = 0
+    try:
+        while True:
+            try:
+                _, data = q.get(timeout=1.0)
+            except queue.Empty:
+                if os.getppid() != parent_pid:
+                    code = 3
+                    break
+                continue
+            try:
+                tick = transport.unpack(data)
+                k = tick["k"]
+            except Exception:
+                print(f"{proc}: malformed tick dropped", file=sys.stderr)
+                continue
+            if tick.get("stop"):
+                host.stop()
+                done.put(transport.pack({"k": k, "bye": True}))
+                break
+            t = tick["t"]
+            ents: dict[str, Any] = {}
+            for ent in sorted(tick["run"]):
+                try:
+                    ents[ent] = host.run(ent, t, tick["run"][ent])
+                except Exception:
+                    ents[ent] = {"err": traceback.format_exc(), "wake": None}
+            done.put(transport.pack({"k": k, "ents": ents}))
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        session.close()
+    return code

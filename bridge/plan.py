@@ -1,0 +1,139 @@
+"""A session plan: the config resolved into robots, initial poses, entities and processes.
+
+The plan is computed once by the launcher and handed to every process, so they all agree on who is who.
+Everything in it follows from the config and the seed alone.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from bridge.config import Config, ConfigError, CylinderObstacle
+from bridge.rng import stream
+
+
+@dataclass(frozen=True)
+class RobotPlan:
+    id: int
+    name: str
+    profile: str
+    behaviour: str
+    params: dict
+    pose: tuple[float, float, float]  # x, y, yaw (rad)
+
+
+@dataclass(frozen=True)
+class ProcPlan:
+    name: str
+    kind: str  # "firmware" | "logic"
+    robots: tuple[int, ...]
+
+    def entities(self) -> list[str]:
+        role = "llc" if self.kind == "firmware" else "logic"
+        return [entity(r, role) for r in self.robots]
+
+
+@dataclass
+class Plan:
+    config: dict
+    robots: list[RobotPlan]
+    procs: list[ProcPlan] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return {"config": self.config, "robots": [asdict(r) for r in self.robots],
+                "procs": [asdict(p) for p in self.procs]}
+
+    @classmethod
+    def from_json(cls, d: dict) -> Plan:
+        robots = [RobotPlan(**{**r, "pose": tuple(r["pose"])}) for r in d["robots"]]
+        procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"])) for p in d["procs"]]
+        return cls(d["config"], robots, procs)
+
+
+def entity(robot: int, role: str) -> str:
+    """Entity id of one emulated component of one robot, e.g. ``r003/llc``."""
+    return f"r{robot:03d}/{role}"
+
+
+def robot_of(ent: str) -> int:
+    return int(ent[1:4])
+
+
+def make_plan(cfg: Config, path: str = "config") -> Plan:
+    robots: list[RobotPlan] = []
+    for gi, group in enumerate(cfg.robots):
+        prof = cfg.profile(group)
+        poses = _place(cfg, gi, prof.radius_m, path)
+        for pose in poses:
+            rid = len(robots)
+            robots.append(RobotPlan(rid, f"r{rid:03d}", group.profile, group.behaviour, dict(group.params), pose))
+    k = cfg.session.robots_per_process
+    ids = [r.id for r in robots]
+    chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
+    procs = [ProcPlan(f"fw{j}", "firmware", c) for j, c in enumerate(chunks)]
+    procs += [ProcPlan(f"lg{j}", "logic", c) for j, c in enumerate(chunks)]
+    return Plan(cfg.model_dump(mode="json"), robots, procs)
+
+
+def _blocked(cfg: Config, x: float, y: float, clearance: float) -> bool:
+    a = cfg.arena
+    if not (clearance < x < a.width_m - clearance and clearance < y < a.length_m - clearance):
+        return True
+    for ob in cfg.obstacles:
+        if isinstance(ob, CylinderObstacle):
+            if math.hypot(x - ob.x, y - ob.y) < ob.radius + clearance:
+                return True
+        else:
+            c, s = math.cos(math.radians(ob.yaw_deg)), math.sin(math.radians(ob.yaw_deg))
+            dx, dy = x - ob.x, y - ob.y
+            lx, ly = c * dx + s * dy, -s * dx + c * dy
+            if abs(lx) < ob.size[0] / 2 + clearance and abs(ly) < ob.size[1] / 2 + clearance:
+                return True
+    return False
+
+
+def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, float, float]]:
+    g = cfg.robots[gi]
+    pl = g.placement
+    rng = stream(cfg.session.seed, "placement", gi)
+    clearance = radius + 0.02
+
+    def yaw() -> float:
+        return float(rng.uniform(-math.pi, math.pi)) if pl.yaw_deg == "random" else math.radians(pl.yaw_deg)
+
+    out: list[tuple[float, float, float]] = []
+    if pl.kind == "explicit":
+        return [(x, y, math.radians(yd)) for x, y, yd in pl.poses]
+    if pl.kind == "grid":
+        for i in range(g.count):
+            x = pl.origin[0] + (i % pl.columns) * pl.spacing_m
+            y = pl.origin[1] + (i // pl.columns) * pl.spacing_m
+            if _blocked(cfg, x, y, clearance):
+                raise ConfigError(
+                    f"{path}: robots[{gi}].placement: grid position {i} at ({x:.2f}, {y:.2f}) is outside the "
+                    "arena or inside an obstacle"
+                )
+            out.append((x, y, yaw()))
+        return out
+    a = cfg.arena
+    x0, y0, x1, y1 = pl.region or (0.0, 0.0, a.width_m, a.length_m)
+    pts = np.empty((0, 2))
+    for _ in range(g.count):
+        for _attempt in range(10000):
+            x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
+            if _blocked(cfg, x, y, clearance):
+                continue
+            if len(pts) and np.min(np.hypot(pts[:, 0] - x, pts[:, 1] - y)) < pl.min_separation_m:
+                continue
+            break
+        else:
+            raise ConfigError(
+                f"{path}: robots[{gi}].placement: could not place {g.count} robots {pl.min_separation_m} m apart "
+                "in the free space of the region"
+            )
+        pts = np.vstack([pts, [x, y]])
+        out.append((x, y, yaw()))
+    return out

@@ -1,0 +1,145 @@
+"""The session recording: every message on every bus, with its sim time, in one MCAP file.
+
+Messages are JSON with JSON-Schema schemas embedded, so Foxglove and any MCAP reader can open the file.
+``digest`` is a SHA-256 over the sim-time-ordered stream (log time, topic, payload of every message);
+``file_digest`` recomputes it from a file, also from one whose writer died before finishing it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from mcap.reader import NonSeekingReader
+from mcap.writer import CompressionType, Writer
+
+SCHEMAS: dict[str, dict[str, Any]] = {
+    "swarm_sitl.CanFrame": {
+        "type": "object",
+        "properties": {
+            "id": {"type": "integer", "description": "arbitration id"},
+            "data": {"type": "string", "description": "payload, hex"},
+            "src": {"type": "string", "description": "sending node (entity)"},
+            "name": {"type": "string", "description": "message name in the robot's DBC, if known"},
+            "wire_end_ns": {"type": "integer", "description": "sim time the last bit left the wire"},
+        },
+    },
+    "swarm_sitl.LlcPins": {
+        "type": "object",
+        "description": "One loop() of the LLC board: physical values at its input pins, and its pin writes "
+                       "(signed motor PWM, LED colour; only when they changed), which act from the next quantum",
+        "properties": {
+            "enc": {"type": "array", "items": {"type": "integer"}},
+            "sonar_m": {"type": "number"},
+            "lux": {"type": "number"},
+            "battery_v": {"type": "number"},
+            "pwm": {"type": "array", "items": {"type": "integer"}},
+            "led": {"type": "array", "items": {"type": "integer"}},
+        },
+    },
+    "swarm_sitl.Poses": {
+        "type": "object",
+        "description": "Ground-truth planar poses of all robots",
+        "properties": {
+            "x": {"type": "array", "items": {"type": "number"}},
+            "y": {"type": "array", "items": {"type": "number"}},
+            "yaw": {"type": "array", "items": {"type": "number"}},
+            "alive": {"type": "array", "items": {"type": "boolean"}},
+            "led": {"type": "array", "items": {"type": "array", "items": {"type": "integer"}}},
+        },
+    },
+    "swarm_sitl.Event": {
+        "type": "object",
+        "properties": {"kind": {"type": "string"}, "robot": {"type": "integer"}, "detail": {"type": "string"}},
+    },
+}
+
+_TIME = struct.Struct("<q")
+
+
+def _digest_update(h: Any, log_time: int, topic: str, data: bytes) -> None:
+    h.update(_TIME.pack(log_time))
+    h.update(topic.encode())
+    h.update(b"\0")
+    h.update(_TIME.pack(len(data)))
+    h.update(data)
+
+
+class Recorder:
+    def __init__(self, path: str | Path, metadata: dict[str, str] | None = None) -> None:
+        self.path = Path(path)
+        self._f: BinaryIO = open(self.path, "wb")  # noqa: SIM115 - closed in finish()
+        self._w = Writer(self._f, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
+        self._w.start(profile="", library="swarm-sitl")
+        self._schema_ids = {
+            name: self._w.register_schema(name, "jsonschema", json.dumps(s).encode()) for name, s in SCHEMAS.items()
+        }
+        self._channels: dict[str, int] = {}
+        self._hash = hashlib.sha256()
+        self.count = 0
+        self.last_time = 0
+        if metadata:
+            self._w.add_metadata("session", metadata)
+        self._finished = False
+
+    def channel(self, topic: str, schema: str) -> int:
+        cid = self._channels.get(topic)
+        if cid is None:
+            cid = self._w.register_channel(topic, "json", self._schema_ids[schema])
+            self._channels[topic] = cid
+        return cid
+
+    def write(self, t_ns: int, topic: str, schema: str, msg: dict[str, Any]) -> None:
+        self.write_json(t_ns, topic, schema, json.dumps(msg, separators=(",", ":")).encode())
+
+    def write_json(self, t_ns: int, topic: str, schema: str, data: bytes) -> None:
+        """Record an already JSON-encoded message (hot paths encode fixed shapes themselves)."""
+        if t_ns < self.last_time:
+            raise ValueError(f"recording must be in sim-time order: {t_ns} after {self.last_time} on {topic}")
+        cid = self.channel(topic, schema)
+        self._w.add_message(cid, log_time=t_ns, data=data, publish_time=t_ns, sequence=self.count)
+        _digest_update(self._hash, t_ns, topic, data)
+        self.count += 1
+        self.last_time = t_ns
+
+    @property
+    def digest(self) -> str:
+        return self._hash.hexdigest()
+
+    def finish(self) -> None:
+        if self._finished:
+            return
+        self._finished = True
+        self._w.finish()
+        self._f.close()
+
+
+def iter_messages(path: str | Path) -> Iterator[tuple[str, int, bytes]]:
+    """(topic, log_time_ns, payload) in file order; reads what a crashed writer left, up to the damage."""
+    with open(path, "rb") as f:
+        reader = NonSeekingReader(f, validate_crcs=True)
+        try:
+            for _schema, channel, message in reader.iter_messages():
+                yield channel.topic, message.log_time, message.data
+        except Exception as e:  # a truncated file ends in a partial record
+            if not _is_truncation(e):
+                raise
+
+
+def _is_truncation(e: Exception) -> bool:
+    name = type(e).__name__
+    return name in {"EndOfFile", "RecordLengthLimitExceeded", "InvalidMagic"} or isinstance(e, EOFError | struct.error)
+
+
+def file_digest(path: str | Path) -> tuple[str, int]:
+    """Recompute (digest, message count) from a recording."""
+    h = hashlib.sha256()
+    n = 0
+    for topic, t, data in iter_messages(path):
+        _digest_update(h, t, topic, data)
+        n += 1
+    return h.hexdigest(), n

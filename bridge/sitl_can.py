@@ -1,0 +1,81 @@
+"""The ``sitl`` python-can interface: a robot's simulated CAN bus, found by python-can's entry point.
+
+``can.Bus(interface="sitl", channel="can0")`` inside a SITL robot program returns this bus; the swarm
+logic cannot tell it from a real adapter. Frames go onto the session's CAN medium (arbitration, bit
+time) and arrive at the other nodes of the robot's bus. Timestamps are in simulated seconds, and a
+blocking ``recv(timeout)`` waits in simulated time.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+import can
+from can import BusABC, CanInitializationError, CanOperationError, Message
+
+from bridge import sim_context
+
+
+class SitlBus(BusABC):
+    def __init__(self, channel: Any = "can0", *, receive_own_messages: bool = False, **kwargs: Any) -> None:
+        try:
+            self._rt = sim_context.current()
+        except sim_context.NotInSession as e:
+            raise CanInitializationError(str(e)) from None
+        self.channel = str(channel)
+        self.channel_info = f"swarm-sitl robot {self._rt.robot_id} {self.channel}"
+        self._own = receive_own_messages
+        try:
+            self._rx: deque = self._rt.open_bus(self.channel)
+        except OSError as e:
+            raise CanInitializationError(str(e)) from None
+        self._open = True
+        super().__init__(channel=channel, **kwargs)
+
+    def send(self, msg: Message, timeout: float | None = None) -> None:
+        if not self._open:
+            raise CanOperationError("bus is shut down")
+        if msg.is_fd or msg.is_error_frame:
+            raise CanOperationError("the simulated bus carries classic CAN data and remote frames only")
+        if len(msg.data) > 8 or msg.dlc > 8:
+            raise CanOperationError(f"classic CAN frame holds at most 8 bytes, got {len(msg.data)}")
+        limit = 0x1FFFFFFF if msg.is_extended_id else 0x7FF
+        if not 0 <= msg.arbitration_id <= limit:
+            raise CanOperationError(f"arbitration id 0x{msg.arbitration_id:X} out of range")
+        self._rt.outbox.append([self.channel, msg.arbitration_id, bytes(msg.data), msg.is_extended_id])
+        if self._own:
+            self._rx.append((msg.arbitration_id, bytes(msg.data), msg.is_extended_id, self._rt.t_ns))
+
+    def _to_message(self, item: tuple) -> Message:
+        arb_id, data, ext, t_ns = item
+        return Message(timestamp=t_ns / 1e9, arbitration_id=arb_id, data=data, is_extended_id=ext,
+                       channel=self.channel, is_rx=True)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
+        if self._rx:
+            return self._to_message(self._rx.popleft()), False
+        return None, False
+
+    def recv(self, timeout: float | None = None) -> Message | None:
+        """Next frame that passes the filters; waits up to ``timeout`` simulated seconds."""
+        rt = self._rt
+        deadline = None if timeout is None else rt.t_ns + max(0, round(timeout * 1e9))
+        while True:
+            while self._rx:
+                msg = self._to_message(self._rx.popleft())
+                if self._matches_filters(msg):
+                    return msg
+            if deadline is not None and rt.t_ns >= deadline:
+                return None
+            rt.block(deadline, True)
+
+    def shutdown(self) -> None:
+        if self._open:
+            self._open = False
+            self._rt.close_bus(self.channel)
+        super().shutdown()
+
+    @staticmethod
+    def _detect_available_configs() -> list[can.typechecking.AutoDetectedConfig]:
+        return []

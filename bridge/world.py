@@ -1,0 +1,308 @@
+"""The physical world: one pybullet DIRECT client with the arena, obstacles, light field and robots.
+
+Each eSwarBot is one rigid cylinder (126 mm x 100 mm, 600 g). Its two DC motors are modelled in numpy for
+all robots at once (first-order speed response to PWM and battery voltage, a dead band, per-wheel gain
+and wheel-radius spread); the resulting differential-drive twist is imposed on the body every physics
+step and pybullet resolves contacts with walls, obstacles and other robots. Encoders count the wheels'
+rotation in 48-CPR pulses (a wheel that spins against a wall keeps counting, as a real one slips).
+The sonar is one batched ray test for all robots, a cone of rays per sensor, at the sensor's rate.
+
+Nothing here reads the wall clock or an unseeded random source; pybullet's banner goes to stdout, which
+is never parsed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as pb
+
+from bridge.config import ArenaCfg, BoxObstacle, Config
+from bridge.plan import RobotPlan
+from bridge.profiles import PROFILES, RobotProfile
+from bridge.rng import stream
+
+# Li-ion open-circuit voltage per cell against state of charge (typical curve).
+_OCV_SOC = np.array([0.0, 0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0])
+_OCV_V = np.array([3.0, 3.45, 3.6, 3.68, 3.76, 3.86, 4.0, 4.08, 4.2])
+_V_NOMINAL_PER_CELL = 3.7
+
+
+@dataclass
+class Sensors:
+    """Physical sensor values for one robot at one instant (what the board's pins are exposed to)."""
+
+    encoders: tuple[int, int]
+    sonar_m: float
+    lux: float
+    battery_v: float
+
+
+class World:
+    def __init__(self, cfg: Config, robots: list[RobotPlan]) -> None:
+        self.cfg = cfg
+        self.seed = cfg.session.seed
+        self.hz = cfg.world.physics_hz
+        self.dt = 1.0 / self.hz
+        self.steps_done = 0
+        self.cid = pb.connect(pb.DIRECT)
+        c = self.cid
+        pb.setGravity(0, 0, -9.81, physicsClientId=c)
+        pb.setTimeStep(self.dt, physicsClientId=c)
+        pb.setPhysicsEngineParameter(numSolverIterations=cfg.world.solver_iterations, physicsClientId=c)
+        plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=c)
+        pb.createMultiBody(0, plane, physicsClientId=c)
+        self.static_rects: list[tuple[float, float, float, float, float]] = []  # cx, cy, sx, sy, yaw (plots)
+        self.cylinders: list[tuple[float, float, float]] = []
+        self._build_arena(cfg.arena)
+        for ob in cfg.obstacles:
+            if isinstance(ob, BoxObstacle):
+                self._box(ob.x, ob.y, ob.size, math.radians(ob.yaw_deg))
+            else:
+                self._cylinder(ob.x, ob.y, ob.radius, ob.height)
+        if cfg.arena.map:
+            self._load_map(cfg.arena)
+        self.lights = [(s.x, s.y, s.peak_lux, s.sigma_m) for s in cfg.light.sources]
+        self._build_robots(robots)
+
+    # -- scene ------------------------------------------------------------------------------------
+    def _box(self, x: float, y: float, size: tuple[float, float, float], yaw: float = 0.0) -> None:
+        half = [size[0] / 2, size[1] / 2, size[2] / 2]
+        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=self.cid)
+        orn = pb.getQuaternionFromEuler([0, 0, yaw])
+        pb.createMultiBody(0, shape, basePosition=[x, y, half[2]], baseOrientation=orn, physicsClientId=self.cid)
+        self.static_rects.append((x, y, size[0], size[1], yaw))
+
+    def _cylinder(self, x: float, y: float, r: float, h: float) -> None:
+        shape = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=r, height=h, physicsClientId=self.cid)
+        pb.createMultiBody(0, shape, basePosition=[x, y, h / 2], physicsClientId=self.cid)
+        self.cylinders.append((x, y, r))
+
+    def _build_arena(self, a: ArenaCfg) -> None:
+        t, h = a.wall_thickness_m, a.wall_height_m
+        w, length = a.width_m, a.length_m
+        self._box(w / 2, -t / 2, (w + 2 * t, t, h))
+        self._box(w / 2, length + t / 2, (w + 2 * t, t, h))
+        self._box(-t / 2, length / 2, (t, length, h))
+        self._box(w + t / 2, length / 2, (t, length, h))
+
+    def _load_map(self, a: ArenaCfg) -> None:
+        """A monochrome bitmap (dark = obstacle) as merged rectangles; row 0 is the arena's far edge."""
+        from PIL import Image
+
+        img = np.asarray(Image.open(a.map).convert("L"))
+        occ = img < a.map_threshold
+        res = a.map_resolution_m
+        rows, _ = occ.shape
+        open_runs: dict[tuple[int, int], int] = {}  # (c0, c1) -> first row
+        rects: list[tuple[int, int, int, int]] = []
+        for r in range(rows + 1):
+            runs = set()
+            if r < rows:
+                line = np.concatenate([[False], occ[r], [False]])
+                edges = np.flatnonzero(line[1:] != line[:-1])
+                runs = {(int(edges[i]), int(edges[i + 1])) for i in range(0, len(edges), 2)}
+            for run in list(open_runs):
+                if run not in runs:
+                    rects.append((open_runs.pop(run), r, *run))
+            for run in runs:
+                open_runs.setdefault(run, r)
+        for r0, r1, c0, c1 in rects:
+            sx, sy = (c1 - c0) * res, (r1 - r0) * res
+            cx = (c0 + c1) / 2 * res
+            cy = (rows - (r0 + r1) / 2) * res
+            self._box(cx, cy, (sx, sy, a.wall_height_m))
+
+    def _build_robots(self, robots: list[RobotPlan]) -> None:
+        n = len(robots)
+        self.n = n
+        self.profiles: list[RobotProfile] = [PROFILES[r.profile] for r in robots]
+        self.bodies: list[int] = []
+        shapes: dict[str, int] = {}
+        for r, prof in zip(robots, self.profiles, strict=True):
+            if prof.name not in shapes:
+                shapes[prof.name] = pb.createCollisionShape(
+                    pb.GEOM_CYLINDER, radius=prof.radius_m, height=prof.height_m, physicsClientId=self.cid
+                )
+            x, y, yaw = r.pose
+            body = pb.createMultiBody(
+                prof.mass_kg, shapes[prof.name], basePosition=[x, y, prof.height_m / 2 + 1e-3],
+                baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=self.cid,
+            )
+            izz = 0.5 * prof.mass_kg * prof.radius_m**2
+            pb.changeDynamics(body, -1, localInertiaDiagonal=[1e3, 1e3, izz], lateralFriction=0.6,
+                              linearDamping=0.0, angularDamping=0.0, physicsClientId=self.cid)
+            self.bodies.append(body)
+        p = self.profiles
+        self.wheel_r = np.empty((n, 2))
+        self.gain = np.empty((n, 2))
+        for i, prof in enumerate(p):
+            g = stream(self.seed, "robot", i, "drivetrain")
+            self.wheel_r[i] = prof.wheel_radius_m * (1 + prof.wheel_radius_spread * g.standard_normal(2))
+            self.gain[i] = 1 + prof.motor_gain_spread * g.standard_normal(2)
+        self.half_track = np.array([q.half_track_m for q in p])
+        self.cpr = np.array([q.encoder_cpr for q in p], dtype=float)
+        self.w_max = np.array([q.motor_max_wheel_rad_s for q in p])
+        self.tau = np.array([q.motor_time_constant_s for q in p])
+        self.deadband = np.array([q.motor_deadband_pwm for q in p], dtype=float)
+        self.pwm = np.zeros((n, 2))
+        self.omega = np.zeros((n, 2))
+        self._w_ss = np.zeros((n, 2))
+        self._decay = np.exp(-self.dt / self.tau)[:, None]
+        self._tau_1ma = self.tau[:, None] * (1 - self._decay)
+        self.angle = np.zeros((n, 2))
+        self.alive = np.ones(n, dtype=bool)
+        self.led = np.zeros((n, 3), dtype=np.uint8)
+        self.soc = np.ones(n)
+        self.cells = np.array([q.battery_cells for q in p], dtype=float)
+        self.capacity_as = np.array([q.battery_capacity_mah * 3.6 for q in p])
+        self.r_int = np.array([q.battery_internal_ohm for q in p])
+        self.i_idle = np.array([q.current_idle_ma for q in p]) / 1000.0
+        self.i_motor = np.array([q.current_motor_max_ma for q in p]) / 1000.0
+        self.battery_v = self._battery_voltage(np.zeros(n))
+        self.pos = np.array([[r.pose[0], r.pose[1]] for r in robots], dtype=float).reshape(n, 2)
+        self.yaw = np.array([r.pose[2] for r in robots], dtype=float)
+        self.odometer = np.zeros(n)
+        self.sonar_m = np.array([q.sonar_max_range_m for q in p])
+        self._sonar_rng = [stream(self.seed, "robot", i, "sonar") for i in range(n)]
+        self._light_rng = [stream(self.seed, "robot", i, "light") for i in range(n)]
+        self._sonar_period_ns = round(1e9 / max(q.sonar_rate_hz for q in p)) if n else 0
+        self._next_sonar_ns = 0
+        rays = [q.sonar_rays for q in p]
+        self._ray_offsets = [np.linspace(-1, 1, k) * math.radians(q.sonar_half_beam_deg) if k > 1 else np.zeros(1)
+                             for k, q in zip(rays, p, strict=True)]
+
+    # -- actuators --------------------------------------------------------------------------------
+    def set_pwm(self, robot: int, left: int, right: int) -> None:
+        if self.alive[robot]:
+            self.pwm[robot] = (left, right)
+
+    def set_led(self, robot: int, rgb: tuple[int, int, int]) -> None:
+        self.led[robot] = rgb
+
+    def kill(self, robot: int) -> None:
+        """A dead robot: motors off, it stays in the arena as an obstacle."""
+        self.alive[robot] = False
+        self.pwm[robot] = 0
+        self.led[robot] = 0
+
+    # -- stepping -----------------------------------------------------------------------------------
+    def _battery_voltage(self, current: np.ndarray) -> np.ndarray:
+        ocv = np.interp(self.soc, _OCV_SOC, _OCV_V) * self.cells
+        return ocv - current * self.r_int
+
+    def _motor_targets(self) -> None:
+        """Steady-state wheel speeds for the current PWM and battery voltage (constant over a quantum)."""
+        duty = np.abs(self.pwm)
+        frac = np.clip((duty - self.deadband[:, None]) / (255.0 - self.deadband[:, None]), 0.0, 1.0)
+        vscale = (self.battery_v / (_V_NOMINAL_PER_CELL * self.cells))[:, None]
+        self._w_ss = np.sign(self.pwm) * frac * self.w_max[:, None] * self.gain * vscale
+
+    def _motor_step(self) -> None:
+        """Exact first-order response over one physics step; the wheel angle is its exact integral."""
+        w_ss = self._w_ss
+        dev = self.omega - w_ss
+        self.angle += w_ss * self.dt + dev * self._tau_1ma
+        self.omega = w_ss + dev * self._decay
+
+    def step_quantum(self, t_ns: int, q_ns: int) -> None:
+        """Advance physics from ``t_ns`` to ``t_ns + q_ns`` (whole 1/physics_hz steps, exact on average)."""
+        target_steps = int((t_ns + q_ns) * self.hz // 1_000_000_000)
+        c = self.cid
+        self._motor_targets()
+        reset = pb.resetBaseVelocity
+        while self.steps_done < target_steps:
+            self._motor_step()
+            rim = self.omega * self.wheel_r
+            v = 0.5 * (rim[:, 0] + rim[:, 1])
+            w = ((rim[:, 1] - rim[:, 0]) / (2 * self.half_track)).tolist()
+            vx = (v * np.cos(self.yaw)).tolist()
+            vy = (v * np.sin(self.yaw)).tolist()
+            for i, body in enumerate(self.bodies):
+                reset(body, (vx[i], vy[i], 0.0), (0.0, 0.0, w[i]), physicsClientId=c)
+            pb.stepSimulation(physicsClientId=c)
+            self.steps_done += 1
+            self._read_poses()
+        current = self.i_idle + self.i_motor * np.abs(self.pwm).sum(axis=1) / 510.0
+        self.soc = np.clip(self.soc - current * (q_ns * 1e-9) / self.capacity_as, 0.0, 1.0)
+        self.battery_v = self._battery_voltage(current)
+        t_end = t_ns + q_ns
+        if self.n and t_end >= self._next_sonar_ns:
+            self._update_sonar()
+            while self._next_sonar_ns <= t_end:
+                self._next_sonar_ns += self._sonar_period_ns
+
+    def _read_poses(self) -> None:
+        c = self.cid
+        get = pb.getBasePositionAndOrientation
+        xs, ys, yaws = [], [], []
+        for body in self.bodies:
+            (x, y, _), (qx, qy, qz, qw) = get(body, physicsClientId=c)
+            xs.append(x)
+            ys.append(y)
+            yaws.append(math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz)))
+        new = np.column_stack((xs, ys)) if self.bodies else self.pos
+        self.odometer += np.hypot(*(new - self.pos).T)
+        self.pos = new
+        self.yaw = np.array(yaws)
+
+    def _update_sonar(self) -> None:
+        froms, tos, owner = [], [], []
+        for i, prof in enumerate(self.profiles):
+            if not self.alive[i]:
+                continue
+            ang = self.yaw[i] + self._ray_offsets[i]
+            r0 = prof.radius_m + 0.005
+            z = prof.height_m * 0.6
+            ca, sa = np.cos(ang), np.sin(ang)
+            x, y = self.pos[i]
+            f = np.column_stack([x + r0 * ca, y + r0 * sa, np.full_like(ca, z)])
+            t = np.column_stack([x + (r0 + prof.sonar_max_range_m) * ca, y + (r0 + prof.sonar_max_range_m) * sa,
+                                 np.full_like(ca, z)])
+            froms.append(f)
+            tos.append(t)
+            owner.extend([i] * len(ang))
+        if not froms:
+            return
+        hits = pb.rayTestBatch(np.vstack(froms).tolist(), np.vstack(tos).tolist(), numThreads=1,
+                               physicsClientId=self.cid)
+        best: dict[int, float] = {}
+        for i, h in zip(owner, hits, strict=True):
+            frac = h[2] if h[0] >= 0 else 1.0
+            best[i] = min(best.get(i, 1.0), frac)
+        for i, frac in best.items():
+            prof = self.profiles[i]
+            rng = self._sonar_rng[i]
+            true_r = frac * prof.sonar_max_range_m + 0.005
+            moving = abs(self.omega[i]).max() * prof.wheel_radius_m > 0.01
+            noise = rng.standard_normal()
+            outlier = rng.random() < prof.sonar_outlier_p
+            spurious = rng.uniform(prof.sonar_min_range_m, prof.sonar_max_range_m)
+            if frac >= 1.0:
+                r = prof.sonar_max_range_m
+            else:
+                r = true_r + noise * (prof.sonar_noise_m + prof.sonar_noise_rel * true_r)
+            if moving and outlier:
+                r = spurious
+            self.sonar_m[i] = float(min(max(r, 0.0), prof.sonar_max_range_m))
+
+    # -- sensing ------------------------------------------------------------------------------------
+    def lux_at(self, x: float, y: float) -> float:
+        total = self.cfg.light.ambient_lux
+        for lx, ly, peak, sigma in self.lights:
+            total += peak * math.exp(-((x - lx) ** 2 + (y - ly) ** 2) / (2 * sigma * sigma))
+        return total
+
+    def sensors(self, robot: int) -> Sensors:
+        cpr = self.cpr[robot]
+        enc = (math.floor(self.angle[robot, 0] * cpr / (2 * math.pi)),
+               math.floor(self.angle[robot, 1] * cpr / (2 * math.pi)))
+        lux = self.lux_at(*self.pos[robot])
+        lux *= 1 + self.profiles[robot].light_noise_rel * self._light_rng[robot].standard_normal()
+        return Sensors(enc, float(self.sonar_m[robot]), float(max(lux, 0.0)), float(self.battery_v[robot]))
+
+    def close(self) -> None:
+        if pb.isConnected(self.cid):
+            pb.disconnect(self.cid)

@@ -1,0 +1,1 @@
+"""Emulated robot firmware: boards, their peripherals, and the sketches that run on them."""

@@ -1,0 +1,71 @@
+"""An ATmega328P-class board as the firmware sees it: millis(), a 10-bit ADC, PWM and digital pins,
+encoder interrupt counters, an RGB LED strip and a CAN controller.
+
+The host process sets the electrical inputs (pin voltages, encoder counts, the clock) before each
+``loop()`` and reads the outputs (PWM duties, direction pins, LED colour, CAN frames) after it.
+Nothing here reads the wall clock: ``millis()`` is the session's simulated time.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from firmware_sim.can_controller import CanController
+
+HIGH, LOW = 1, 0
+
+
+class Board:
+    """Pins and peripherals of one Arduino-class board."""
+
+    ADC_BITS = 10
+    ADC_MAX = (1 << ADC_BITS) - 1
+    VREF = 5.0
+
+    def __init__(self, can_rx_depth: int = 8) -> None:
+        self.time_us = 0
+        self.analog_volts: dict[str, float] = {}
+        self.pwm: dict[str, int] = {}
+        self.digital: dict[str, int] = {}
+        self.encoder_counts = [0, 0]
+        self.led_rgb = (0, 0, 0)
+        self.can = CanController(rx_depth=can_rx_depth)
+
+    # -- Arduino API -------------------------------------------------------------------------------
+    def millis(self) -> int:
+        return self.time_us // 1000
+
+    def micros(self) -> int:
+        return self.time_us
+
+    def analog_read(self, pin: str) -> int:
+        """10-bit conversion of the pin voltage, clamped to 0..VREF (as the ADC saturates)."""
+        v = self.analog_volts.get(pin, 0.0)
+        v = 0.0 if v < 0 else min(v, self.VREF)
+        return min(self.ADC_MAX, int(v / self.VREF * (self.ADC_MAX + 1)))
+
+    def analog_write(self, pin: str, duty: int) -> None:
+        self.pwm[pin] = max(0, min(255, int(duty)))
+
+    def digital_write(self, pin: str, level: int) -> None:
+        self.digital[pin] = HIGH if level else LOW
+
+    def digital_read(self, pin: str) -> int:
+        return self.digital.get(pin, LOW)
+
+    def encoder(self, channel: int) -> int:
+        """Signed pulse count kept by the encoder interrupt routine of wheel ``channel``."""
+        return self.encoder_counts[channel]
+
+    def led_strip(self, r: int, g: int, b: int) -> None:
+        self.led_rgb = (max(0, min(255, r)), max(0, min(255, g)), max(0, min(255, b)))
+
+
+class Sketch(Protocol):
+    """What an Arduino sketch provides; the runtime calls ``setup()`` once, then ``loop()`` at its rate."""
+
+    loop_period_us: int
+
+    def setup(self) -> None: ...
+
+    def loop(self) -> None: ...

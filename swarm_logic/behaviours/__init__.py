@@ -1,0 +1,22 @@
+"""Swarm behaviours, by name; a config may also name any ``module:Class`` controller."""
+
+from __future__ import annotations
+
+import importlib
+
+from swarm_logic.behaviours.random_walk import RandomWalk
+from swarm_logic.controller import Controller
+
+BEHAVIOURS: dict[str, type[Controller]] = {"random_walk": RandomWalk}
+
+
+def load_behaviour(name: str) -> type[Controller]:
+    if name in BEHAVIOURS:
+        return BEHAVIOURS[name]
+    if ":" in name:
+        module, _, attr = name.partition(":")
+        cls = getattr(importlib.import_module(module), attr)
+        if isinstance(cls, type) and issubclass(cls, Controller):
+            return cls
+        raise TypeError(f"{name} is not a swarm_logic.controller.Controller subclass")
+    raise KeyError(f"unknown behaviour {name!r}; known: {', '.join(sorted(BEHAVIOURS))} or module:Class")

@@ -1,0 +1,84 @@
+"""Random walk with sonar obstacle avoidance; the LED strip shows the state.
+
+Run straight for an exponentially distributed time, then tumble (turn in place by a random angle).
+When the front sonar reads closer than ``avoid_m`` on two consecutive steps (one reading alone may be a
+spurious echo), turn in place, in a random direction, until it reads clear. Green: running, blue:
+tumbling, red: avoiding.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+from swarm_logic.controller import Controller
+from swarm_logic.robot import Robot
+
+GREEN, BLUE, RED = (0, 255, 0), (0, 0, 255), (255, 0, 0)
+
+
+class RandomWalk(Controller):
+    defaults: ClassVar[dict[str, float]] = {
+        "speed_mps": 0.15,
+        "turn_rate_rps": 1.5,
+        "avoid_m": 0.45,
+        "clear_m": 0.7,
+        "mean_run_s": 5.0,
+        "period_s": 0.1,
+    }
+
+    def init(self, robot: Robot) -> None:
+        super().init(robot)
+        unknown = set(robot.params) - set(self.defaults)
+        if unknown:
+            raise ValueError(f"random_walk: unknown parameters {sorted(unknown)}; known: {sorted(self.defaults)}")
+        self.p = {**self.defaults, **robot.params}
+        self.period_s = float(self.p["period_s"])
+        self.reset()
+
+    def reset(self) -> None:
+        self.state = "run"
+        self.until = self.robot.clock.now() + self._run_time()
+        self.turn_dir = 1.0
+        self.close_count = 0
+        self.led: tuple[int, int, int] | None = None
+
+    def _run_time(self) -> float:
+        return float(self.robot.rng.exponential(self.p["mean_run_s"]))
+
+    def step(self) -> None:
+        r = self.robot
+        now = r.clock.now()
+        sonar = r.llc.state.sonar_m
+        self.close_count = self.close_count + 1 if sonar < self.p["avoid_m"] else 0
+        if self.state != "avoid" and self.close_count >= 2:
+            self.state = "avoid"
+            self.turn_dir = 1.0 if r.rng.random() < 0.5 else -1.0
+            self.until = now + 0.5
+        elif self.state == "avoid":
+            if sonar > self.p["clear_m"] and now >= self.until:
+                self.state = "run"
+                self.until = now + self._run_time()
+        elif now >= self.until:
+            if self.state == "run":
+                self.state = "tumble"
+                angle = float(r.rng.uniform(-math.pi, math.pi))
+                self.turn_dir = math.copysign(1.0, angle)
+                self.until = now + abs(angle) / self.p["turn_rate_rps"]
+            else:
+                self.state = "run"
+                self.until = now + self._run_time()
+        if self.state == "run":
+            r.llc.drive(self.p["speed_mps"], 0.0)
+            self._show(GREEN)
+        else:
+            r.llc.drive(0.0, self.turn_dir * self.p["turn_rate_rps"])
+            self._show(RED if self.state == "avoid" else BLUE)
+
+    def _show(self, rgb: tuple[int, int, int]) -> None:
+        if rgb != self.led:
+            self.led = rgb
+            self.robot.llc.set_led(*rgb)
+
+    def destroy(self) -> None:
+        self.robot.llc.stop()

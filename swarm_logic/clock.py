@@ -1,0 +1,31 @@
+"""The ``Clock`` a controller lives by: the wall clock on a real robot, the session clock in SITL."""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol, runtime_checkable
+
+
+@runtime_checkable
+class Clock(Protocol):
+    def now(self) -> float:
+        """Seconds since an arbitrary epoch (monotonic)."""
+        ...
+
+    def sleep(self, dt: float) -> None: ...
+
+    def sleep_until(self, t: float) -> None: ...
+
+
+class WallClock:
+    """Monotonic wall time, for real robots."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, dt: float) -> None:
+        if dt > 0:
+            time.sleep(dt)
+
+    def sleep_until(self, t: float) -> None:
+        self.sleep(t - time.monotonic())

@@ -1,0 +1,29 @@
+"""The controller API, in the spirit of ARGoS: ``init`` / ``step`` / ``reset`` / ``destroy``.
+
+A controller sees only its ``Robot`` (devices, clock, parameters, random stream); it knows nothing of
+the simulator. The runner calls ``step()`` every ``period_s`` of the robot's clock.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from swarm_logic.robot import Robot
+
+
+class Controller(ABC):
+    period_s: float = 0.1
+
+    def init(self, robot: Robot) -> None:
+        self.robot = robot
+
+    @abstractmethod
+    def step(self) -> None: ...
+
+    def reset(self) -> None:
+        """Return to the state right after ``init``."""
+
+    def destroy(self) -> None:
+        """Leave the robot safe (motors stopped)."""

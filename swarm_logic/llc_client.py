@@ -1,0 +1,114 @@
+"""Driver for the eSwarBot low-level controller over any python-can bus (SITL or a real adapter).
+
+``poll()`` drains received frames without blocking and decodes them with the robot's DBC; commands are
+encoded with the same database. Frames with an unknown ID or a wrong length are counted and dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import can
+
+from swarm_logic.interfaces import eswarbot_llc_db
+
+
+@dataclass
+class LlcState:
+    """The latest telemetry from the LLC, in SI units; ``*_t`` is the bus timestamp of each update."""
+
+    x: float = 0.0
+    y: float = 0.0
+    theta: float = 0.0
+    v: float = 0.0
+    odom_t: float | None = None
+    encoders: tuple[int, int] = (0, 0)
+    sonar_m: float = math.inf
+    sonar_valid: bool = False
+    sonar_t: float | None = None
+    light_raw: int = 0
+    battery_v: float = 0.0
+    battery_soc: int = 0
+    heartbeat: int = -1
+    status_t: float | None = None
+    faults: dict[str, bool] = field(default_factory=dict)
+
+
+class LlcClient:
+    def __init__(self, bus: can.BusABC) -> None:
+        self.bus = bus
+        self.db = eswarbot_llc_db()
+        self._by_name = {m.name: m for m in self.db.messages}
+        self.state = LlcState()
+        self.rx_frames = 0
+        self.rx_unknown = 0
+        self.rx_bad_length = 0
+        self._seq = 0
+
+    def poll(self) -> int:
+        """Decode every frame waiting on the bus; returns how many were accepted."""
+        n = 0
+        while (msg := self.bus.recv(timeout=0)) is not None:
+            if self._handle(msg):
+                n += 1
+        return n
+
+    def _handle(self, msg: can.Message) -> bool:
+        if msg.is_error_frame or msg.is_remote_frame:
+            return False
+        try:
+            spec = self.db.get_message_by_frame_id(msg.arbitration_id)
+        except KeyError:
+            self.rx_unknown += 1
+            return False
+        if len(msg.data) != spec.length or spec.senders != ["LLC"]:
+            self.rx_bad_length += 1
+            return False
+        s = spec.decode(bytes(msg.data), decode_choices=False)
+        st, ts = self.state, msg.timestamp
+        name = spec.name
+        if name == "ODOMETRY":
+            st.x, st.y = s["x_mm"] / 1000.0, s["y_mm"] / 1000.0
+            st.theta, st.v = s["theta_mrad"] / 1000.0, s["v_mm_s"] / 1000.0
+            st.odom_t = ts
+        elif name == "ENCODERS":
+            st.encoders = (int(s["left"]), int(s["right"]))
+        elif name == "SONAR":
+            st.sonar_valid = bool(s["valid"])
+            st.sonar_m = s["range_mm"] / 1000.0 if st.sonar_valid else math.inf
+            st.sonar_t = ts
+        elif name == "LIGHT":
+            st.light_raw = int(s["ldr_raw"])
+        elif name == "BATTERY":
+            st.battery_v = s["voltage_mv"] / 1000.0
+            st.battery_soc = int(s["soc_pct"])
+        elif name == "STATUS":
+            st.heartbeat = int(s["heartbeat"])
+            st.status_t = ts
+            st.faults = {k[6:]: bool(v) for k, v in s.items() if k.startswith("fault_")}
+        self.rx_frames += 1
+        return True
+
+    def _send(self, name: str, **signals: float) -> None:
+        spec = self._by_name[name]
+        self.bus.send(can.Message(arbitration_id=spec.frame_id, data=spec.encode(signals), is_extended_id=False))
+
+    def drive(self, v: float, w: float) -> None:
+        """Forward speed ``v`` (m/s) and turn rate ``w`` (rad/s); repeat within 0.5 s or the LLC stops."""
+        self._seq = (self._seq + 1) & 0xFF
+        self._send(
+            "DRIVE_CMD",
+            v_mm_s=max(-2000, min(2000, round(v * 1000))),
+            w_mrad_s=max(-20000, min(20000, round(w * 1000))),
+            seq=self._seq,
+        )
+
+    def stop(self) -> None:
+        self.drive(0.0, 0.0)
+
+    def set_led(self, r: int, g: int, b: int) -> None:
+        self._send("LED_CMD", red=r, green=g, blue=b)
+
+    def set_odometry(self, x: float, y: float, theta: float) -> None:
+        self._send("ODOM_SET", x_mm=round(x * 1000), y_mm=round(y * 1000), theta_mrad=round(theta * 1000))
