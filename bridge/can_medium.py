@@ -14,17 +14,28 @@ from dataclasses import dataclass, field
 
 
 def frame_bits(dlc: int, extended: bool = False) -> int:
-    """Worst-case bits on the wire for a classic data frame with bit stuffing, plus 3 bits interframe."""
+    """Worst-case bits on the wire for a classic data frame: 47 (standard) or 67 (extended) bits of
+    framing including the 3-bit interframe space, 8 per data byte, and the worst-case stuff bits over
+    the 34 + 8n (54 + 8n) bits from start of frame to the end of the CRC."""
     if extended:
-        return 67 + 8 * dlc + (54 + 8 * dlc - 1) // 4 + 3
-    return 47 + 8 * dlc + (34 + 8 * dlc - 1) // 4 + 3
+        return 67 + 8 * dlc + (54 + 8 * dlc - 1) // 4
+    return 47 + 8 * dlc + (34 + 8 * dlc - 1) // 4
+
+
+def arbitration_key(arbitration_id: int, extended: bool) -> tuple[int, int, int]:
+    """Who wins arbitration: the 11-bit base ID first; at equal base IDs a standard frame beats an
+    extended one (its RTR/IDE bits are dominant where the extended frame sends recessive SRR/IDE)."""
+    if extended:
+        return (arbitration_id >> 18, 1, arbitration_id & 0x3FFFF)
+    return (arbitration_id, 0, 0)
 
 
 @dataclass(order=True)
 class _Pending:
-    arbitration_id: int
+    key: tuple[int, int, int]
     src: str
     seq: int
+    arbitration_id: int = field(compare=False)
     data: bytes = field(compare=False)
     extended: bool = field(compare=False, default=False)
 
@@ -51,7 +62,10 @@ class CanMedium:
         self.bits = 0
 
     def offer(self, src: str, seq: int, arbitration_id: int, data: bytes, extended: bool = False) -> None:
-        heapq.heappush(self.pending, _Pending(arbitration_id, src, seq, bytes(data), extended))
+        if len(data) > 8:
+            raise ValueError(f"classic CAN frame holds at most 8 bytes, got {len(data)}")
+        heapq.heappush(self.pending, _Pending(arbitration_key(arbitration_id, extended), src, seq,
+                                              arbitration_id, bytes(data), extended))
 
     def transmit(self, t_start_ns: int, q_ns: int) -> list[Delivery]:
         """Put pending frames on the wire from ``t_start_ns`` for one quantum; return what completes.
@@ -66,7 +80,7 @@ class CanMedium:
             bits = frame_bits(len(f.data), f.extended)
             end = t + (bits * 1_000_000_000 + self.bitrate - 1) // self.bitrate
             deliver = -(-end // q_ns) * q_ns
-            out.append(Delivery(max(deliver, t_start_ns), end, f.arbitration_id, f.data, f.src, f.extended))
+            out.append(Delivery(deliver, end, f.arbitration_id, f.data, f.src, f.extended))
             self.frames += 1
             self.bits += bits
             t = end

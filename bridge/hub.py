@@ -71,12 +71,15 @@ class Hub:
         self.can = [CanMedium(f"r{r:03d}/can0") for r in range(self.n)]
         self.can_nodes = [(entity(r, "llc"), entity(r, "logic")) for r in range(self.n)]
         self.deliveries: dict[int, list[tuple]] = defaultdict(list)
+        self._dead_detail: dict[str, str] = {}
         self.dead: set[int] = set()
         self.live_procs: set[str] = set(self.procs)
         self.pids: dict[str, int] = {}
         self.failures: list[dict[str, Any]] = []
         self.stop_reason: str | None = None
+        self.abort = False  # the launcher is gone: participants are gone too, do not wait for them
         self.failed_stop = False
+        self.parent_pid = os.getppid()
         self.counts: dict[str, int] = defaultdict(int)
         self.barrier_us: list[float] = []
         self.ticks = 0
@@ -110,15 +113,20 @@ class Hub:
             left = timeout - (time.monotonic() - t0)
             if left <= 0:
                 raise TimeoutError(f"processes did not join within {timeout:.0f} s: {', '.join(sorted(missing))}")
+            if self.abort or os.getppid() != self.parent_pid:
+                raise KeyboardInterrupt
             try:
-                key, data = self.q.get(timeout=min(left, 0.5))
+                key, data = self.q.get(timeout=min(left, 0.2))
             except queue.Empty:
                 continue
-            msg = transport.unpack(data)
+            msg = _unpack_dict(data)
+            if msg is None:
+                self.counts["malformed_control"] += 1
+                continue
             if key.startswith("hello/"):
                 p = key.split("/", 1)[1]
-                if p in missing:
-                    self.pids[p] = int(msg["pid"])
+                if p in missing and isinstance(msg.get("pid"), int):
+                    self.pids[p] = msg["pid"]
                     transport.wait_matched(self.tick_pub[p], timeout, f"tick/{p}")
                     missing.discard(p)
             elif key == "control":
@@ -130,7 +138,7 @@ class Hub:
         self.status(op="started", startup_s=self.startup_wall_s)
 
     # -- failures ------------------------------------------------------------------------------------
-    def robot_failed(self, r: int, t_ns: int, kind: str, detail: str) -> None:
+    def robot_failed(self, r: int, t_ns: int, kind: str, detail: str, proc: str | None = None) -> None:
         if r in self.dead:
             return
         self.dead.add(r)
@@ -141,8 +149,10 @@ class Hub:
             self.wom[e] = False
             self.inbox[e].clear()
         rec = {"robot": r, "t_s": t_ns / 1e9, "kind": kind, "detail": detail[-2000:]}
-        self.failures.append(rec)
         self.rec.write(t_ns, "/session/events", "swarm_sitl.Event", {"kind": kind, "robot": r, "detail": rec["detail"]})
+        if proc:  # which process is a packing detail: reported, not recorded
+            rec["process"] = proc
+        self.failures.append(rec)
         self.status(op="event", **rec)
         if self.cfg.session.on_robot_failure == "stop":
             self.failed_stop = True
@@ -157,7 +167,7 @@ class Hub:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         for r in self.procs[proc].robots:
-            self.robot_failed(r, t_ns, kind, f"process {proc}: {detail}")
+            self.robot_failed(r, t_ns, kind, detail, proc)
 
     # -- one quantum ---------------------------------------------------------------------------------
     def _deliver(self, t: int) -> None:
@@ -178,7 +188,7 @@ class Hub:
                     continue
                 for node in self.can_nodes[r]:
                     if node != d.src:
-                        self.inbox[node].append(["can0", d.arbitration_id, d.data, d.extended, t])
+                        self.inbox[node].append(["can0", d.arbitration_id, d.data, d.extended, d.wire_end_ns])
             else:  # pin writes of the LLC's previous loop
                 _, r, pins = item
                 self.counts["pin_writes"] += 1
@@ -197,23 +207,30 @@ class Hub:
         return due
 
     def _collect(self, waiting: set[str], t: int) -> dict[str, dict]:
+        """Wait for every ticked process's answer. Deaths reported meanwhile take effect after the
+        outputs of this quantum are routed, so a late notice never discards answers already in."""
         results: dict[str, dict] = {}
         hang = self.cfg.session.hang_timeout_s
         deadline = time.monotonic() + hang
         while waiting:
-            try:
-                key, data = self.q.get(timeout=max(0.01, deadline - time.monotonic()))
-            except queue.Empty:
-                for p in sorted(waiting):
-                    self.proc_failed(p, t, "hung", f"no answer for quantum at t={t / 1e9:.3f} s within {hang} s")
+            if self.abort or os.getppid() != self.parent_pid:
+                self.abort = True
                 break
+            left = deadline - time.monotonic()
+            if left <= 0:
+                for p in sorted(waiting):
+                    self.proc_failed(p, t, "hung", f"no answer for the quantum at t={t / 1e9:.3f} s within {hang} s")
+                break
+            try:
+                key, data = self.q.get(timeout=min(0.2, left))
+            except queue.Empty:
+                continue
             if key.startswith("done/"):
                 p = key[5:]
                 if p not in waiting:
                     continue
-                try:
-                    msg = transport.unpack(data)
-                except Exception:
+                msg = _unpack_dict(data)
+                if msg is None or not isinstance(msg.get("ents"), dict):
                     self.counts["malformed_done"] += 1
                     continue
                 if msg.get("k") != self.k:
@@ -222,26 +239,43 @@ class Hub:
                 results[p] = msg
                 waiting.discard(p)
             elif key == "control":
-                self._control(data, t)
-                waiting &= self.live_procs
+                dead = self._control(data, t)
+                if dead in waiting:
+                    waiting.discard(dead)
+                    self.proc_failed(dead, t, "died", self._dead_detail.pop(dead, ""))
         return results
 
-    def _control(self, data: bytes, t: int) -> None:
-        try:
-            msg = transport.unpack(data)
-        except Exception:
-            return
+    def _control(self, data: bytes, t: int) -> str | None:
+        """Handle a launcher message; a death is queued (applied at the end of the quantum) and returned."""
+        msg = _unpack_dict(data)
+        if msg is None:
+            self.counts["malformed_control"] += 1
+            return None
         op = msg.get("op")
         if op == "stop":
-            self.stop_reason = self.stop_reason or msg.get("reason", "stop requested")
-        elif op == "dead":
-            self.proc_failed(str(msg.get("proc")), t, "died", str(msg.get("detail", "")))
+            self.stop_reason = self.stop_reason or str(msg.get("reason", "stop requested"))
+        elif op == "dead" and msg.get("proc") in self.live_procs:
+            p = str(msg["proc"])
+            self._dead_detail[p] = str(msg.get("detail", ""))
+            return p
+        else:
+            self.counts["malformed_control"] += 1
+        return None
 
-    def _outputs(self, t: int, results: dict[str, dict], sensed: dict[str, dict]) -> None:
+    def _apply_deaths(self, t: int) -> None:
+        for p in sorted(self._dead_detail):
+            self.proc_failed(p, t, "died", self._dead_detail.pop(p))
+
+    def _outputs(self, t: int, results: dict[str, dict], sensed: dict[str, dict],
+                 due: dict[str, list[str]]) -> None:
         q = self.q_ns
         merged: dict[str, dict] = {}
-        for res in results.values():
-            merged.update(res.get("ents", {}))
+        for p, res in results.items():
+            for e, v in res["ents"].items():
+                if e in due[p] and isinstance(v, dict):
+                    merged[e] = v
+                else:
+                    self.counts["malformed_done"] += 1
         touched: set[int] = set()
         for e in sorted(merged):
             r = robot_of(e)
@@ -257,20 +291,21 @@ class Hub:
                 self.robot_failed(r, t, "raised", res["err"])
                 continue
             w = res.get("wake")
-            if w is not None:
-                w = max(t + q, -(-int(w) // q) * q)
-            self.next_wake[e] = w
+            self.next_wake[e] = max(t + q, -(-w // q) * q) if isinstance(w, int) else None
             self.wom[e] = bool(res.get("wom"))
-            for bus, arb_id, data, ext in res.get("out", ()):
-                if bus != "can0":
-                    self.counts["unknown_bus"] += 1
+            for item in res.get("out", ()):
+                if not _valid_can(item):
+                    self.counts["malformed_frames"] += 1
                     continue
                 self.seq[e] += 1
-                self.can[r].offer(e, self.seq[e], int(arb_id), bytes(data), bool(ext))
+                self.can[r].offer(e, self.seq[e], item[1], item[2], item[3])
                 touched.add(r)
             pins = res.get("pins")
             if pins is not None:
-                self.deliveries[t + q].append(("pins", r, pins))
+                if _valid_pins(pins):
+                    self.deliveries[t + q].append(("pins", r, pins))
+                else:
+                    self.counts["malformed_pins"] += 1
         for r in range(self.n):
             if r in touched or self.can[r].pending:
                 for d in self.can[r].transmit(t, q):
@@ -283,7 +318,7 @@ class Hub:
         poses_every = self.cfg.session.poses_every_quanta
         wall0 = time.monotonic()
         next_status = 0
-        while self.stop_reason is None:
+        while self.stop_reason is None and not self.abort:
             t = self.k * q
             if t >= self.end_ns:
                 break
@@ -316,7 +351,8 @@ class Hub:
             if due:
                 results = self._collect(set(due), t)
                 self.barrier_us.append((time.perf_counter() - t_pub) * 1e6)
-                self._outputs(t, results, sensed)
+                self._outputs(t, results, sensed, due)
+                self._apply_deaths(t)
                 self.ticks += 1
             else:
                 self._drain_control(t)
@@ -337,14 +373,15 @@ class Hub:
             try:
                 key, data = self.q.get_nowait()
             except queue.Empty:
-                return
+                break
             if key == "control":
                 self._control(data, t)
+        self._apply_deaths(t)
 
     def shutdown(self) -> None:
         """Tell every live process to stop and wait (briefly) for their goodbyes."""
         stop = transport.pack({"k": self.k, "stop": True})
-        waiting = set(self.live_procs)
+        waiting = set() if self.abort else set(self.live_procs)
         for p in sorted(waiting):
             self.tick_pub[p].put(stop)
         deadline = time.monotonic() + 3.0
@@ -378,7 +415,33 @@ class Hub:
                                 round(float(self.world.yaw[r]), 3)],
                  "battery_v": round(float(self.world.battery_v[r]), 3),
                  "can_frames": self.can[r].frames,
-                 "can_bus_load": round(self.can[r].bits / 500_000 / max(self.sim_end_ns / 1e9, 1e-9), 4)}
+                 "can_bus_load": round(self.can[r].bits / self.can[r].bitrate / max(self.sim_end_ns / 1e9, 1e-9), 4)}
                 for r in range(self.n)
             ],
         }
+
+
+def _unpack_dict(data: bytes) -> dict | None:
+    try:
+        msg = transport.unpack(data)
+    except Exception:
+        return None
+    return msg if isinstance(msg, dict) else None
+
+
+def _valid_can(item: Any) -> bool:
+    """[bus, arbitration id, data, extended] as the participants send it; anything else is dropped."""
+    if not (isinstance(item, list | tuple) and len(item) == 4 and item[0] == "can0"):
+        return False
+    _, arb, data, ext = item
+    if not (isinstance(arb, int) and isinstance(data, bytes) and isinstance(ext, bool) and len(data) <= 8):
+        return False
+    return 0 <= arb <= (0x1FFFFFFF if ext else 0x7FF)
+
+
+def _valid_pins(pins: Any) -> bool:
+    if not isinstance(pins, dict):
+        return False
+    pwm, led = pins.get("pwm"), pins.get("led")
+    return (isinstance(pwm, list) and len(pwm) == 2 and all(isinstance(v, int) and -255 <= v <= 255 for v in pwm)
+            and isinstance(led, list) and len(led) == 3 and all(isinstance(v, int) and 0 <= v <= 255 for v in led))

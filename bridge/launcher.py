@@ -101,7 +101,8 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         log = open(logs / f"{name}.log", "wb")  # noqa: SIM115 - owned by the child
         cmd = [sys.executable, "-m", "bridge.proc", role, "--plan", str(plan_path), "--session-dir", session_dir,
                "--namespace", namespace, "--out", str(out), "--proc", name, "--parent-pid", str(os.getpid())]
-        env = {"ZENOH_RUNTIME": ZENOH_RUNTIME, **os.environ, "PYTHONUNBUFFERED": "1", "MAVLINK20": "1"}
+        env = {k: v for k, v in os.environ.items() if not k.startswith("CAN_")}  # python-can config
+        env = {"ZENOH_RUNTIME": ZENOH_RUNTIME, **env, "PYTHONUNBUFFERED": "1", "MAVLINK20": "1"}
         p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                              start_new_session=True, env=env)
         log.close()
@@ -153,7 +154,9 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
                 op = msg.get("op")
                 if op == "started":
                     t_started = time.monotonic()
-                elif op == "progress" and t_started is not None:
+                    prog.note(f"[{cfg.session.name}] started: {len(children)} processes joined in "
+                              f"{t_started - t_launch:.1f} s")
+                elif op == "progress" and t_started is not None and msg["t"] >= 1.0:
                     last_sim = msg["t"]
                     prog.update(msg["t"], msg["t"] / max(time.monotonic() - t_started, 1e-9), msg["alive"])
                 elif op == "event":
@@ -289,8 +292,11 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
             plot_session(out / "session.mcap", plan, out / "trajectories.png")
         except Exception as e:  # a plot must never cost the summary
             prog.note(f"could not draw the trajectories: {e}")
+    how = "interrupted" if interrupted else "stopped" if code else "done"
+    why = f" ({summary['stop_reason'] or summary['error'].strip().splitlines()[-1]})" if code and not interrupted and (
+        summary["stop_reason"] or summary["error"]) else ""
     prog.note(
-        f"[{cfg.session.name}] {'interrupted' if interrupted else 'done'}: {sim_t:.1f} s simulated in "
+        f"[{cfg.session.name}] {how}{why}: {sim_t:.1f} s simulated in "
         f"{wall:.1f} s wall (rtf {summary['rtf']}x), {summary['messages']} messages, digest "
         f"{str(summary['digest'])[:16]}\n  recording  {out / 'session.mcap'}\n  summary    {out / 'summary.json'}\n"
         f"  plot       {out / 'trajectories.png'}"

@@ -15,7 +15,8 @@ from swarm_logic.behaviours import load_behaviour
 from swarm_logic.robot import Robot
 from swarm_logic.runner import run_controller
 
-SITL_HAL = {"llc_can": {"interface": "sitl", "channel": "can0"}}
+# ignore_config: python-can must not merge the host's ~/.canrc or CAN_* variables into a simulated bus
+SITL_HAL = {"llc_can": {"interface": "sitl", "channel": "can0", "ignore_config": True}}
 
 
 class LogicHost:

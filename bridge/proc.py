@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import sys
 import traceback
@@ -24,6 +25,7 @@ def _world(args: argparse.Namespace, plan) -> int:
 
     def on_term(signum, frame):
         hub.stop_reason = hub.stop_reason or f"signal {signal.Signals(signum).name}"
+        hub.abort = True  # SIGTERM comes from a vanished launcher: its other children are gone too
 
     signal.signal(signal.SIGTERM, on_term)
     result: dict = {}
@@ -60,6 +62,7 @@ def _world(args: argparse.Namespace, plan) -> int:
     if hasattr(hub, "session"):
         hub.status(op="end", code=code)
         hub.session.close()
+    shutil.rmtree(args.session_dir, ignore_errors=True)  # the socket's directory, if the launcher could not
     return code
 
 

@@ -123,7 +123,7 @@ def iter_messages(path: str | Path) -> Iterator[tuple[str, int, bytes]]:
     with open(path, "rb") as f:
         reader = NonSeekingReader(f, validate_crcs=True)
         try:
-            for _schema, channel, message in reader.iter_messages():
+            for _schema, channel, message in reader.iter_messages(log_time_order=False):
                 yield channel.topic, message.log_time, message.data
         except Exception as e:  # a truncated file ends in a partial record
             if not _is_truncation(e):

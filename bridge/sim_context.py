@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 _local = threading.local()
+RX_QUEUE_FRAMES = 4096  # frames a device queue holds before it drops (a socket receive buffer)
 
 
 class SessionEnded(BaseException):
@@ -45,6 +46,7 @@ class RobotRuntime:
         self.wom = False
         self.rx: dict[str, deque] = {}
         self.unrouted = 0
+        self.rx_dropped = 0
         self.outbox: list[list[Any]] = []
         self.error: str | None = None
         self.finished = False
@@ -77,6 +79,8 @@ class RobotRuntime:
         q = self.rx.get(bus)
         if q is None:
             self.unrouted += 1  # nobody has this bus open: a real socket would not exist either
+        elif len(q) >= RX_QUEUE_FRAMES:
+            self.rx_dropped += 1  # the socket's receive buffer is full, as on a real host
         else:
             q.append(item)
 
@@ -108,7 +112,7 @@ class RobotRuntime:
     def open_bus(self, name: str) -> deque:
         if name in self.rx:
             raise OSError(f"bus {name!r} of robot {self.robot_id} is already open in this session")
-        q: deque = deque(maxlen=4096)
+        q: deque = deque()
         self.rx[name] = q
         return q
 

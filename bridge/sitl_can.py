@@ -8,6 +8,7 @@ blocking ``recv(timeout)`` waits in simulated time.
 
 from __future__ import annotations
 
+import threading
 from collections import deque
 from typing import Any
 
@@ -23,9 +24,10 @@ class SitlBus(BusABC):
             self._rt = sim_context.current()
         except sim_context.NotInSession as e:
             raise CanInitializationError(str(e)) from None
+        if receive_own_messages:
+            raise CanInitializationError("the sitl interface does not support receive_own_messages yet")
         self.channel = str(channel)
         self.channel_info = f"swarm-sitl robot {self._rt.robot_id} {self.channel}"
-        self._own = receive_own_messages
         try:
             self._rx: deque = self._rt.open_bus(self.channel)
         except OSError as e:
@@ -33,19 +35,25 @@ class SitlBus(BusABC):
         self._open = True
         super().__init__(channel=channel, **kwargs)
 
+    def _check_thread(self) -> None:
+        if threading.current_thread() is not self._rt.thread:
+            raise CanOperationError(
+                "a sitl bus is used from its robot's own thread only (python-can Notifier threads are not "
+                "supported in SITL: they would run outside simulated time)"
+            )
+
     def send(self, msg: Message, timeout: float | None = None) -> None:
+        self._check_thread()
         if not self._open:
             raise CanOperationError("bus is shut down")
-        if msg.is_fd or msg.is_error_frame:
-            raise CanOperationError("the simulated bus carries classic CAN data and remote frames only")
+        if msg.is_fd or msg.is_error_frame or msg.is_remote_frame:
+            raise CanOperationError("the simulated bus carries classic CAN data frames only")
         if len(msg.data) > 8 or msg.dlc > 8:
             raise CanOperationError(f"classic CAN frame holds at most 8 bytes, got {len(msg.data)}")
         limit = 0x1FFFFFFF if msg.is_extended_id else 0x7FF
         if not 0 <= msg.arbitration_id <= limit:
             raise CanOperationError(f"arbitration id 0x{msg.arbitration_id:X} out of range")
         self._rt.outbox.append([self.channel, msg.arbitration_id, bytes(msg.data), msg.is_extended_id])
-        if self._own:
-            self._rx.append((msg.arbitration_id, bytes(msg.data), msg.is_extended_id, self._rt.t_ns))
 
     def _to_message(self, item: tuple) -> Message:
         arb_id, data, ext, t_ns = item
@@ -59,6 +67,7 @@ class SitlBus(BusABC):
 
     def recv(self, timeout: float | None = None) -> Message | None:
         """Next frame that passes the filters; waits up to ``timeout`` simulated seconds."""
+        self._check_thread()
         rt = self._rt
         deadline = None if timeout is None else rt.t_ns + max(0, round(timeout * 1e9))
         while True:

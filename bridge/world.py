@@ -132,7 +132,9 @@ class World:
                 baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=self.cid,
             )
             izz = 0.5 * prof.mass_kg * prof.radius_m**2
-            pb.changeDynamics(body, -1, localInertiaDiagonal=[1e3, 1e3, izz], lateralFriction=0.6,
+            # The wheels are kinematic (the twist is imposed every step), so the body itself must not
+            # rub on the floor; huge roll/pitch inertia keeps it upright when it hits something.
+            pb.changeDynamics(body, -1, localInertiaDiagonal=[1e3, 1e3, izz], lateralFriction=0.0,
                               linearDamping=0.0, angularDamping=0.0, physicsClientId=self.cid)
             self.bodies.append(body)
         p = self.profiles

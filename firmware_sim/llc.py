@@ -32,6 +32,7 @@ PERIOD_LIGHT_MS = 100
 PERIOD_STATUS_MS = 100
 PERIOD_BATTERY_MS = 1000
 STALL_MS = 1000
+SONAR_NO_ECHO_MARGIN_MM = 30  # about two ADC steps below full range
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,9 @@ class LowLevelController:
         self.fault_battery_low = False
         self.fault_bad_frame = False
         self.stall_since_ms: list[int | None] = [None, None]
+        self.stalled = [False, False]
+        self.last_loop_us: int | None = None
+        self.overflows_reported = 0
         self.led = (0, 0, 0)
         now = b.millis()
         self.next_ms = {"odom": now, "sonar": now, "light": now, "status": now, "battery": now}
@@ -127,7 +131,11 @@ class LowLevelController:
     def loop(self) -> None:
         b = self.board
         now = b.millis()
-        dt = self.loop_period_us * 1e-6
+        now_us = b.micros()
+        dt = (now_us - self.last_loop_us) * 1e-6 if self.last_loop_us is not None else self.loop_period_us * 1e-6
+        self.last_loop_us = now_us
+        if dt <= 0:
+            dt = self.loop_period_us * 1e-6
         self._read_can(now)
         counts = (b.encoder(0), b.encoder(1))
         prev = self.last_counts
@@ -153,7 +161,8 @@ class LowLevelController:
         if now >= self.next_ms["sonar"]:
             self.next_ms["sonar"] += PERIOD_SONAR_MS
             mm = sensors.sonar_mm_from_adc(b.analog_read(PIN_SONAR))
-            self.sonar_valid = self.p.sonar_min_mm <= mm < self.p.sonar_max_mm
+            # a reading at the top of the scale means no echo (the ranger outputs its maximum)
+            self.sonar_valid = self.p.sonar_min_mm <= mm < self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
             self.sonar_mm = mm
             self._send("SONAR", range_mm=min(mm, 65535), valid=int(self.sonar_valid))
         if now >= self.next_ms["odom"]:
@@ -184,12 +193,13 @@ class LowLevelController:
                 fault_watchdog=int(self.fault_watchdog),
                 fault_stall=int(self.fault_stall),
                 fault_battery_low=int(self.fault_battery_low),
-                fault_can_overflow=int(can.rx_overflows > 0),
+                fault_can_overflow=int(can.rx_overflows > self.overflows_reported),
                 fault_bad_frame=int(self.fault_bad_frame),
                 rx_bad_frames=min(255, self.rx_bad + can.rx_errors),
                 rx_overflows=min(255, can.rx_overflows),
                 uptime_s=min(65535, now // 1000),
             )
+            self.overflows_reported = can.rx_overflows
         b.led_strip(*self.led)
 
     # -- helpers ------------------------------------------------------------------------------------
@@ -235,15 +245,15 @@ class LowLevelController:
         self.board.analog_write(PIN_PWM[i], abs(pwm))
 
     def _stall_check(self, i: int, pwm: int, moved: bool, now: int) -> None:
+        """A wheel is stalled after STALL_MS of high PWM without a single encoder pulse."""
         if abs(pwm) >= 200 and not moved:
             if self.stall_since_ms[i] is None:
                 self.stall_since_ms[i] = now
-            elif now - self.stall_since_ms[i] >= STALL_MS:
-                self.fault_stall = True
+            self.stalled[i] = now - self.stall_since_ms[i] >= STALL_MS
         else:
             self.stall_since_ms[i] = None
-            if self.stall_since_ms[1 - i] is None:
-                self.fault_stall = False
+            self.stalled[i] = False
+        self.fault_stall = self.stalled[0] or self.stalled[1]
 
     def _sample_battery(self) -> None:
         self.batt_mv = sensors.battery_mv_from_adc(self.board.analog_read(PIN_BATTERY))

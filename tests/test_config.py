@@ -1,0 +1,100 @@
+"""Config validation: good configs load; bad ones name the file, the field and the reason."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bridge.config import ConfigError, load_config
+from bridge.plan import make_plan
+
+MINIMAL = """
+[session]
+duration_s = 5
+[[robots]]
+count = 3
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_demo_config_is_valid(demo_config: Path) -> None:
+    cfg = load_config(demo_config)
+    assert cfg.robot_count == 10
+    assert (cfg.arena.width_m, cfg.arena.length_m) == (10, 20)
+    assert cfg.session.duration_s == 120
+    plan = make_plan(cfg)
+    assert len(plan.procs) == 20
+
+
+def test_overrides_apply(demo_config: Path) -> None:
+    cfg = load_config(demo_config, {"robots.count": 4, "session.seed": 99, "session.robots_per_process": 2})
+    plan = make_plan(cfg)
+    assert cfg.session.seed == 99
+    assert len(plan.robots) == 4
+    assert [p.robots for p in plan.procs if p.kind == "firmware"] == [(0, 1), (2, 3)]
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (MINIMAL.replace("count = 3", "count = 0"), "robots[0].count: Input should be greater than or equal to 1"),
+        (MINIMAL.replace("duration_s = 5", "duration_s = -1"), "session.duration_s: Input should be greater than 0"),
+        (MINIMAL + "colour = 'red'\n", "robots[0].colour: Extra inputs are not permitted"),
+        (MINIMAL.replace("[[robots]]", "[[robots]]\nprofile = 'rover'"),
+         "robots[0].profile: unknown robot profile 'rover'"),
+        (MINIMAL.replace("[session]", "[session]\nspeed = 'fast'"), "session.speed"),
+        (MINIMAL + "[[obstacles]]\ntype = 'box'\nx = 50\ny = 1\nsize = [1, 1, 1]\n",
+         "obstacles[0]: centre (50.0, 1.0)"),
+        (MINIMAL + "[[obstacles]]\ntype = 'cone'\nx = 1\ny = 1\n", "obstacles[0]"),
+        (MINIMAL.replace("[session]", "[session]\nquantum_ms = 1"), "shorter than one physics step"),
+        ("[session\n", "not valid TOML"),
+    ],
+)
+def test_errors_name_file_field_reason(tmp_path: Path, text: str, expected: str) -> None:
+    p = write(tmp_path, text)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    msg = str(e.value)
+    assert msg.startswith(str(p)), msg
+    assert expected in msg, msg
+
+
+def test_missing_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="no such file"):
+        load_config(tmp_path / "nope.toml")
+
+
+def test_explicit_poses_must_match_count_and_arena(tmp_path: Path) -> None:
+    bad = MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0]]\n"
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement\.poses: 1 poses for count = 3"):
+        load_config(write(tmp_path, bad))
+
+
+def test_random_placement_is_seeded_and_collision_free(demo_config: Path) -> None:
+    a = make_plan(load_config(demo_config))
+    b = make_plan(load_config(demo_config))
+    c = make_plan(load_config(demo_config, {"session.seed": 8}))
+    assert [r.pose for r in a.robots] == [r.pose for r in b.robots]
+    assert [r.pose for r in a.robots] != [r.pose for r in c.robots]
+    pts = [r.pose[:2] for r in a.robots]
+    for i, p in enumerate(pts):
+        for q in pts[i + 1:]:
+            assert ((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2) ** 0.5 >= 0.6
+
+
+def test_grid_into_obstacle_is_rejected(tmp_path: Path) -> None:
+    text = MINIMAL + "[[obstacles]]\ntype = 'cylinder'\nx = 1.5\ny = 1\nradius = 0.3\n"
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement: grid position 1"):
+        make_plan(load_config(write(tmp_path, text)), "c.toml")
+
+
+def test_map_path_must_exist(tmp_path: Path) -> None:
+    text = MINIMAL + "[arena]\nmap = 'missing.png'\n"
+    with pytest.raises(ConfigError, match=r"arena\.map: no such file 'missing\.png'"):
+        load_config(write(tmp_path, text))
