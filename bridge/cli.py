@@ -76,7 +76,8 @@ def cmd_plot(a: argparse.Namespace) -> int:
 def cmd_bench(a: argparse.Namespace) -> int:
     from bridge.bench import run_bench
 
-    return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown)
+    return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
+                     config=a.config)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -106,6 +107,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--duration", type=float, help="simulated seconds per case")
     p.add_argument("--out", default="runs/bench")
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
+    p.add_argument("--config", help="session config to benchmark (default: the demo)")
     p.set_defaults(fn=cmd_bench)
 
     p = sub.add_parser("digest", help="recompute the digest of a recording")
