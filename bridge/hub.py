@@ -42,6 +42,9 @@ from bridge.world import World
 from swarm_logic.interfaces import eswarbot_llc_db
 
 
+LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
+
+
 class Hub:
     def __init__(self, plan: Plan, session_dir: str, out_dir: str, namespace: str) -> None:
         self.plan = plan
@@ -62,9 +65,12 @@ class Hub:
                 self.proc_of[e] = p.name
         self.ents = sorted(self.proc_of)
         self.next_wake: dict[str, int | None] = dict.fromkeys(self.ents, 0)
-        for r, rp in enumerate(plan.robots):  # robots boot at staggered times, spreading LLC loops over quanta
+        for r, rp in enumerate(plan.robots):
+            # Robots power up one quantum apart (cyclically), as real ones never boot in the same 10 ms; this
+            # spreads LLC loops and controller steps evenly over quanta instead of waking everyone at once.
             period = round(1e9 / PROFILES[rp.profile].llc_loop_hz)
             self.next_wake[entity(r, "llc")] = (r * self.q_ns) % max(period, self.q_ns) // self.q_ns * self.q_ns
+            self.next_wake[entity(r, "logic")] = (r * self.q_ns) % max(LOGIC_BOOT_SPREAD_NS, self.q_ns)
         self.wom: dict[str, bool] = dict.fromkeys(self.ents, False)
         self.inbox: dict[str, list] = {e: [] for e in self.ents}
         self.seq: dict[str, int] = dict.fromkeys(self.ents, 0)

@@ -172,9 +172,13 @@ class World:
         self._light_rng = [stream(self.seed, "robot", i, "light") for i in range(n)]
         self._sonar_period_ns = round(1e9 / max(q.sonar_rate_hz for q in p)) if n else 0
         self._next_sonar_ns = 0
-        rays = [q.sonar_rays for q in p]
-        self._ray_offsets = [np.linspace(-1, 1, k) * math.radians(q.sonar_half_beam_deg) if k > 1 else np.zeros(1)
-                             for k, q in zip(rays, p, strict=True)]
+        offsets = [np.linspace(-1, 1, q.sonar_rays) * math.radians(q.sonar_half_beam_deg) if q.sonar_rays > 1
+                   else np.zeros(1) for q in p]
+        self._ray_owner = np.concatenate([np.full(len(o), i) for i, o in enumerate(offsets)]) if n else np.zeros(0, int)
+        self._ray_angle = np.concatenate(offsets) if n else np.zeros(0)
+        self._ray_r0 = np.array([q.radius_m + 0.005 for q in p])
+        self._ray_len = np.array([q.sonar_max_range_m for q in p])
+        self._ray_z = np.array([q.height_m * 0.6 for q in p])
 
     # -- actuators --------------------------------------------------------------------------------
     def set_pwm(self, robot: int, left: int, right: int) -> None:
@@ -215,17 +219,26 @@ class World:
         c = self.cid
         self._motor_targets()
         reset = pb.resetBaseVelocity
+        yaw = self.yaw.copy()
+        stepped = False
         while self.steps_done < target_steps:
             self._motor_step()
             rim = self.omega * self.wheel_r
             v = 0.5 * (rim[:, 0] + rim[:, 1])
-            w = ((rim[:, 1] - rim[:, 0]) / (2 * self.half_track)).tolist()
-            vx = (v * np.cos(self.yaw)).tolist()
-            vy = (v * np.sin(self.yaw)).tolist()
+            w = (rim[:, 1] - rim[:, 0]) / (2 * self.half_track)
+            # heading at mid-step (imposed turn rate); the true pose is read back once per quantum, so
+            # a collision's effect on the heading is picked up within one quantum
+            mid = yaw + 0.5 * w * self.dt
+            vx = (v * np.cos(mid)).tolist()
+            vy = (v * np.sin(mid)).tolist()
+            wl = w.tolist()
             for i, body in enumerate(self.bodies):
-                reset(body, (vx[i], vy[i], 0.0), (0.0, 0.0, w[i]), physicsClientId=c)
+                reset(body, (vx[i], vy[i], 0.0), (0.0, 0.0, wl[i]), physicsClientId=c)
             pb.stepSimulation(physicsClientId=c)
+            yaw += w * self.dt
             self.steps_done += 1
+            stepped = True
+        if stepped:
             self._read_poses()
         current = self.i_idle + self.i_motor * np.abs(self.pwm).sum(axis=1) / 510.0
         self.soc = np.clip(self.soc - current * (q_ns * 1e-9) / self.capacity_as, 0.0, 1.0)
@@ -251,30 +264,23 @@ class World:
         self.yaw = np.array(yaws)
 
     def _update_sonar(self) -> None:
-        froms, tos, owner = [], [], []
-        for i, prof in enumerate(self.profiles):
-            if not self.alive[i]:
-                continue
-            ang = self.yaw[i] + self._ray_offsets[i]
-            r0 = prof.radius_m + 0.005
-            z = prof.height_m * 0.6
-            ca, sa = np.cos(ang), np.sin(ang)
-            x, y = self.pos[i]
-            f = np.column_stack([x + r0 * ca, y + r0 * sa, np.full_like(ca, z)])
-            t = np.column_stack([x + (r0 + prof.sonar_max_range_m) * ca, y + (r0 + prof.sonar_max_range_m) * sa,
-                                 np.full_like(ca, z)])
-            froms.append(f)
-            tos.append(t)
-            owner.extend([i] * len(ang))
-        if not froms:
+        """One ray batch for every live robot's sonar cone; the nearest echo in the cone is the range."""
+        live = np.flatnonzero(self.alive)
+        if not len(live):
             return
-        hits = pb.rayTestBatch(np.vstack(froms).tolist(), np.vstack(tos).tolist(), numThreads=1,
-                               physicsClientId=self.cid)
-        best: dict[int, float] = {}
-        for i, h in zip(owner, hits, strict=True):
-            frac = h[2] if h[0] >= 0 else 1.0
-            best[i] = min(best.get(i, 1.0), frac)
-        for i, frac in best.items():
+        owner = self._ray_owner[np.isin(self._ray_owner, live)]
+        ang = self.yaw[owner] + self._ray_angle[np.isin(self._ray_owner, live)]
+        ca, sa = np.cos(ang), np.sin(ang)
+        x, y = self.pos[owner, 0], self.pos[owner, 1]
+        r0, r1, z = self._ray_r0[owner], self._ray_r0[owner] + self._ray_len[owner], self._ray_z[owner]
+        froms = np.column_stack([x + r0 * ca, y + r0 * sa, z])
+        tos = np.column_stack([x + r1 * ca, y + r1 * sa, z])
+        hits = pb.rayTestBatch(froms.tolist(), tos.tolist(), numThreads=1, physicsClientId=self.cid)
+        frac = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits])
+        nearest = np.ones(self.n)
+        np.minimum.at(nearest, owner, frac)
+        for i in live.tolist():
+            frac = float(nearest[i])
             prof = self.profiles[i]
             rng = self._sonar_rng[i]
             true_r = frac * prof.sonar_max_range_m + 0.005
