@@ -41,7 +41,6 @@ from bridge.recorder import Recorder
 from bridge.world import World
 from swarm_logic.interfaces import eswarbot_llc_db
 
-
 LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
 
 
