@@ -170,6 +170,8 @@ class World:
         self.sonar_m = np.array([q.sonar_max_range_m for q in p])
         self._sonar_rng = [stream(self.seed, "robot", i, "sonar") for i in range(n)]
         self._light_rng = [stream(self.seed, "robot", i, "light") for i in range(n)]
+        self._light_noise = [q.light_noise_rel for q in p]
+        self._sampled: tuple | None = None
         self._sonar_period_ns = round(1e9 / max(q.sonar_rate_hz for q in p)) if n else 0
         self._next_sonar_ns = 0
         offsets = [np.linspace(-1, 1, q.sonar_rays) * math.radians(q.sonar_half_beam_deg) if q.sonar_rays > 1
@@ -243,6 +245,7 @@ class World:
         current = self.i_idle + self.i_motor * np.abs(self.pwm).sum(axis=1) / 510.0
         self.soc = np.clip(self.soc - current * (q_ns * 1e-9) / self.capacity_as, 0.0, 1.0)
         self.battery_v = self._battery_voltage(current)
+        self._sampled = None
         t_end = t_ns + q_ns
         if self.n and t_end >= self._next_sonar_ns:
             self._update_sonar()
@@ -303,13 +306,22 @@ class World:
             total += peak * math.exp(-((x - lx) ** 2 + (y - ly) ** 2) / (2 * sigma * sigma))
         return total
 
+    def _sample_all(self) -> None:
+        """Noise-free encoder counts and illuminance of every robot, once per physics state."""
+        counts = np.floor(self.angle * (self.cpr / (2 * math.pi))[:, None]).astype(np.int64)
+        lux = np.full(self.n, float(self.cfg.light.ambient_lux))
+        x, y = self.pos[:, 0], self.pos[:, 1]
+        for lx, ly, peak, sigma in self.lights:
+            lux += peak * np.exp(-((x - lx) ** 2 + (y - ly) ** 2) / (2 * sigma * sigma))
+        self._sampled = (self.steps_done, counts.tolist(), lux.tolist(), self.sonar_m.tolist(),
+                         self.battery_v.tolist())
+
     def sensors(self, robot: int) -> Sensors:
-        cpr = self.cpr[robot]
-        enc = (math.floor(self.angle[robot, 0] * cpr / (2 * math.pi)),
-               math.floor(self.angle[robot, 1] * cpr / (2 * math.pi)))
-        lux = self.lux_at(*self.pos[robot])
-        lux *= 1 + self.profiles[robot].light_noise_rel * self._light_rng[robot].standard_normal()
-        return Sensors(enc, float(self.sonar_m[robot]), float(max(lux, 0.0)), float(self.battery_v[robot]))
+        if self._sampled is None or self._sampled[0] != self.steps_done:
+            self._sample_all()
+        _, counts, lux, sonar, batt = self._sampled
+        noisy = lux[robot] * (1 + self._light_noise[robot] * self._light_rng[robot].standard_normal())
+        return Sensors((counts[robot][0], counts[robot][1]), sonar[robot], max(noisy, 0.0), batt[robot])
 
     def close(self) -> None:
         if pb.isConnected(self.cid):
