@@ -219,3 +219,24 @@ def test_config_errors_exit_2_naming_file_and_field(tmp_path: Path) -> None:
     assert f"{bad}: session.duration_s: Input should be a valid number" in r.stderr
     r = subprocess.run(cli("validate", str(config(tmp_path))), cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0 and "4 robots, 9 processes" in r.stdout
+
+
+def test_killed_launcher_leaves_no_orphans_and_a_readable_recording(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=300), out, "--speed", "2")
+    try:
+        wait_started(p)
+        time.sleep(1.0)
+        assert len(session_procs(out)) == 9
+        p.kill()  # SIGKILL: the launcher cannot clean up; its children must go by themselves
+        p.wait(timeout=5)
+        t0 = time.monotonic()
+        while session_procs(out) and time.monotonic() - t0 < 10:
+            time.sleep(0.1)
+        assert session_procs(out) == []
+    finally:
+        if p.poll() is None:
+            p.kill()
+    world = json.loads((out / "world_result.json").read_text())  # the world finished its recording
+    assert file_digest(out / "session.mcap") == (world["digest"], world["messages"])
+    assert 0 < world["sim_time_s"] < 300
