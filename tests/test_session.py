@@ -131,25 +131,35 @@ def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path) -> N
     assert code == 0 and s["digest"] != digests["a"]
 
 
-def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> None:
-    out = tmp_path / "run"
+def long_session_then(tmp_path: Path, out: Path, act, within_s: float) -> subprocess.Popen:
+    """Start a long paced session, let it run a second, ``act(launcher, procs)``, and check that no process
+    of the session is left ``within_s`` seconds later."""
     p = start(config(tmp_path, duration=300), out, "--speed", "2")
     try:
         wait_started(p)
         time.sleep(1.0)
         procs = session_procs(out)
         assert len(procs) == 9
-        for proc in procs:  # network hygiene: unix sockets only, nothing on inet
-            assert proc.net_connections(kind="inet") == []
-        p.send_signal(signal.SIGINT)
+        act(p, procs)
         t0 = time.monotonic()
-        p.wait(timeout=5)
-        while session_procs(out) and time.monotonic() - t0 < 5:
+        p.wait(timeout=within_s)
+        while session_procs(out) and time.monotonic() - t0 < within_s:
             time.sleep(0.1)
         assert session_procs(out) == []
     finally:
         if p.poll() is None:
             p.kill()
+    return p
+
+
+def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> None:
+    def ctrl_c(launcher: subprocess.Popen, procs: list[psutil.Process]) -> None:
+        for proc in procs:  # network hygiene: unix sockets only, nothing on inet
+            assert proc.net_connections(kind="inet") == []
+        launcher.send_signal(signal.SIGINT)
+
+    out = tmp_path / "run"
+    p = long_session_then(tmp_path, out, ctrl_c, within_s=5)
     assert p.returncode == 130
     s = json.loads((out / "summary.json").read_text())
     assert s["interrupted"] and 0 < s["sim_time_s"] < 300
@@ -223,20 +233,8 @@ def test_config_errors_exit_2_naming_file_and_field(tmp_path: Path) -> None:
 
 def test_killed_launcher_leaves_no_orphans_and_a_readable_recording(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    p = start(config(tmp_path, duration=300), out, "--speed", "2")
-    try:
-        wait_started(p)
-        time.sleep(1.0)
-        assert len(session_procs(out)) == 9
-        p.kill()  # SIGKILL: the launcher cannot clean up; its children must go by themselves
-        p.wait(timeout=5)
-        t0 = time.monotonic()
-        while session_procs(out) and time.monotonic() - t0 < 10:
-            time.sleep(0.1)
-        assert session_procs(out) == []
-    finally:
-        if p.poll() is None:
-            p.kill()
+    # SIGKILL: the launcher cannot clean up; its children must go by themselves
+    long_session_then(tmp_path, out, lambda launcher, procs: launcher.kill(), within_s=10)
     world = json.loads((out / "world_result.json").read_text())  # the world finished its recording
     assert file_digest(out / "session.mcap") == (world["digest"], world["messages"])
     assert 0 < world["sim_time_s"] < 300
