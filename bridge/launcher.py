@@ -277,7 +277,8 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
                   "plot": str(out / "trajectories.png"), "logs": str(out / "logs")},
     }
     if not world_res:
-        summary["error"] = f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}"
+        summary["error"] = ("interrupted during start-up" if interrupted else
+                            f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}")
     code = world_code if world_code is not None else 1
     if interrupted:
         code = 130
