@@ -10,10 +10,19 @@ from __future__ import annotations
 
 import os
 import pstats
+import queue
+import shutil
+import signal
+import subprocess
 import sys
+import tempfile
+import time
+import uuid
 from pathlib import Path
+from typing import Any
 
-from bridge.launcher import run_session
+from bridge import transport
+from bridge.launcher import ZENOH_RUNTIME, run_session
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO = ROOT / "hil_configs" / "demo.toml"
@@ -48,8 +57,74 @@ def run_bench(quick: bool = False, duration: float | None = None, out_dir: str =
         if profile:
             _print_profile(out / "profile" / "world.prof")
     _print_table(rows, dur, markdown)
+    rate, median_us = barrier_yardstick()
+    print(f"machine yardstick: bare lock-step barrier over zenoh, world + 6 participant processes, no physics or "
+          f"firmware: {rate:.0f} quanta/s, median {median_us:.0f} us (compare machines and moments by this)")
     failed = [r for r in rows if r[2]["exit_code"] != 0]
     return 1 if failed else 0
+
+
+class _EchoHost:
+    """A participant that does nothing but answer: wakes every quantum."""
+
+    def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        return {"out": [], "wake": t_ns + 1, "wom": False}
+
+    def stop(self) -> None:
+        pass
+
+
+def _echo_main(proc: str, endpoint: str, namespace: str, parent_pid: int) -> None:
+    from bridge.participant import die_with_parent, serve
+
+    die_with_parent()
+    code = serve(proc, endpoint, namespace, _EchoHost(), parent_pid)
+    os._exit(code)
+
+
+def barrier_yardstick(procs: int = 6, quanta: int = 3000) -> tuple[float, float]:
+    """Quanta per second and median barrier of the bare tick/done protocol, with our participant loop."""
+    d = tempfile.mkdtemp(prefix="swarm-sitl-bench-")
+    ns = f"swarm-sitl-bench/{uuid.uuid4().hex[:12]}"
+    ep = transport.endpoint_for(d)
+    s = transport.open_session(ep, ns, listen=True)
+    q: queue.SimpleQueue = queue.SimpleQueue()
+    subs = [transport.queue_subscriber(s, "done/*", q), transport.queue_subscriber(s, "hello/*", q)]
+    names = [f"e{i}" for i in range(procs)]
+    pubs = {n: transport.publisher(s, f"tick/{n}") for n in names}
+    env = {"ZENOH_RUNTIME": ZENOH_RUNTIME, **os.environ}
+    children = [subprocess.Popen([sys.executable, "-c", f"from bridge.bench import _echo_main; "
+                                  f"_echo_main({n!r}, {ep!r}, {ns!r}, {os.getpid()})"], env=env,
+                                 start_new_session=True) for n in names]
+    try:
+        for _ in names:
+            q.get(timeout=60)
+        for p in pubs.values():
+            transport.wait_matched(p, 60, "tick")
+        lat = []
+        t0 = time.perf_counter()
+        for k in range(quanta):
+            a = time.perf_counter()
+            for n in names:
+                pubs[n].put(transport.pack({"k": k, "t": k, "run": {f"{n}/x": {"in": []}}}))
+            for _ in names:
+                q.get(timeout=30)
+            lat.append(time.perf_counter() - a)
+        rate = quanta / (time.perf_counter() - t0)
+        for n in names:
+            pubs[n].put(transport.pack({"k": quanta, "stop": True}))
+        for c in children:
+            c.wait(timeout=10)
+    finally:
+        for c in children:
+            if c.poll() is None:
+                os.killpg(c.pid, signal.SIGKILL)
+                c.wait()
+        del subs
+        s.close()
+        shutil.rmtree(d, ignore_errors=True)
+    lat.sort()
+    return rate, lat[len(lat) // 2] * 1e6
 
 
 def _fmt(v: float | None, spec: str) -> str:
