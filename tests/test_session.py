@@ -115,7 +115,24 @@ def test_session_writes_summary_recording_and_plot(tmp_path: Path) -> None:
     assert n == s["messages"]
     assert file_digest(out / "session.mcap") == (s["digest"], s["messages"])
     assert Image.open(out / "trajectories.png").size[0] > 300
+    _check_messages_match_their_schemas(out / "session.mcap")
     assert all(r["distance_m"] > 0.1 for r in s["per_robot"])  # every robot moved
+
+
+def _check_messages_match_their_schemas(path: Path) -> None:
+    """Every recorded message is a JSON object whose fields are declared in its embedded schema, with the
+    declared JSON types (what Foxglove relies on to show them)."""
+    types = {"integer": int, "number": (int, float), "string": str, "boolean": bool, "array": list}
+    seen = set()
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            props = json.loads(schema.data)["properties"]
+            msg = json.loads(message.data)
+            assert isinstance(msg, dict) and set(msg) <= set(props), (channel.topic, msg)
+            for k, v in msg.items():
+                assert isinstance(v, types[props[k]["type"]]), (channel.topic, k, v)
+            seen.add(schema.name)
+    assert {"swarm_sitl.CanFrame", "swarm_sitl.LlcPins", "swarm_sitl.Poses"} <= seen
 
 
 def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path) -> None:
