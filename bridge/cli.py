@@ -126,6 +126,9 @@ def main(argv: list[str] | None = None) -> None:
     except ConfigError as e:
         print(f"config error: {e}", file=sys.stderr)
         code = 2
+    except FileNotFoundError as e:
+        print(f"swarm-sitl {a.cmd}: no such file: {e.filename}", file=sys.stderr)
+        code = 2
     sys.exit(code)
 
 

@@ -115,6 +115,18 @@ class Placement(_Model):
     poses: list[tuple[float, float, float]] = Field([], description="explicit [x, y, yaw_deg] per robot")
     yaw_deg: float | Literal["random"] = "random"
 
+    @model_validator(mode="after")
+    def _fields_fit_kind(self) -> Placement:
+        applies = {"grid": {"origin", "spacing_m", "columns", "yaw_deg"},
+                   "random": {"region", "min_separation_m", "yaw_deg"},
+                   "explicit": {"poses"}}[self.kind]
+        fields = type(self).model_fields
+        stray = sorted(f for f in self.model_fields_set - applies - {"kind"}
+                       if getattr(self, f) != fields[f].default)
+        if stray:
+            raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {self.kind!r}")
+        return self
+
 
 class RobotGroup(_Model):
     profile: str = "eswarbot"
@@ -147,6 +159,13 @@ class Config(_Model):
                 f"session.quantum_ms = {self.session.quantum_ms} is shorter than one physics step "
                 f"(world.physics_hz = {self.world.physics_hz})"
             )
+        for g in self.robots:
+            period_ms = 1000.0 / PROFILES[g.profile].llc_loop_hz
+            if self.session.quantum_ms > period_ms + 1e-9:
+                raise ValueError(
+                    f"session.quantum_ms = {self.session.quantum_ms} is longer than the {g.profile} LLC loop "
+                    f"period ({period_ms:g} ms): a board cannot run its loop more than once per quantum"
+                )
         return self
 
     @property
@@ -207,8 +226,38 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
         if not mp.is_file():
             raise ConfigError(f"{p}: arena.map: no such file {cfg.arena.map!r} (relative to the config)")
         cfg.arena.map = str(mp)
+        try:
+            from bridge.arena_map import occupancy
+
+            occupancy(cfg.arena)
+        except Exception as e:
+            raise ConfigError(f"{p}: arena.map: cannot read {mp.name} as an image: {e}") from None
     _check_geometry(str(p), cfg)
+    _check_behaviours(str(p), cfg)
     return cfg
+
+
+def _check_behaviours(path: str, cfg: Config) -> None:
+    """Each group's behaviour must load, and its params must be ones it declares, of the declared kind."""
+    from swarm_logic.behaviours import load_behaviour
+
+    for i, g in enumerate(cfg.robots):
+        try:
+            cls = load_behaviour(g.behaviour)
+        except Exception as e:
+            raise ConfigError(f"{path}: robots[{i}].behaviour: {e}") from None
+        declared = getattr(cls, "defaults", None)
+        if not declared:
+            continue
+        unknown = sorted(set(g.params) - set(declared))
+        if unknown:
+            raise ConfigError(f"{path}: robots[{i}].params: unknown parameters {unknown} for {g.behaviour}; "
+                              f"known: {sorted(declared)}")
+        for k, v in g.params.items():
+            d = declared[k]
+            if isinstance(d, int | float) and not isinstance(d, bool) and (
+                    isinstance(v, bool) or not isinstance(v, int | float)):
+                raise ConfigError(f"{path}: robots[{i}].params.{k}: expected a number, got {v!r}")
 
 
 def _check_geometry(path: str, cfg: Config) -> None:

@@ -36,6 +36,7 @@ class FirmwareHost:
         self.boards: dict[int, Board] = {}
         self.llcs: dict[int, LowLevelController] = {}
         self.started: set[int] = set()
+        self.nominal_ns: dict[int, int] = {}  # the loop's own fixed-rate schedule (millis()-based, as on the board)
         self.last_pins: dict[int, tuple] = {}
         for r in robots:
             board = Board()
@@ -55,15 +56,23 @@ class FirmwareHost:
             b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
         if r not in self.started:
             self.started.add(r)
+            self.nominal_ns[r] = t_ns
             llc.setup()
         llc.loop()
+        # Next loop on the nominal schedule; the world rounds it up to a quantum boundary, so when the
+        # quantum does not divide the period the loop jitters but keeps its average rate.
+        period = llc.loop_period_us * 1000
+        nominal = self.nominal_ns[r] + period
+        while nominal <= t_ns:
+            nominal += period
+        self.nominal_ns[r] = nominal
         pwm = tuple(
             b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1) for i in (0, 1)
         )
         pins = (pwm, b.led_rgb)
         out: dict[str, Any] = {
             "out": [["can0", f.arbitration_id, f.data, f.is_extended_id] for f in b.can.take_tx()],
-            "wake": t_ns + llc.loop_period_us * 1000,
+            "wake": nominal,
             "wom": False,
         }
         if pins != self.last_pins.get(r):

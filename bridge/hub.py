@@ -90,6 +90,7 @@ class Hub:
         self.ticks = 0
         self.k = 0
         self.q: queue.SimpleQueue = queue.SimpleQueue()
+        self.status_pub: Any = None
         self._names = {m.frame_id: m.name for m in eswarbot_llc_db().messages}
         self._topics = {r: (f"/r{r:03d}/can0", f"/r{r:03d}/llc/pins")
                         for r in range(self.n)}
@@ -107,7 +108,9 @@ class Hub:
         self.tick_pub = {p: transport.publisher(s, f"tick/{p}") for p in self.procs}
 
     def status(self, **msg: Any) -> None:
-        self.status_pub.put(transport.pack(msg))
+        """Tell the launcher (nothing to tell before ``open``, e.g. a hub driven directly by tests)."""
+        if self.status_pub is not None:
+            self.status_pub.put(transport.pack(msg))
 
     def wait_for_participants(self) -> None:
         t0 = time.monotonic()
@@ -259,10 +262,12 @@ class Hub:
         op = msg.get("op")
         if op == "stop":
             self.stop_reason = self.stop_reason or str(msg.get("reason", "stop requested"))
-        elif op == "dead" and msg.get("proc") in self.live_procs:
-            p = str(msg["proc"])
-            self._dead_detail[p] = str(msg.get("detail", ""))
-            return p
+        elif op == "dead":
+            p = msg.get("proc")
+            if p in self.live_procs:
+                self._dead_detail[str(p)] = str(msg.get("detail", ""))
+                return str(p)
+            # already handled (e.g. the world killed it as hung, then the launcher saw it exit)
         else:
             self.counts["malformed_control"] += 1
         return None
@@ -287,16 +292,22 @@ class Hub:
             if r in self.dead:
                 continue
             res = merged[e]
+            if not _valid_reply(res):
+                self.counts["malformed_done"] += 1
+                self.robot_failed(r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
+                continue
+            pins = res.get("pins")
+            pins_ok = pins is None or _valid_pins(pins)
             if e in sensed:  # one record per LLC loop: what its pins read, and what it wrote
                 pins_io = dict(sensed[e])
-                if res.get("pins") is not None:
-                    pins_io.update(res["pins"])
+                if pins is not None and pins_ok:
+                    pins_io.update(pins)
                 self.rec.write(t, self._topics[r][1], "swarm_sitl.LlcPins", pins_io)
             if res.get("err"):
                 self.robot_failed(r, t, "raised", res["err"])
                 continue
             w = res.get("wake")
-            self.next_wake[e] = max(t + q, -(-w // q) * q) if isinstance(w, int) else None
+            self.next_wake[e] = None if w is None else max(t + q, -(-w // q) * q)
             self.wom[e] = bool(res.get("wom"))
             for item in res.get("out", ()):
                 if not _valid_can(item):
@@ -305,9 +316,8 @@ class Hub:
                 self.seq[e] += 1
                 self.can[r].offer(e, self.seq[e], item[1], item[2], item[3])
                 touched.add(r)
-            pins = res.get("pins")
             if pins is not None:
-                if _valid_pins(pins):
+                if pins_ok:
                     self.deliveries[t + q].append(("pins", r, pins))
                 else:
                     self.counts["malformed_pins"] += 1
@@ -432,6 +442,12 @@ def _unpack_dict(data: bytes) -> dict | None:
     except Exception:
         return None
     return msg if isinstance(msg, dict) else None
+
+
+def _valid_reply(res: dict) -> bool:
+    """The shape of one entity's answer: ``out`` a list, ``wake`` an int or None, ``err`` a str or None."""
+    return (isinstance(res.get("out", []), list) and (res.get("wake") is None or type(res.get("wake")) is int)
+            and (res.get("err") is None or isinstance(res.get("err"), str)))
 
 
 def _valid_can(item: Any) -> bool:

@@ -169,7 +169,7 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
                     unexpected = c.kind != "world" and not c.expected_exit and world.exit_code is None
                     if c.exit_code is not None and unexpected:
                         control.put(transport.pack({"op": "dead", "proc": c.name,
-                                                    "detail": f"exit code {c.exit_code}"}))
+                                                    "detail": f"exit code {c.exit_code}; see {logs / c.name}.log"}))
             if world.exit_code is not None:
                 world_code = world.exit_code
                 break
@@ -192,11 +192,10 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         for s, h in old.items():
             signal.signal(s, h)
     wall = time.monotonic() - t_launch
-    res = _finish(cfg, plan, out, children, world_code, interrupted, wall, t_started, t_launch, prog, plot)
-    if startup_error and not res.summary.get("error"):
-        res.summary["error"] = startup_error
-        (out / "summary.json").write_text(json.dumps(res.summary, indent=1))
-    return res
+    if world_code is None and children:
+        world_code = children[0].exit_code  # the world, reaped during teardown
+    return _finish(cfg, plan, out, children, world_code, interrupted, wall, t_started, t_launch, prog, plot,
+                   startup_error)
 
 
 class _Abort(Exception):
@@ -236,7 +235,8 @@ def _terminate(children: list[Child], grace_s: float) -> None:
 
 
 def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None, interrupted: bool, wall: float,
-            t_started: float | None, t_launch: float, prog: _Progress, plot: bool) -> SessionResult:
+            t_started: float | None, t_launch: float, prog: _Progress, plot: bool,
+            startup_error: str | None = None) -> SessionResult:
     res_path = out / "world_result.json"
     world_res: dict[str, Any] = json.loads(res_path.read_text()) if res_path.exists() else {}
     n = len(plan.robots)
@@ -277,13 +277,17 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
                   "plot": str(out / "trajectories.png"), "logs": str(out / "logs")},
     }
     if not world_res:
-        summary["error"] = ("interrupted during start-up" if interrupted else
+        summary["error"] = ("interrupted during start-up" if interrupted else startup_error or
                             f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}")
     code = world_code if world_code is not None else 1
+    robots_alive = [r["alive"] for r in summary["per_robot"]]
     if interrupted:
         code = 130
     elif not world_res or world_res.get("error"):
         code = code or 1
+    elif robots_alive and not any(robots_alive):
+        code = code or 1
+        summary["error"] = summary["error"] or "every robot failed"
     summary["exit_code"] = code
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     if plot and (out / "session.mcap").exists():
@@ -296,10 +300,12 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
     how = "interrupted" if interrupted else "stopped" if code else "done"
     why = f" ({summary['stop_reason'] or summary['error'].strip().splitlines()[-1]})" if code and not interrupted and (
         summary["stop_reason"] or summary["error"]) else ""
+    files = "".join(f"\n  {label:<10} {path}" for label, path in (
+        ("recording", out / "session.mcap"), ("summary", out / "summary.json"), ("plot", out / "trajectories.png"),
+        ("logs", out / "logs")) if path.exists())
     prog.note(
         f"[{cfg.session.name}] {how}{why}: {sim_t:.1f} s simulated in "
         f"{wall:.1f} s wall (rtf {summary['rtf']}x), {summary['messages']} messages, digest "
-        f"{str(summary['digest'])[:16]}\n  recording  {out / 'session.mcap'}\n  summary    {out / 'summary.json'}\n"
-        f"  plot       {out / 'trajectories.png'}"
+        f"{str(summary['digest'])[:16]}{files}"
     )
     return SessionResult(code, summary, out, children)

@@ -11,6 +11,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from bridge.arena_map import blocked as map_blocked
+from bridge.arena_map import occupancy
 from bridge.config import Config, ConfigError, CylinderObstacle
 from bridge.rng import stream
 
@@ -59,7 +61,8 @@ def entity(robot: int, role: str) -> str:
 
 
 def robot_of(ent: str) -> int:
-    return int(ent[1:4])
+    """Robot index of an entity id (``r003/llc`` -> 3, ``r1234/logic`` -> 1234)."""
+    return int(ent[1:ent.index("/")])
 
 
 def make_plan(cfg: Config, path: str = "config") -> Plan:
@@ -78,9 +81,11 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
     return Plan(cfg.model_dump(mode="json"), robots, procs)
 
 
-def _blocked(cfg: Config, x: float, y: float, clearance: float) -> bool:
+def _blocked(cfg: Config, x: float, y: float, clearance: float, occ: np.ndarray | None = None) -> bool:
     a = cfg.arena
     if not (clearance < x < a.width_m - clearance and clearance < y < a.length_m - clearance):
+        return True
+    if occ is not None and map_blocked(occ, a.map_resolution_m, x, y, clearance):
         return True
     for ob in cfg.obstacles:
         if isinstance(ob, CylinderObstacle):
@@ -100,18 +105,23 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
     pl = g.placement
     rng = stream(cfg.session.seed, "placement", gi)
     clearance = radius + 0.02
+    occ = occupancy(cfg.arena) if cfg.arena.map else None
 
     def yaw() -> float:
         return float(rng.uniform(-math.pi, math.pi)) if pl.yaw_deg == "random" else math.radians(pl.yaw_deg)
 
     out: list[tuple[float, float, float]] = []
     if pl.kind == "explicit":
+        for j, (x, y, _) in enumerate(pl.poses):
+            if _blocked(cfg, x, y, radius, occ):
+                raise ConfigError(f"{path}: robots[{gi}].placement.poses[{j}]: ({x}, {y}) is inside a wall or an "
+                                  "obstacle (or closer to one than the robot's radius)")
         return [(x, y, math.radians(yd)) for x, y, yd in pl.poses]
     if pl.kind == "grid":
         for i in range(g.count):
             x = pl.origin[0] + (i % pl.columns) * pl.spacing_m
             y = pl.origin[1] + (i // pl.columns) * pl.spacing_m
-            if _blocked(cfg, x, y, clearance):
+            if _blocked(cfg, x, y, clearance, occ):
                 raise ConfigError(
                     f"{path}: robots[{gi}].placement: grid position {i} at ({x:.2f}, {y:.2f}) is outside the "
                     "arena or inside an obstacle"
@@ -124,7 +134,7 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
     for _ in range(g.count):
         for _attempt in range(10000):
             x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
-            if _blocked(cfg, x, y, clearance):
+            if _blocked(cfg, x, y, clearance, occ):
                 continue
             if len(pts) and np.min(np.hypot(pts[:, 0] - x, pts[:, 1] - y)) < pl.min_separation_m:
                 continue

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bridge.arena_map import occupancy
 from bridge.config import Config
 from bridge.plan import Plan
 from bridge.recorder import iter_messages
@@ -45,9 +46,7 @@ def plot_session(mcap_path: str | Path, plan: Plan, png_path: str | Path) -> Non
     im = ax.imshow(lux, origin="lower", extent=(0, a.width_m, 0, a.length_m), cmap="YlOrBr", alpha=0.45)
     fig.colorbar(im, ax=ax, fraction=0.04, pad=0.02, label="illuminance [lux]")
     if a.map:
-        from PIL import Image
-
-        img = np.asarray(Image.open(a.map).convert("L")) < a.map_threshold
+        img = occupancy(a)
         h, w = img.shape
         ax.imshow(np.where(img, 1.0, np.nan), origin="upper", cmap="Greys", vmin=0, vmax=1.2,
                   extent=(0, w * a.map_resolution_m, 0, h * a.map_resolution_m))

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as pb
 
+from bridge.arena_map import occupancy
 from bridge.config import ArenaCfg, BoxObstacle, Config
 from bridge.plan import RobotPlan
 from bridge.profiles import PROFILES, RobotProfile
@@ -90,10 +91,7 @@ class World:
 
     def _load_map(self, a: ArenaCfg) -> None:
         """A monochrome bitmap (dark = obstacle) as merged rectangles; row 0 is the arena's far edge."""
-        from PIL import Image
-
-        img = np.asarray(Image.open(a.map).convert("L"))
-        occ = img < a.map_threshold
+        occ = occupancy(a)
         res = a.map_resolution_m
         rows, _ = occ.shape
         open_runs: dict[tuple[int, int], int] = {}  # (c0, c1) -> first row
@@ -297,7 +295,8 @@ class World:
                 r = true_r + noise * (prof.sonar_noise_m + prof.sonar_noise_rel * true_r)
             if moving and outlier:
                 r = spurious
-            self.sonar_m[i] = float(min(max(r, 0.0), prof.sonar_max_range_m))
+            # inside its blind zone the ranger reports its minimum range (as MaxBotix sensors do)
+            self.sonar_m[i] = float(min(max(r, prof.sonar_min_range_m), prof.sonar_max_range_m))
 
     # -- sensing ------------------------------------------------------------------------------------
     def lux_at(self, x: float, y: float) -> float:

@@ -161,8 +161,9 @@ class LowLevelController:
         if now >= self.next_ms["sonar"]:
             self.next_ms["sonar"] += PERIOD_SONAR_MS
             mm = sensors.sonar_mm_from_adc(b.analog_read(PIN_SONAR))
-            # a reading at the top of the scale means no echo (the ranger outputs its maximum)
-            self.sonar_valid = self.p.sonar_min_mm <= mm < self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
+            # a reading at the top of the scale means no echo (the ranger outputs its maximum); anything
+            # nearer than its minimum range reads as the minimum, which is a valid "very close"
+            self.sonar_valid = 0 < mm < self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
             self.sonar_mm = mm
             self._send("SONAR", range_mm=min(mm, 65535), valid=int(self.sonar_valid))
         if now >= self.next_ms["odom"]:
@@ -206,6 +207,9 @@ class LowLevelController:
     def _read_can(self, now: int) -> None:
         can = self.board.can
         while (frame := can.read()) is not None:
+            if frame.is_extended_id:  # the robot's interface uses standard (11-bit) IDs only
+                self._bad_frame()
+                continue
             try:
                 msg = self.db.get_message_by_frame_id(frame.arbitration_id)
             except KeyError:

@@ -7,7 +7,7 @@ the simulator. The runner calls ``step()`` every ``period_s`` of the robot's clo
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, ClassVar
 
 if TYPE_CHECKING:
     from swarm_logic.robot import Robot
@@ -15,6 +15,7 @@ if TYPE_CHECKING:
 
 class Controller(ABC):
     period_s: float = 0.1
+    defaults: ClassVar[dict[str, Any]] = {}  # parameters and their defaults: configs are checked against them
 
     def init(self, robot: Robot) -> None:
         self.robot = robot

@@ -57,6 +57,9 @@ class LlcClient:
     def _handle(self, msg: can.Message) -> bool:
         if msg.is_error_frame or msg.is_remote_frame:
             return False
+        if msg.is_extended_id:  # the LLC's interface uses standard (11-bit) IDs only
+            self.rx_unknown += 1
+            return False
         try:
             spec = self.db.get_message_by_frame_id(msg.arbitration_id)
         except KeyError:

@@ -53,6 +53,7 @@ def test_overrides_apply(demo_config: Path) -> None:
          "obstacles[0]: centre (50.0, 1.0)"),
         (MINIMAL + "[[obstacles]]\ntype = 'cone'\nx = 1\ny = 1\n", "obstacles[0]"),
         (MINIMAL.replace("[session]", "[session]\nquantum_ms = 1"), "shorter than one physics step"),
+        (MINIMAL.replace("[session]", "[session]\nquantum_ms = 25"), "longer than the eswarbot LLC loop period"),
         ("[session\n", "not valid TOML"),
     ],
 )
@@ -74,6 +75,53 @@ def test_explicit_poses_must_match_count_and_arena(tmp_path: Path) -> None:
     bad = MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0]]\n"
     with pytest.raises(ConfigError, match=r"robots\[0\]\.placement\.poses: 1 poses for count = 3"):
         load_config(write(tmp_path, bad))
+    outside = MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [11, 1, 0]]\n"
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement\.poses\[2\]: \(11.0, 1.0\) is outside"):
+        load_config(write(tmp_path, outside))
+    in_obstacle = (MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [5, 5, 0]]\n"
+                   "[[obstacles]]\ntype = 'cylinder'\nx = 5\ny = 5\nradius = 0.3\n")
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement\.poses\[2\]: \(5.0, 5.0\) is inside"):
+        make_plan(load_config(write(tmp_path, in_obstacle)), "c.toml")
+    near_wall = MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [0.01, 5, 0]]\n"
+    with pytest.raises(ConfigError, match=r"poses\[2\]"):
+        make_plan(load_config(write(tmp_path, near_wall)), "c.toml")
+
+
+@pytest.mark.parametrize(("extra", "expected"), [
+    ("behaviour = 'dance'\n", "robots[0].behaviour: unknown behaviour 'dance'"),
+    ("behaviour = 'nosuchmodule:Thing'\n", "robots[0].behaviour: No module named 'nosuchmodule'"),
+    ("[robots.params]\nsped_mps = 0.2\n", "robots[0].params: unknown parameters ['sped_mps'] for random_walk"),
+    ("[robots.params]\nspeed_mps = 'fast'\n", "robots[0].params.speed_mps: expected a number, got 'fast'"),
+    ("[robots.placement]\nkind = 'grid'\nposes = [[1, 1, 0]]\n", "poses do(es) not apply to kind = 'grid'"),
+    ("[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [3, 1, 0]]\nyaw_deg = 0\n",
+     "yaw_deg do(es) not apply to kind = 'explicit'"),
+])
+def test_behaviour_and_placement_errors(tmp_path: Path, extra: str, expected: str) -> None:
+    p = write(tmp_path, MINIMAL + extra)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value).startswith(str(p)) and expected in str(e.value), str(e.value)
+
+
+def test_map_must_be_an_image(tmp_path: Path) -> None:
+    (tmp_path / "m.png").write_text("not an image")
+    with pytest.raises(ConfigError, match=r"arena\.map: cannot read m\.png as an image"):
+        load_config(write(tmp_path, MINIMAL + "[arena]\nmap = 'm.png'\n"))
+
+
+def test_random_placement_avoids_map_obstacles(tmp_path: Path) -> None:
+    import numpy as np
+    from PIL import Image
+
+    img = np.full((80, 80), 255, np.uint8)
+    img[10:70, 10:70] = 0  # a 3 x 3 m block in a 4 x 4 m map, leaving a 0.5 m border free
+    Image.fromarray(img).save(tmp_path / "m.png")
+    text = (MINIMAL.replace("count = 3", "count = 6") + "[robots.placement]\nkind = 'random'\nmin_separation_m = 0.3\n"
+            "[arena]\nwidth_m = 4\nlength_m = 4\nmap = 'm.png'\n")
+    plan = make_plan(load_config(write(tmp_path, text)), "c.toml")
+    for r in plan.robots:
+        x, y, _ = r.pose
+        assert not (0.5 - 0.08 < x < 3.5 + 0.08 and 0.5 - 0.08 < y < 3.5 + 0.08), r.pose
 
 
 def test_random_placement_is_seeded_and_collision_free(demo_config: Path) -> None:
@@ -98,3 +146,11 @@ def test_map_path_must_exist(tmp_path: Path) -> None:
     text = MINIMAL + "[arena]\nmap = 'missing.png'\n"
     with pytest.raises(ConfigError, match=r"arena\.map: no such file 'missing\.png'"):
         load_config(write(tmp_path, text))
+
+
+def test_plan_config_round_trips(demo_config: Path) -> None:
+    from bridge.config import Config
+
+    cfg = load_config(demo_config)
+    again = Config.model_validate(make_plan(cfg).config)  # what every process of a session does
+    assert again == cfg

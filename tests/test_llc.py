@@ -122,14 +122,16 @@ def test_malformed_frames_are_counted_and_dropped() -> None:
     can.on_bus_frame(Frame(DRIVE.frame_id, b"\x01\x02"))  # wrong length
     can.on_bus_frame(Frame(DB.get_message_by_name("ODOMETRY").frame_id, bytes(8)))  # a frame the LLC itself sends
     can.on_bus_frame(Frame(DRIVE.frame_id, bytes(12)))  # longer than classic CAN: controller error
+    can.on_bus_frame(Frame(DRIVE.frame_id, DRIVE.encode({"v_mm_s": 100, "w_mrad_s": 0, "seq": 1}),
+                           is_extended_id=True))  # right id and length, but an extended frame
     llc.loop()
-    assert llc.rx_bad == 3 and can.rx_errors == 1
+    assert llc.rx_bad == 4 and can.rx_errors == 1
     assert llc.v_cmd == 0.0
     llc.board.time_us += 100_000
     llc.loop()
     status = [DB.decode_message(f.arbitration_id, f.data) for f in can.take_tx()
               if f.arbitration_id == DB.get_message_by_name("STATUS").frame_id][-1]
-    assert status["rx_bad_frames"] == 4 and status["fault_bad_frame"] == 1
+    assert status["rx_bad_frames"] == 5 and status["fault_bad_frame"] == 1
 
 
 def test_receive_ring_overflow_is_counted() -> None:
@@ -147,5 +149,40 @@ def test_random_frames_never_crash_the_llc(frames: list[tuple[int, bytes]]) -> N
         llc.board.can.on_bus_frame(Frame(arb, data))
         llc.board.time_us += 20_000
         llc.loop()
-    pwm = [llc.board.pwm.get(pin, 0) for pin in ("D5", "D6")]
-    assert all(0 <= v <= 255 for v in pwm)
+    can = llc.board.can
+    assert can.rx_frames + can.rx_errors + can.rx_overflows == len(frames)  # every frame accounted for
+    assert llc.rx_bad <= can.rx_frames
+    known = {m.frame_id: m.length for m in DB.messages if m.senders == ["HOST"]}
+    wellformed = sum(1 for a, d in frames if known.get(a) == len(d))
+    assert llc.rx_bad == sum(1 for a, d in frames if len(d) <= 8) - wellformed
+
+
+def test_obstacle_inside_the_blind_zone_reads_as_close_not_clear() -> None:
+    p = plant(x=0.08, y=5.0, yaw=180.0)  # body surface 1.7 cm from the wall
+    p.run_for(0.5)
+    last = decoded(p, "SONAR")[-1]
+    assert last["valid"] == 1 and last["range_mm"] <= 160
+
+
+@pytest.mark.parametrize("quantum_ms", [7, 10, 13])
+def test_loop_keeps_its_rate_when_the_quantum_does_not_divide_the_period(quantum_ms: int) -> None:
+    cfg = Config.model_validate({
+        "session": {"quantum_ms": quantum_ms},
+        "robots": [{"count": 1, "placement": {"kind": "explicit", "poses": [[2, 2, 0]]}}],
+    })
+    p = Plant(cfg)
+    p.run_for(3.0)
+    assert len(decoded(p, "STATUS")) == pytest.approx(30, abs=1)  # 10 Hz status from a 50 Hz loop
+    assert len(decoded(p, "ODOMETRY")) == pytest.approx(60, abs=2)
+
+
+def test_heading_drift_follows_the_wheel_radius_mismatch() -> None:
+    """Both wheels held to the same pulse rate: unequal radii turn the robot, as real odometry drift."""
+    p = plant(seed=11)
+    drive(p, 0.15, 0.0, 1.0)
+    yaw0 = float(p.world.yaw[0])
+    drive(p, 0.15, 0.0, 8.0)
+    r_left, r_right = p.world.wheel_r[0]
+    expected = 0.15 * 2 * (r_right - r_left) / ((r_left + r_right) * 2 * p.world.half_track[0]) * 8.0
+    assert abs(expected) > 0.02  # the seed gives a measurable mismatch
+    assert float(p.world.yaw[0]) - yaw0 == pytest.approx(expected, rel=0.2)

@@ -67,8 +67,9 @@ def test_client_counts_and_drops_malformed_frames() -> None:
         llc.bus.send(can.Message(arbitration_id=0x7AB, data=b"\x01", is_extended_id=False))
         llc.bus.send(can.Message(arbitration_id=0x181, data=b"\x01\x02", is_extended_id=False))
         llc.bus.send(can.Message(arbitration_id=0x100, data=bytes(5), is_extended_id=False))  # a command, not telemetry
+        llc.bus.send(can.Message(arbitration_id=0x181, data=bytes(8)))  # python-can's default: an extended id
         client.poll()
-        assert client.rx_unknown == 1 and client.rx_bad_length == 2 and client.rx_frames == 0
+        assert client.rx_unknown == 2 and client.rx_bad_length == 2 and client.rx_frames == 0
     finally:
         bus.shutdown()
         llc.bus.shutdown()

@@ -19,4 +19,4 @@ def load_behaviour(name: str) -> type[Controller]:
         if isinstance(cls, type) and issubclass(cls, Controller):
             return cls
         raise TypeError(f"{name} is not a swarm_logic.controller.Controller subclass")
-    raise KeyError(f"unknown behaviour {name!r}; known: {', '.join(sorted(BEHAVIOURS))} or module:Class")
+    raise ValueError(f"unknown behaviour {name!r}; known: {', '.join(sorted(BEHAVIOURS))} or module:Class")
