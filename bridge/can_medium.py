@@ -22,6 +22,16 @@ def frame_bits(dlc: int, extended: bool = False) -> int:
     return 47 + 8 * dlc + (34 + 8 * dlc - 1) // 4
 
 
+def frame_fault(arbitration_id: int, data: bytes, extended: bool) -> str | None:
+    """Why a classic CAN data frame cannot exist on the wire, or None if it can."""
+    if len(data) > 8:
+        return f"classic CAN frame holds at most 8 bytes, got {len(data)}"
+    if not 0 <= arbitration_id <= (0x1FFFFFFF if extended else 0x7FF):
+        kind = "an extended" if extended else "a standard"
+        return f"arbitration id 0x{arbitration_id:X} out of range for {kind} frame"
+    return None
+
+
 def arbitration_key(arbitration_id: int, extended: bool) -> tuple[int, int, int]:
     """Who wins arbitration: the 11-bit base ID first; at equal base IDs a standard frame beats an
     extended one (its RTR/IDE bits are dominant where the extended frame sends recessive SRR/IDE)."""
@@ -62,8 +72,8 @@ class CanMedium:
         self.bits = 0
 
     def offer(self, src: str, seq: int, arbitration_id: int, data: bytes, extended: bool = False) -> None:
-        if len(data) > 8:
-            raise ValueError(f"classic CAN frame holds at most 8 bytes, got {len(data)}")
+        if (fault := frame_fault(arbitration_id, data, extended)) is not None:
+            raise ValueError(fault)
         heapq.heappush(self.pending, _Pending(arbitration_key(arbitration_id, extended), src, seq,
                                               arbitration_id, bytes(data), extended))
 

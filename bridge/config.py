@@ -11,6 +11,7 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from bridge.profiles import PROFILES, RobotProfile
@@ -101,6 +102,13 @@ class LightSource(_Model):
 class LightCfg(_Model):
     ambient_lux: float = Field(50.0, ge=0)
     sources: list[LightSource] = []
+
+    def illuminance(self, x: Any, y: Any) -> Any:
+        """Illuminance (lux) at (x, y): floats or numpy arrays of any shape."""
+        total = np.zeros(np.broadcast(x, y).shape) + self.ambient_lux
+        for s in self.sources:
+            total = total + s.peak_lux * np.exp(-((x - s.x) ** 2 + (y - s.y) ** 2) / (2 * s.sigma_m * s.sigma_m))
+        return total
 
 
 class Placement(_Model):

@@ -35,7 +35,6 @@ class FirmwareHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
         self.boards: dict[int, Board] = {}
         self.llcs: dict[int, LowLevelController] = {}
-        self.started: set[int] = set()
         self.nominal_ns: dict[int, int] = {}  # the loop's own fixed-rate schedule (millis()-based, as on the board)
         self.last_pins: dict[int, tuple] = {}
         for r in robots:
@@ -54,8 +53,7 @@ class FirmwareHost:
         b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(s["battery_v"])
         for _bus, arb_id, data, ext, ts in inputs["in"]:
             b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
-        if r not in self.started:
-            self.started.add(r)
+        if r not in self.nominal_ns:  # first tick: power-up
             self.nominal_ns[r] = t_ns
             llc.setup()
         llc.loop()

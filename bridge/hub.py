@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from bridge import transport
-from bridge.can_medium import CanMedium
+from bridge.can_medium import CanMedium, frame_fault
 from bridge.config import Config
 from bridge.plan import Plan, entity, robot_of
 from bridge.profiles import PROFILES
@@ -455,9 +455,8 @@ def _valid_can(item: Any) -> bool:
     if not (isinstance(item, list | tuple) and len(item) == 4 and item[0] == "can0"):
         return False
     _, arb, data, ext = item
-    if not (isinstance(arb, int) and isinstance(data, bytes) and isinstance(ext, bool) and len(data) <= 8):
-        return False
-    return 0 <= arb <= (0x1FFFFFFF if ext else 0x7FF)
+    return (isinstance(arb, int) and isinstance(data, bytes) and isinstance(ext, bool)
+            and frame_fault(arb, data, ext) is None)
 
 
 def _valid_pins(pins: Any) -> bool:

@@ -40,9 +40,7 @@ def plot_session(mcap_path: str | Path, plan: Plan, png_path: str | Path) -> Non
     aspect = a.length_m / a.width_m
     fig, ax = plt.subplots(figsize=(7, min(12, max(4, 7 * aspect))), dpi=110)
     gx, gy = np.meshgrid(np.linspace(0, a.width_m, 120), np.linspace(0, a.length_m, int(120 * aspect) + 2))
-    lux = np.full_like(gx, cfg.light.ambient_lux)
-    for s in cfg.light.sources:
-        lux += s.peak_lux * np.exp(-((gx - s.x) ** 2 + (gy - s.y) ** 2) / (2 * s.sigma_m**2))
+    lux = cfg.light.illuminance(gx, gy)
     im = ax.imshow(lux, origin="lower", extent=(0, a.width_m, 0, a.length_m), cmap="YlOrBr", alpha=0.45)
     fig.colorbar(im, ax=ax, fraction=0.04, pad=0.02, label="illuminance [lux]")
     if a.map:

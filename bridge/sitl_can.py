@@ -16,6 +16,7 @@ import can
 from can import BusABC, CanInitializationError, CanOperationError, Message
 
 from bridge import sim_context
+from bridge.can_medium import frame_fault
 
 
 class SitlBus(BusABC):
@@ -48,22 +49,15 @@ class SitlBus(BusABC):
             raise CanOperationError("bus is shut down")
         if msg.is_fd or msg.is_error_frame or msg.is_remote_frame:
             raise CanOperationError("the simulated bus carries classic CAN data frames only")
-        if len(msg.data) > 8 or msg.dlc > 8:
-            raise CanOperationError(f"classic CAN frame holds at most 8 bytes, got {len(msg.data)}")
-        limit = 0x1FFFFFFF if msg.is_extended_id else 0x7FF
-        if not 0 <= msg.arbitration_id <= limit:
-            raise CanOperationError(f"arbitration id 0x{msg.arbitration_id:X} out of range")
-        self._rt.outbox.append([self.channel, msg.arbitration_id, bytes(msg.data), msg.is_extended_id])
+        data = bytes(msg.data)
+        if (fault := frame_fault(msg.arbitration_id, data, msg.is_extended_id)) is not None:
+            raise CanOperationError(fault)
+        self._rt.outbox.append([self.channel, msg.arbitration_id, data, msg.is_extended_id])
 
     def _to_message(self, item: tuple) -> Message:
         arb_id, data, ext, t_ns = item
         return Message(timestamp=t_ns / 1e9, arbitration_id=arb_id, data=data, is_extended_id=ext,
                        channel=self.channel, is_rx=True)
-
-    def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
-        if self._rx:
-            return self._to_message(self._rx.popleft()), False
-        return None, False
 
     def recv(self, timeout: float | None = None) -> Message | None:
         """Next frame that passes the filters; waits up to ``timeout`` simulated seconds."""

@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import queue
 import time
-from collections.abc import Callable
 from typing import Any
 
 import msgpack
@@ -81,6 +80,3 @@ def wait_matched(pub: zenoh.Publisher, timeout_s: float, what: str) -> None:
             raise TimeoutError(f"nobody subscribed to {what} within {timeout_s:.0f} s")
         time.sleep(0.005)
 
-
-def subscriber_callback(session: zenoh.Session, key: str, fn: Callable[[bytes], None]) -> Any:
-    return session.declare_subscriber(key, lambda s: fn(s.payload.to_bytes()))

@@ -65,7 +65,6 @@ class World:
                 self._cylinder(ob.x, ob.y, ob.radius, ob.height)
         if cfg.arena.map:
             self._load_map(cfg.arena)
-        self.lights = [(s.x, s.y, s.peak_lux, s.sigma_m) for s in cfg.light.sources]
         self._build_robots(robots)
 
     # -- scene ------------------------------------------------------------------------------------
@@ -269,8 +268,9 @@ class World:
         live = np.flatnonzero(self.alive)
         if not len(live):
             return
-        owner = self._ray_owner[np.isin(self._ray_owner, live)]
-        ang = self.yaw[owner] + self._ray_angle[np.isin(self._ray_owner, live)]
+        rays = self.alive[self._ray_owner]
+        owner = self._ray_owner[rays]
+        ang = self.yaw[owner] + self._ray_angle[rays]
         ca, sa = np.cos(ang), np.sin(ang)
         x, y = self.pos[owner, 0], self.pos[owner, 1]
         r0, r1, z = self._ray_r0[owner], self._ray_r0[owner] + self._ray_len[owner], self._ray_z[owner]
@@ -299,26 +299,16 @@ class World:
             self.sonar_m[i] = float(min(max(r, prof.sonar_min_range_m), prof.sonar_max_range_m))
 
     # -- sensing ------------------------------------------------------------------------------------
-    def lux_at(self, x: float, y: float) -> float:
-        total = self.cfg.light.ambient_lux
-        for lx, ly, peak, sigma in self.lights:
-            total += peak * math.exp(-((x - lx) ** 2 + (y - ly) ** 2) / (2 * sigma * sigma))
-        return total
-
     def _sample_all(self) -> None:
         """Noise-free encoder counts and illuminance of every robot, once per physics state."""
         counts = np.floor(self.angle * (self.cpr / (2 * math.pi))[:, None]).astype(np.int64)
-        lux = np.full(self.n, float(self.cfg.light.ambient_lux))
-        x, y = self.pos[:, 0], self.pos[:, 1]
-        for lx, ly, peak, sigma in self.lights:
-            lux += peak * np.exp(-((x - lx) ** 2 + (y - ly) ** 2) / (2 * sigma * sigma))
-        self._sampled = (self.steps_done, counts.tolist(), lux.tolist(), self.sonar_m.tolist(),
-                         self.battery_v.tolist())
+        lux = self.cfg.light.illuminance(self.pos[:, 0], self.pos[:, 1])
+        self._sampled = (counts.tolist(), lux.tolist(), self.sonar_m.tolist(), self.battery_v.tolist())
 
     def sensors(self, robot: int) -> Sensors:
-        if self._sampled is None or self._sampled[0] != self.steps_done:
+        if self._sampled is None:  # invalidated by every step_quantum
             self._sample_all()
-        _, counts, lux, sonar, batt = self._sampled
+        counts, lux, sonar, batt = self._sampled
         noisy = lux[robot] * (1 + self._light_noise[robot] * self._light_rng[robot].standard_normal())
         return Sensors((counts[robot][0], counts[robot][1]), sonar[robot], max(noisy, 0.0), batt[robot])
 

@@ -15,8 +15,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cantools.database
-
 from firmware_sim import sensors
 from firmware_sim.arduino import Board
 from swarm_logic.interfaces import eswarbot_llc_db
@@ -94,7 +92,6 @@ class LowLevelController:
         self.p = params or LlcParams()
         self.loop_period_us = round(1e6 / self.p.loop_hz)
         self.db = eswarbot_llc_db()
-        self._msg = {m.name: m for m in self.db.messages}
         self.pid = (WheelPid(self.p), WheelPid(self.p))
         self.m_per_pulse = 2 * math.pi * self.p.wheel_radius_m / self.p.encoder_cpr
 
@@ -268,7 +265,7 @@ class LowLevelController:
         return int(max(0, min(100, round((per_cell - 3.3) / (4.2 - 3.3) * 100))))
 
     def _send(self, name: str, **signals: float) -> None:
-        msg: cantools.database.can.Message = self._msg[name]
+        msg = self.db.get_message_by_name(name)
         self.board.can.write(msg.frame_id, msg.encode(signals, scaling=True), self.board.micros())
 
 

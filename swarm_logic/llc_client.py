@@ -39,7 +39,6 @@ class LlcClient:
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
         self.db = eswarbot_llc_db()
-        self._by_name = {m.name: m for m in self.db.messages}
         self.state = LlcState()
         self.rx_frames = 0
         self.rx_unknown = 0
@@ -94,7 +93,7 @@ class LlcClient:
         return True
 
     def _send(self, name: str, **signals: float) -> None:
-        spec = self._by_name[name]
+        spec = self.db.get_message_by_name(name)
         self.bus.send(can.Message(arbitration_id=spec.frame_id, data=spec.encode(signals), is_extended_id=False))
 
     def drive(self, v: float, w: float) -> None:

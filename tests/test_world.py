@@ -73,8 +73,8 @@ def test_light_field_and_sensor_noise_are_seeded() -> None:
     extra = {"light": {"ambient_lux": 10, "sources": [{"x": 2, "y": 2, "peak_lux": 100, "sigma_m": 1}]}}
     a = world(**one_robot(2.0, 2.0, 0, **extra))
     b = world(**one_robot(2.0, 2.0, 0, **extra))
-    assert a.lux_at(2, 2) == pytest.approx(110)
-    assert a.lux_at(3, 2) == pytest.approx(10 + 100 * math.exp(-0.5))
+    assert a.cfg.light.illuminance(2, 2) == pytest.approx(110)
+    assert a.cfg.light.illuminance(3, 2) == pytest.approx(10 + 100 * math.exp(-0.5))
     readings = [a.sensors(0).lux for _ in range(200)]
     assert readings[:5] == [b.sensors(0).lux for _ in range(5)]  # seeded: same stream in the same order
     assert np.std(readings) == pytest.approx(110 * 0.01, rel=0.25)  # 1 % noise is there
