@@ -80,6 +80,35 @@ def cmd_bench(a: argparse.Namespace) -> int:
                      config=a.config)
 
 
+def cmd_radio_survey(a: argparse.Namespace) -> int:
+    from bridge.radio_survey import run_survey
+
+    out = a.out or f"runs/{Path(a.config).stem}-radio-survey"
+    cal = run_survey(a.config, out, duration_s=a.duration, interval_s=a.interval, seed=a.seed, series=a.series,
+                     progress=None if a.quiet else sys.stderr)
+    for k, v in cal.items():
+        if isinstance(v, dict):
+            verdict = "" if "pass" not in v else ("  PASS" if v["pass"] else "  FAIL")
+            print(f"{k}: {json.dumps({kk: vv for kk, vv in v.items() if kk != 'pass'})}{verdict}")
+    print(f"wrote {out}/survey.csv, {out}/survey.png, {out}/calibration.json")
+    return 0
+
+
+def cmd_radio_fit(a: argparse.Namespace) -> int:
+    from bridge.radio_fit import fit_csv
+
+    try:
+        res = fit_csv(a.csv, a.out, tx_power_dbm=a.tx_power, sensitivity_dbm=a.sensitivity, d0_m=a.d0)
+    except ValueError as e:
+        print(f"swarm-sitl radio-fit: {e}", file=sys.stderr)
+        return 2
+    print(json.dumps({k: v for k, v in res.items() if k != "radio"}, indent=1, default=float))
+    print(f"[radio] fields: {json.dumps(res['radio'])}")
+    if a.out:
+        print(f"wrote {a.out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -110,6 +139,24 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
     p.add_argument("--config", help="session config to benchmark (default: the demo)")
     p.set_defaults(fn=cmd_bench)
+
+    p = sub.add_parser("radio-survey", help="the thesis' RSSI-vs-distance survey (Fig. 3.7) in a config's arena")
+    p.add_argument("config", help="session config whose arena (and robots' XBee settings) to survey in")
+    p.add_argument("--duration", type=float, default=3600.0, help="simulated seconds (default 3600)")
+    p.add_argument("--interval", type=float, default=2.0, help="seconds between messages (default 2, as the thesis)")
+    p.add_argument("--seed", type=int)
+    p.add_argument("--series", type=int, choices=[1, 2], help="XBee series (default: the config's, else 2)")
+    p.add_argument("--out", help="output directory (default runs/<config>-radio-survey)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(fn=cmd_radio_survey)
+
+    p = sub.add_parser("radio-fit", help="fit path loss and shadowing to RSSI-vs-distance pairs (a CSV)")
+    p.add_argument("csv", help="columns distance_m, rssi_dbm (empty: lost), optional walls")
+    p.add_argument("--out", help="write the fitted [radio] config fragment (TOML) here")
+    p.add_argument("--tx-power", type=float, default=3.0, help="transmit power, dBm (XBee S2 at PL 4: +3)")
+    p.add_argument("--sensitivity", type=float, default=-94.0, help="receiver sensitivity, dBm")
+    p.add_argument("--d0", type=float, default=1.0, help="reference distance, m")
+    p.set_defaults(fn=cmd_radio_fit)
 
     p = sub.add_parser("digest", help="recompute the digest of a recording")
     p.add_argument("recording")

@@ -15,6 +15,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from bridge.profiles import PROFILES, RobotProfile
+from bridge.radio_medium import RadioCfg
+from bridge.uwb_medium import UwbCfg
 
 
 class ConfigError(Exception):
@@ -136,12 +138,45 @@ class Placement(_Model):
         return self
 
 
+XBEE_BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)  # the BD table of the XBee modules
+
+
+class XBeeCfg(_Model):
+    """A robot's XBee module: which firmware it runs and how its UART is set up (as configured with XCTU)."""
+
+    series: Literal[1, 2] = Field(2, description="1: 802.15.4 firmware (frames 0x00/0x01/0x80/0x81/0x89); "
+                                                 "2: ZigBee firmware (0x10/0x8B/0x90), the eSwarBot's module")
+    api_mode: Literal[1, 2] = Field(1, description="AP: 1 plain API frames, 2 API frames with escaped bytes")
+    baud: int = Field(9600, description="BD: UART rate in bit/s (the modules' default is 9600)")
+    power_level: int = Field(4, ge=0, le=4, description="PL: transmit power level, 4 is the highest")
+    pan_id: int = Field(0x3332, ge=0, le=0xFFFF, description="ID: PAN id; modules hear only their own PAN")
+    channel: int = Field(0x0C, ge=0x0B, le=0x1A, description="CH: 802.15.4 channel 11-26")
+    pty: str | None = Field(None, description="expose this XBee's UART on a pseudo-terminal, linked at this path "
+                                              "(relative to the session's output directory; '{id}' is replaced by "
+                                              "the robot id); the robot's own logic then cannot open sitl://xbee")
+
+    @field_validator("baud")
+    @classmethod
+    def _known_baud(cls, v: int) -> int:
+        if v not in XBEE_BAUDS:
+            raise ValueError(f"{v} is not an XBee BD rate; one of {', '.join(map(str, XBEE_BAUDS))}")
+        return v
+
+
 class RobotGroup(_Model):
     profile: str = "eswarbot"
     count: int = Field(1, ge=1, le=10000)
     behaviour: str = "random_walk"
     params: dict[str, Any] = {}
     placement: Placement = Placement()
+    xbee: XBeeCfg | None = Field(None, description="the robot's XBee radio module (none: no radio)")
+    uwb: bool = Field(False, description="fit a DWM1001-class UWB ranging module")
+
+    @model_validator(mode="after")
+    def _pty_per_robot(self) -> RobotGroup:
+        if self.xbee is not None and self.xbee.pty and self.count > 1 and "{id}" not in self.xbee.pty:
+            raise ValueError("xbee.pty: a group of several robots needs '{id}' in the link path")
+        return self
 
     @field_validator("profile")
     @classmethod
@@ -157,6 +192,8 @@ class Config(_Model):
     arena: ArenaCfg = ArenaCfg()
     obstacles: list[Obstacle] = []
     light: LightCfg = LightCfg()
+    radio: RadioCfg = Field(RadioCfg(), description="the 2.4 GHz channel the XBees share (docs/radio.md)")
+    uwb: UwbCfg = Field(UwbCfg(), description="UWB ranging noise and TDMA budget (docs/uwb.md)")
     robots: list[RobotGroup] = Field(min_length=1)
 
     @model_validator(mode="after")

@@ -1,23 +1,45 @@
-"""Hosts the firmware of one or more robots: one Arduino board and LLC sketch per robot.
+"""Hosts the firmware of one or more robots: per robot an Arduino board with the LLC sketch, and the radio
+modules it carries (an XBee, a UWB module), each an entity with its own schedule.
 
-Per tick the host sets each due board's clock and pin inputs from the world's physical values, hands it
-the CAN frames the bus delivered, runs ``loop()`` (``setup()`` first, once) and returns the frames it
-transmitted, its pin outputs when they changed, and its next loop time.
+Per tick the host sets a due board's clock and pin inputs from the world's physical values, hands it the CAN
+frames the bus delivered, runs ``loop()`` (``setup()`` first, once) and returns the frames it transmitted,
+its pin outputs when they changed, and its next loop time. A module gets the bytes its UART received and the
+radio events the medium delivered, and returns the bytes it sent to its host, what it puts on the air, and
+when it next needs to run.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import pty
+import tty
+from pathlib import Path
 from typing import Any
 
-from bridge.plan import Plan, robot_of
+from bridge.config import Config
+from bridge.plan import Plan, robot_of, uwb_addr16, xbee_serial64
 from bridge.profiles import PROFILES, RobotProfile
+from bridge.rng import stream
 from firmware_sim import sensors
 from firmware_sim.arduino import Board
 from firmware_sim.can_controller import Frame
-from firmware_sim.llc import PIN_BATTERY, PIN_DIR, PIN_LDR, PIN_PWM, PIN_SONAR, LlcParams, LowLevelController
+from firmware_sim.llc import (
+    PIN_BATTERY,
+    PIN_DIR,
+    PIN_LDR,
+    PIN_PWM,
+    PIN_RSSI,
+    PIN_SONAR,
+    RSSI_PWM_HZ,
+    LlcParams,
+    LowLevelController,
+)
+from firmware_sim.uwb import UwbModule
+from firmware_sim.xbee import XBeeModule
 
 
-def llc_params(p: RobotProfile) -> LlcParams:
+def llc_params(p: RobotProfile, rssi_pwm_input: bool = False) -> LlcParams:
     return LlcParams(
         wheel_radius_m=p.wheel_radius_m,
         half_track_m=p.half_track_m,
@@ -28,22 +50,91 @@ def llc_params(p: RobotProfile) -> LlcParams:
         battery_cells=p.battery_cells,
         sonar_min_mm=round(p.sonar_min_range_m * 1000),
         sonar_max_mm=round(p.sonar_max_range_m * 1000),
+        rssi_pwm_input=rssi_pwm_input,
     )
+
+
+class PtyLink:
+    """A module's UART on a pseudo-terminal, so outside tools (XCTU, digi-xbee, minicom) can open it.
+
+    The slave side is linked at ``link`` and kept open here, so a tool may close and reopen it. Bytes cross
+    in raw mode, as on a USB-serial adapter; what the outside sends is read once per quantum.
+    """
+
+    def __init__(self, link: str) -> None:
+        self.master, self.slave = pty.openpty()
+        tty.setraw(self.slave)
+        os.set_blocking(self.master, False)
+        self.link = Path(link)
+        self.link.parent.mkdir(parents=True, exist_ok=True)
+        self.link.unlink(missing_ok=True)
+        self.link.symlink_to(os.ttyname(self.slave))
+
+    def read(self) -> bytes:
+        chunks = []
+        while True:
+            try:
+                data = os.read(self.master, 4096)
+            except (BlockingIOError, OSError):
+                break
+            if not data:
+                break
+            chunks.append(data)
+        return b"".join(chunks)
+
+    def write(self, data: bytes) -> None:
+        with contextlib.suppress(BlockingIOError, OSError):  # nobody reading and the buffer full: bytes lost
+            os.write(self.master, data)
+
+    def close(self) -> None:
+        self.link.unlink(missing_ok=True)
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
 
 
 class FirmwareHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
+        cfg = Config.model_validate(plan.config)
+        seed = cfg.session.seed
         self.boards: dict[int, Board] = {}
         self.llcs: dict[int, LowLevelController] = {}
         self.nominal_ns: dict[int, int] = {}  # the loop's own fixed-rate schedule (millis()-based, as on the board)
         self.last_pins: dict[int, tuple] = {}
+        self.xbees: dict[int, XBeeModule] = {}
+        self.ptys: dict[int, PtyLink] = {}
+        self.uwbs: dict[int, UwbModule] = {}
+        uwb_team = [r.id for r in plan.robots if r.uwb]
+        self.uwb_baud = cfg.uwb.uart_baud
         for r in robots:
+            rp = plan.robots[r]
             board = Board()
             self.boards[r] = board
-            self.llcs[r] = LowLevelController(board, llc_params(PROFILES[plan.robots[r].profile]))
+            self.llcs[r] = LowLevelController(board, llc_params(PROFILES[rp.profile], rp.xbee is not None))
+            if rp.xbee:
+                x = rp.xbee
+                self.xbees[r] = XBeeModule(
+                    series=x["series"], serial64=xbee_serial64(r), node_id=rp.name, rng=stream(seed, "xbee", r),
+                    api_mode=x["api_mode"], baud=x["baud"], pan_id=x["pan_id"], channel=x["channel"],
+                    power_level=x["power_level"])
+                if x.get("pty"):
+                    self.ptys[r] = PtyLink(x["pty"])
+            if rp.uwb:
+                self.uwbs[r] = UwbModule(
+                    addr16=uwb_addr16(r), robot=r, peers=[(p, uwb_addr16(p)) for p in uwb_team if p != r],
+                    slot=uwb_team.index(r), n_slots=len(uwb_team), rng=stream(seed, "uwb", r),
+                    cfg=cfg.uwb)
 
     def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         r = robot_of(ent)
+        role = ent[ent.index("/") + 1:]
+        if role == "llc":
+            return self._llc(r, t_ns, inputs)
+        if role == "xbee":
+            return self._xbee(r, t_ns, inputs)
+        return self._uwb(r, t_ns, inputs)
+
+    def _llc(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         b, llc = self.boards[r], self.llcs[r]
         b.time_us = t_ns // 1000
         s = inputs["sens"]
@@ -51,6 +142,7 @@ class FirmwareHost:
         b.analog_volts[PIN_SONAR] = sensors.sonar_volts(s["sonar_m"])
         b.analog_volts[PIN_LDR] = sensors.ldr_volts(s["lux"])
         b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(s["battery_v"])
+        b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
         for _bus, arb_id, data, ext, ts in inputs["in"]:
             b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
         if r not in self.nominal_ns:  # first tick: power-up
@@ -78,5 +170,50 @@ class FirmwareHost:
             out["pins"] = {"pwm": list(pwm), "led": list(b.led_rgb)}
         return out
 
+    def _xbee(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        m = self.xbees[r]
+        link = self.ptys.get(r)
+        uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
+        if link is not None:
+            uart += link.read()
+        air = [item[1] for item in inputs["in"] if item[0] == "air"]
+        res = m.step(t_ns, uart, air)
+        out: list[list] = [["air", f] for f in res.air_tx]
+        if res.uart_tx:
+            if link is not None:
+                link.write(res.uart_tx)
+            else:
+                out.append(["uart", "xbee", res.uart_tx, m.baud])
+        if res.node is not None:
+            out.append(["node", res.node])
+        if res.rssi_pwm is not None:
+            out.append(["rssi_pwm", float(res.rssi_pwm)])
+        wake = m.next_wake()
+        if link is not None:  # poll the pseudo-terminal every quantum
+            wake = t_ns + 1 if wake is None else min(wake, t_ns + 1)
+        return {"out": out, "wake": wake, "wom": True}
+
+    def _uwb(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        m = self.uwbs[r]
+        uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
+        events = [item[1] for item in inputs["in"] if item[0] == "uwb"]
+        res = m.step(t_ns, uart, events)
+        out: list[list] = [["uwb", q] for q in res.requests]
+        if res.uart_tx:
+            out.append(["uart", "uwb", res.uart_tx, self.uwb_baud])
+        # Range results wait in the inbox until the module runs anyway (its next turn, or its host asks): they
+        # carry their own times, so the module sees the same thing, with fewer wake-ups of the process.
+        return {"out": out, "wake": m.next_wake(), "wom": ["uart"]}
+
+    def stats(self) -> dict[str, dict]:
+        """Each module's counters (malformed frames, buffer drops, ...), reported when the session ends."""
+        out: dict[str, dict] = {}
+        for r, m in self.xbees.items():
+            out[f"r{r:03d}/xbee"] = dict(m.counters)
+        for r, m in self.uwbs.items():
+            out[f"r{r:03d}/uwb"] = dict(m.counters)
+        return out
+
     def stop(self) -> None:
-        pass
+        for link in self.ptys.values():
+            link.close()

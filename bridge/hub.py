@@ -35,13 +35,17 @@ import numpy as np
 from bridge import transport
 from bridge.can_medium import CanMedium, frame_fault
 from bridge.config import Config
-from bridge.plan import Plan, entity, robot_of
+from bridge.plan import Plan, entity, robot_of, uwb_addr16
 from bridge.profiles import PROFILES
+from bridge.radio_medium import RadioMedium
 from bridge.recorder import Recorder
+from bridge.uart import SerialLine
+from bridge.uwb_medium import UwbMedium
 from bridge.world import World
 from swarm_logic.interfaces import eswarbot_llc_db
 
 LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
+CONNECTIVITY_EVERY_NS = 1_000_000_000  # how often the radio graph's algebraic connectivity is sampled
 
 
 class Hub:
@@ -60,7 +64,7 @@ class Hub:
         self.procs = {p.name: p for p in plan.procs}
         self.proc_of: dict[str, str] = {}
         for p in plan.procs:
-            for e in p.entities():
+            for e in p.entities(plan.robots):
                 self.proc_of[e] = p.name
         self.ents = sorted(self.proc_of)
         self.next_wake: dict[str, int | None] = dict.fromkeys(self.ents, 0)
@@ -68,9 +72,12 @@ class Hub:
             # Robots power up one quantum apart (cyclically), as real ones never boot in the same 10 ms; this
             # spreads LLC loops and controller steps evenly over quanta instead of waking everyone at once.
             period = round(1e9 / PROFILES[rp.profile].llc_loop_hz)
-            self.next_wake[entity(r, "llc")] = (r * self.q_ns) % max(period, self.q_ns) // self.q_ns * self.q_ns
+            boot = (r * self.q_ns) % max(period, self.q_ns) // self.q_ns * self.q_ns
+            for role in rp.modules():
+                self.next_wake[entity(r, role)] = boot
             self.next_wake[entity(r, "logic")] = (r * self.q_ns) % max(LOGIC_BOOT_SPREAD_NS, self.q_ns)
-        self.wom: dict[str, bool] = dict.fromkeys(self.ents, False)
+        # wake on message: False, True (any input), or the input kinds that wake it (item[0] of inbox items)
+        self.wom: dict[str, Any] = dict.fromkeys(self.ents, False)
         self.inbox: dict[str, list] = {e: [] for e in self.ents}
         self.seq: dict[str, int] = dict.fromkeys(self.ents, 0)
         self.can = [CanMedium(f"r{r:03d}/can0") for r in range(self.n)]
@@ -87,13 +94,40 @@ class Hub:
         self.parent_pid = os.getppid()
         self.counts: dict[str, int] = defaultdict(int)
         self.barrier_us: list[float] = []
+        self.wakeups: dict[str, int] = defaultdict(int)  # entity runs by role (llc, xbee, uwb, logic)
         self.ticks = 0
+        self.proc_ticks = 0  # tick messages sent (one per due process per quantum)
         self.k = 0
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.status_pub: Any = None
         self._names = {m.frame_id: m.name for m in eswarbot_llc_db().messages}
         self._topics = {r: (f"/r{r:03d}/can0", f"/r{r:03d}/llc/pins")
                         for r in range(self.n)}
+        # radios: the 2.4 GHz medium of the XBees, the UWB ranging medium, and each robot's serial lines
+        robots = plan.robots
+        geometry = _Geometry(self.world)
+        self.roles = {r: rp.modules() for r, rp in enumerate(robots)}
+        self.radio = RadioMedium(cfg.radio, self.n, cfg.session.seed, geometry) if any(
+            rp.xbee for rp in robots) else None
+        self.uwb = UwbMedium(cfg.uwb, self.n, cfg.session.seed, geometry) if any(rp.uwb for rp in robots) else None
+        self.uwb_robot = {uwb_addr16(r): r for r, rp in enumerate(robots) if rp.uwb}
+        self.lines: dict[tuple[int, str], SerialLine] = {}  # host -> module, paced at the host's baud
+        self.host_baud: dict[tuple[int, str], int] = {}  # what the host's port is set to (last write)
+        for r, rp in enumerate(robots):
+            if rp.xbee and not rp.xbee.get("pty"):
+                self.lines[(r, "xbee")] = SerialLine(rp.xbee["baud"])
+                self.host_baud[(r, "xbee")] = rp.xbee["baud"]
+            if rp.uwb:
+                self.lines[(r, "uwb")] = SerialLine(cfg.uwb.uart_baud)
+                self.host_baud[(r, "uwb")] = cfg.uwb.uart_baud
+        self.rssi_pwm = [0.0] * self.n
+        self.uart_unrouted = 0
+        self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+        self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
+        self.module_stats: dict[str, dict] = {}
+        self.addr_robot: dict[tuple[str, int], int] = {}  # ("64" | "16", address) -> robot, from the modules
+        self.tx_dst: dict[tuple[int, Any], int | None] = {}  # (robot, frame handle) -> addressed robot
+        self.node_sens: dict[int, float] = {}  # each module's receiver sensitivity, as it reported it
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def open(self) -> None:
@@ -151,7 +185,7 @@ class Hub:
             return
         self.dead.add(r)
         self.world.kill(r)
-        for role in ("llc", "logic"):
+        for role in (*self.roles[r], "logic"):
             e = entity(r, role)
             self.next_wake[e] = None
             self.wom[e] = False
@@ -197,6 +231,13 @@ class Hub:
                 for node in self.can_nodes[r]:
                     if node != d.src:
                         self.inbox[node].append(["can0", d.arbitration_id, d.data, d.extended, d.wire_end_ns])
+            elif kind == "ent":  # radio events, UART bytes: to one entity's inbox
+                _, e, msg = item
+                if robot_of(e) not in self.dead:
+                    self.inbox[e].append(msg)
+            elif kind == "rec":
+                _, topic, schema, payload = item
+                rec.write(t, topic, schema, payload)
             else:  # pin writes of the LLC's previous loop
                 _, r, pins = item
                 self.counts["pin_writes"] += 1
@@ -205,12 +246,21 @@ class Hub:
                 world.set_pwm(r, *pins["pwm"])
                 world.set_led(r, tuple(pins["led"]))
 
+    def _lines(self, t: int) -> None:
+        """Bytes that finished crossing a host-to-module serial line by ``t`` go to the module."""
+        for (r, dev), line in self.lines.items():
+            if line.pending and r not in self.dead:
+                data = line.arrived(t)
+                if data:
+                    self.inbox[entity(r, dev)].append(["uart", data])
+
     def _due(self, t: int) -> dict[str, list[str]]:
         due: dict[str, list[str]] = defaultdict(list)
         nw, wom, inbox, proc_of = self.next_wake, self.wom, self.inbox, self.proc_of
         for e in self.ents:
             w = nw[e]
-            if (w is not None and w <= t) or (wom[e] and inbox[e]):
+            if (w is not None and w <= t) or (wom[e] and inbox[e] and (
+                    wom[e] is True or any(item[0] in wom[e] for item in inbox[e]))):
                 due[proc_of[e]].append(e)
         return due
 
@@ -308,14 +358,20 @@ class Hub:
                 continue
             w = res.get("wake")
             self.next_wake[e] = None if w is None else max(t + q, -(-w // q) * q)
-            self.wom[e] = bool(res.get("wom"))
+            wm = res.get("wom")
+            self.wom[e] = wm if isinstance(wm, list) and all(isinstance(x, str) for x in wm) else bool(wm)
             for item in res.get("out", ()):
-                if not _valid_can(item):
-                    self.counts["malformed_frames"] += 1
-                    continue
-                self.seq[e] += 1
-                self.can[r].offer(e, self.seq[e], item[1], item[2], item[3])
-                touched.add(r)
+                if not (isinstance(item, list | tuple) and item):
+                    self.counts["malformed_items"] += 1
+                elif item[0] == "can0":
+                    if not _valid_can(item):
+                        self.counts["malformed_frames"] += 1
+                        continue
+                    self.seq[e] += 1
+                    self.can[r].offer(e, self.seq[e], item[1], item[2], item[3])
+                    touched.add(r)
+                else:
+                    self._route(e, r, t, item)
             if pins is not None:
                 if pins_ok:
                     self.deliveries[t + q].append(("pins", r, pins))
@@ -325,6 +381,138 @@ class Hub:
             if r in touched or self.can[r].pending:
                 for d in self.can[r].transmit(t, q):
                     self.deliveries[d.t_ns].append(("can", r, d))
+
+    def _media(self, t: int) -> None:
+        """Let the radio resolve the air up to the earliest time a new frame could start (t+2q: this quantum's
+        submissions start at t+q or later), and sample the radio graph's connectivity."""
+        q = self.q_ns
+        if self.radio is None:
+            return
+        for t_ev, r, ev in self.radio.advance(t + 2 * q):
+            self._radio_event(t_ev, r, ev)
+        if t % CONNECTIVITY_EVERY_NS < q:
+            lam = self.algebraic_connectivity()
+            self.connectivity.append((t / 1e9, lam))
+            self.rec.write(t, "/radio/connectivity", "swarm_sitl.Connectivity", {"lambda2": round(lam, 6)})
+
+    def algebraic_connectivity(self) -> float:
+        """lambda2 of the graph of live robots whose mean link budget (no fast fading) clears the receiver's
+        sensitivity both ways: above zero exactly when the radio network is connected."""
+        live = [r for r in range(self.n) if r not in self.dead and "xbee" in self.roles[r]]
+        if len(live) < 2:
+            return 0.0
+        rssi = self.radio.mean_rssi()[np.ix_(live, live)]
+        sens = np.array([self.node_sens.get(r, -94.0) for r in live])
+        up = (rssi >= sens[None, :]) & (sens[None, :] <= rssi.T).T
+        adj = (up & up.T).astype(float)
+        np.fill_diagonal(adj, 0.0)
+        lap = np.diag(adj.sum(axis=1)) - adj
+        return float(max(0.0, np.sort(np.linalg.eigvalsh(lap))[1]))
+
+    def _route(self, e: str, r: int, t: int, item: list) -> None:
+        """One output item other than a CAN frame: UART bytes, an air frame, a node setting, a ranging request,
+        the RSSI PWM level, a log record. Anything malformed is counted and dropped."""
+        q = self.q_ns
+        kind = item[0]
+        role = e[e.index("/") + 1:]
+        try:
+            if kind == "uart" and role == "logic":
+                _, dev, data, baud = item
+                line = self.lines.get((r, dev))
+                if line is None or not isinstance(data, bytes) or type(baud) is not int or baud <= 0:
+                    self.uart_unrouted += 1
+                    return
+                self.host_baud[(r, dev)] = baud
+                line.offer(t + q, data, baud)
+                self.rec.write(t, f"/r{r:03d}/{dev}/uart", "swarm_sitl.Uart", {"dir": "to_module", "data": data.hex()})
+            elif kind == "uart" and role in ("xbee", "uwb"):
+                _, dev, data, baud = item
+                if not isinstance(data, bytes) or dev != role:
+                    raise ValueError
+                if baud != self.host_baud.get((r, dev), baud):  # the host listens at another rate: garbage
+                    self.counts["uart_garbled_bytes"] += len(data)
+                    data = bytes(((b * 73 + 41) ^ 0x5A) & 0xFF for b in data)
+                self.deliveries[t + q].append(("ent", entity(r, "logic"), [f"uart:{dev}", data]))
+                self.deliveries[t + q].append(("rec", f"/r{r:03d}/{dev}/uart", "swarm_sitl.Uart",
+                                               {"dir": "to_host", "data": data.hex()}))
+            elif kind == "air" and role == "xbee" and self.radio is not None and isinstance(item[1], dict):
+                f = item[1]
+                self.radio.submit(r, t + q, f)
+                self.counts["air_frames"] += 1
+                dst = f.get("dst")
+                self.tx_dst[(r, f.get("handle"))] = (self.addr_robot.get((dst, f.get("dst_addr"))) if dst != "bcast"
+                                                     else None)
+            elif kind == "node" and role == "xbee" and self.radio is not None and isinstance(item[1], dict):
+                node = item[1]
+                self.radio.set_node(r, node)
+                self.addr_robot[("64", int(node["addr64"]))] = r
+                self.addr_robot[("16", int(node["addr16"]))] = r
+                self.node_sens[r] = float(node["sensitivity_dbm"])
+            elif kind == "rssi_pwm" and role == "xbee":
+                self.rssi_pwm[r] = min(1.0, max(0.0, float(item[1])))
+            elif kind == "uwb" and role == "uwb" and self.uwb is not None and isinstance(item[1], dict):
+                req = item[1]
+                peer = int(req["peer"])
+                if not (0 <= peer < self.n) or peer == r:
+                    raise ValueError
+                start = max(t + q, int(req.get("t_ns", 0)))
+                for t_ev, rr, ev in self.uwb.exchange(start, r, peer):
+                    if "uwb" in self.roles[rr]:
+                        self.deliveries[max(t + q, -(-t_ev // q) * q)].append(("ent", entity(rr, "uwb"), ["uwb", ev]))
+            elif kind == "log" and role == "logic":
+                _, topic, values = item
+                if not (isinstance(topic, str) and topic.isidentifier() and isinstance(values, dict)):
+                    raise ValueError
+                self.rec.write(t, f"/r{r:03d}/log/{topic}", "swarm_sitl.Log", values)
+                if topic == "uwb_ranges":
+                    self._uwb_log(r, values)
+            else:
+                raise ValueError
+        except (ValueError, TypeError, KeyError, IndexError):
+            self.counts["malformed_items"] += 1
+
+    def _radio_event(self, t_ev: int, r: int, ev: dict) -> None:
+        """A reception or a transmit result from the medium: to the module at the next quantum boundary, and
+        to the recording (with the ground-truth distance, for surveys)."""
+        q = self.q_ns
+        t_del = -(-t_ev // q) * q
+        if "xbee" in self.roles[r]:
+            self.deliveries[t_del].append(("ent", entity(r, "xbee"), ["air", ev]))
+        if ev.get("ev") == "rx":
+            f = ev["frame"]
+            src = self.addr_robot.get(("64", f.get("src64")), -1)
+            d = float(np.hypot(*(self.world.pos[r] - self.world.pos[src]))) if 0 <= src < self.n else None
+            self.deliveries[t_del].append(("rec", "/radio/rx", "swarm_sitl.RadioRx", {
+                "t_ns": t_ev, "dst": r, "src": src, "handle": f.get("handle"), "rssi_dbm": ev.get("rssi_dbm"),
+                "len": len(f.get("payload", b"")), "distance_m": None if d is None else round(d, 3)}))
+        elif ev.get("ev") == "done":
+            dst = self.tx_dst.pop((r, ev.get("handle")), None)
+            d = walls = None
+            if dst is not None and dst != r:
+                d = round(float(np.hypot(*(self.world.pos[r] - self.world.pos[dst]))), 3)
+                walls = int(self.world.walls(r, np.array([dst]))[0])
+            self.deliveries[t_del].append(("rec", "/radio/tx", "swarm_sitl.RadioTx", {
+                "t_ns": t_ev, "src": r, "handle": ev.get("handle"), "status": ev.get("status"),
+                "attempts": ev.get("attempts"), "dst": dst, "distance_m": d, "walls": walls}))
+
+    def _uwb_log(self, r: int, values: dict) -> None:
+        """The logic's own ranges (raw and filtered) against the ground truth now: the error it lives with."""
+        peers, raw, filt = values.get("peers"), values.get("raw"), values.get("filtered")
+        if not (isinstance(peers, list) and isinstance(raw, list) and isinstance(filt, list)
+                and len(peers) == len(raw) == len(filt)):
+            raise ValueError
+        acc = self.uwb_log_err[r]
+        pairs = [(self.uwb_robot.get(a), x, f) for a, x, f in zip(peers, raw, filt, strict=True)]
+        pairs = [(p, x, f) for p, x, f in pairs if p is not None and p not in self.dead and p != r]
+        if not pairs:
+            return
+        walls = self.world.walls(r, np.array([p for p, _, _ in pairs]))
+        for (p, x, f), w in zip(pairs, walls.tolist(), strict=True):
+            true_m = float(np.hypot(*(self.world.pos[r] - self.world.pos[p])))
+            sight = "nlos" if w else "los"
+            if isinstance(x, int | float) and isinstance(f, int | float):  # compared on the same samples
+                acc[f"raw_{sight}"].append(float(x) - true_m)
+                acc[f"filtered_{sight}"].append(float(f) - true_m)
 
     def run(self) -> dict[str, Any]:
         q = self.q_ns
@@ -338,6 +526,7 @@ class Hub:
             if t >= self.end_ns:
                 break
             self._deliver(t)
+            self._lines(t)
             due = self._due(t)
             for p in list(due):
                 if p not in self.live_procs:
@@ -347,6 +536,7 @@ class Hub:
             for p in sorted(due):
                 run: dict[str, Any] = {}
                 for e in due[p]:
+                    self.wakeups[e[e.index("/") + 1:]] += 1
                     entry: dict[str, Any] = {"in": self.inbox[e]}
                     self.inbox[e] = []
                     if e.endswith("/llc"):
@@ -354,9 +544,12 @@ class Hub:
                         s = world.sensors(r)
                         entry["sens"] = {"enc": list(s.encoders), "sonar_m": s.sonar_m, "lux": s.lux,
                                          "battery_v": s.battery_v}
+                        if "xbee" in self.roles[r]:
+                            entry["sens"]["rssi_pwm"] = self.rssi_pwm[r]
                         sensed[e] = entry["sens"]
                     run[e] = entry
                 self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
+                self.proc_ticks += 1
             if self.k % poses_every == 0:
                 rec.write(t, "/world/poses", "swarm_sitl.Poses", {
                     "x": np.round(world.pos[:, 0], 5).tolist(), "y": np.round(world.pos[:, 1], 5).tolist(),
@@ -371,6 +564,7 @@ class Hub:
                 self.ticks += 1
             else:
                 self._drain_control(t)
+            self._media(t)
             self.k += 1
             if t >= next_status:
                 next_status += 1_000_000_000
@@ -402,11 +596,52 @@ class Hub:
         deadline = time.monotonic() + 3.0
         while waiting and time.monotonic() < deadline:
             try:
-                key, _ = self.q.get(timeout=0.05)
+                key, data = self.q.get(timeout=0.05)
             except queue.Empty:
                 continue
             if key.startswith("done/"):
                 waiting.discard(key[5:])
+                msg = _unpack_dict(data)
+                if msg and isinstance(msg.get("stats"), dict):  # the modules' own counters
+                    self.module_stats.update({str(k): v for k, v in msg["stats"].items() if isinstance(v, dict)})
+
+    def radio_report(self) -> dict[str, Any]:
+        """The session's radio figures: per robot from the media and the modules, and the network's
+        connectivity over time. Filled in after ``shutdown`` (the modules report their counters then)."""
+        out: dict[str, Any] = {"per_robot": {}}
+        if self.radio is not None:
+            stats = self.radio.stats()
+            lam = [v for _, v in self.connectivity]
+            share = round(sum(v > 1e-9 for v in lam) / len(lam), 4) if lam else None
+            out["connectivity"] = {
+                "samples": len(lam), "connected_share": share,
+                "lambda2_min": round(min(lam), 4) if lam else None,
+                "lambda2_median": round(statistics.median(lam), 4) if lam else None}
+            out["totals"] = stats.get("totals", {})
+            out["rssi_hist_bins_dbm"] = [stats.get("rssi_hist_lo_dbm"), stats.get("rssi_hist_bin_db")]
+            for r in range(self.n):
+                if "xbee" in self.roles[r]:
+                    out["per_robot"].setdefault(r, {})["radio"] = stats["robots"][r]
+                    out["per_robot"][r]["xbee_module"] = self.module_stats.get(entity(r, "xbee"))
+            out["uart_unrouted_writes"] = self.uart_unrouted
+        if self.uwb is not None:
+            ustats = self.uwb.stats()
+            out["uwb_medium"] = ustats.get("all", {})
+            for r in range(self.n):
+                if "uwb" not in self.roles[r]:
+                    continue
+                d = out["per_robot"].setdefault(r, {})
+                d["uwb_raw"] = ustats["robots"][r]
+                d["uwb_module"] = self.module_stats.get(entity(r, "uwb"))
+                logged = self.uwb_log_err.get(r)
+                if logged:
+                    d["uwb_logic_error"] = {k: _rms_summary(v) for k, v in logged.items()}
+            allerr: dict[str, list[float]] = defaultdict(list)
+            for acc in self.uwb_log_err.values():
+                for k, v in acc.items():
+                    allerr[k] += v
+            out["uwb_logic_error"] = {k: _rms_summary(v) for k, v in sorted(allerr.items())}
+        return out
 
     def result(self) -> dict[str, Any]:
         lat = sorted(self.barrier_us)
@@ -417,6 +652,8 @@ class Hub:
             "ticks": self.ticks,
             "messages": self.rec.count,
             "message_counts": dict(self.counts),
+            "wakeups": dict(self.wakeups),
+            "process_ticks": self.proc_ticks,
             "digest": self.rec.digest,
             "barrier_us_median": statistics.median(lat) if lat else None,
             "barrier_us_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
@@ -434,6 +671,30 @@ class Hub:
                 for r in range(self.n)
             ],
         }
+
+
+class _Geometry:
+    """What the radio and UWB media ask of the world: where robots are, which live, and walls between them."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+
+    def positions(self) -> np.ndarray:
+        return self.world.pos
+
+    def alive(self) -> np.ndarray:
+        return self.world.alive
+
+    def walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
+        return self.world.walls(src, dsts)
+
+
+def _rms_summary(errors: list[float]) -> dict[str, Any]:
+    a = np.asarray(errors, dtype=float)
+    if not len(a):
+        return {"n": 0}
+    return {"n": len(a), "rms_m": round(float(np.sqrt(np.mean(a * a))), 4), "mean_m": round(float(a.mean()), 4),
+            "p95_abs_m": round(float(np.quantile(np.abs(a), 0.95)), 4)}
 
 
 def _unpack_dict(data: bytes) -> dict | None:

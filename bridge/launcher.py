@@ -90,6 +90,9 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     logs = out / "logs"
     shutil.rmtree(logs, ignore_errors=True)
     logs.mkdir()
+    for rp in plan.robots:  # a pseudo-terminal link is a path the user chose, relative to the output directory
+        if rp.xbee and rp.xbee.get("pty"):
+            rp.xbee["pty"] = str((out / rp.xbee["pty"].replace("{id}", str(rp.id))).absolute())
     plan_path = out / "plan.json"
     plan_path.write_text(json.dumps(plan.to_json(), indent=1))
     session_dir = tempfile.mkdtemp(prefix="swarm-sitl-")
@@ -259,6 +262,8 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "quanta": world_res.get("quanta"),
         "messages": world_res.get("messages"),
         "message_counts": world_res.get("message_counts"),
+        "wakeups": world_res.get("wakeups"),
+        "process_ticks": world_res.get("process_ticks"),
         "digest": world_res.get("digest"),
         "barrier_us_median": world_res.get("barrier_us_median"),
         "barrier_us_p99": world_res.get("barrier_us_p99"),
@@ -276,6 +281,11 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "files": {"recording": str(out / "session.mcap"), "summary": str(out / "summary.json"),
                   "plot": str(out / "trajectories.png"), "logs": str(out / "logs")},
     }
+    radio = world_res.get("radio") or {}
+    if radio.get("per_robot") or len(radio) > 1:
+        for rr in summary["per_robot"]:
+            rr.update(radio.get("per_robot", {}).get(str(rr["id"]), {}))
+        summary["radio"] = {k: v for k, v in radio.items() if k != "per_robot"}
     if not world_res:
         summary["error"] = ("interrupted during start-up" if interrupted else startup_error or
                             f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}")

@@ -1,14 +1,16 @@
 """Hosts the swarm logic of one or more robots, each in its own robot thread (see ``sim_context``).
 
 The robot program is the same ``swarm_logic.runner.run_controller`` a real robot runs; only the HAL
-config (``interface = "sitl"``) and the clock differ.
+config (``interface = "sitl"``, ``sitl://`` serial ports) and the clock differ.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from bridge.plan import Plan, robot_of
+from bridge import urlhandler
+from bridge.config import Config
+from bridge.plan import Plan, RobotPlan, robot_of
 from bridge.rng import stream_seed
 from bridge.sim_context import RobotRuntime, SessionClock
 from swarm_logic.behaviours import load_behaviour
@@ -16,23 +18,46 @@ from swarm_logic.robot import Robot
 from swarm_logic.runner import run_controller
 
 # ignore_config: python-can must not merge the host's ~/.canrc or CAN_* variables into a simulated bus
-SITL_HAL = {"llc_can": {"interface": "sitl", "channel": "can0", "ignore_config": True}}
+SITL_CAN = {"interface": "sitl", "channel": "can0", "ignore_config": True}
+
+
+def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
+    """The HAL config of a robot in a session: the devices it carries, on their simulated ports."""
+    hal: dict[str, Any] = {"llc_can": dict(SITL_CAN)}
+    if rp.xbee and not rp.xbee.get("pty"):  # an XBee on a pseudo-terminal belongs to whoever opens the pty
+        # Series 2 receive frames carry no RSSI: the host asks the module (ATDB) after each packet
+        hal["xbee"] = {"port": "sitl://xbee", "baudrate": rp.xbee["baud"], "api_mode": rp.xbee["api_mode"],
+                       "rssi_from_db": rp.xbee["series"] == 2}
+    if rp.uwb:
+        hal["uwb"] = {"port": "sitl://uwb", "baudrate": cfg.uwb.uart_baud}
+    return hal
 
 
 class LogicHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
+        urlhandler.register()
         self.plan = plan
-        seed = plan.config["session"]["seed"]
+        cfg = Config.model_validate(plan.config)
+        seed = cfg.session.seed
         self.rts: dict[int, RobotRuntime] = {}
         self.reported: set[int] = set()
+        if any(plan.robots[r].uwb for r in robots):
+            # filterpy (with scipy) takes about a second to import: do it while the session starts, not in the
+            # first simulated quantum, where every robot would stall the lock-step
+            import filterpy.common
+            import filterpy.kalman  # noqa: F401
         for r in robots:
             rp = plan.robots[r]
             rt = RobotRuntime(r)
             cls = load_behaviour(rp.behaviour)
+            hal = sitl_hal(rp, cfg)
 
-            def program(rt: RobotRuntime = rt, rp=rp, cls=cls) -> None:
-                robot = Robot.open(rp.id, SITL_HAL, SessionClock(rt), stream_seed(seed, "robot", rp.id, "logic"),
-                                   rp.params)
+            def program(rt: RobotRuntime = rt, rp=rp, cls=cls, hal=hal) -> None:
+                def sink(topic: str, values: dict, rt: RobotRuntime = rt) -> None:
+                    rt.outbox.append(["log", topic, values])
+
+                robot = Robot.open(rp.id, hal, SessionClock(rt), stream_seed(seed, "robot", rp.id, "logic"),
+                                   rp.params, log_sink=sink)
                 try:
                     run_controller(cls(), robot)
                 finally:
@@ -44,8 +69,12 @@ class LogicHost:
     def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         r = robot_of(ent)
         rt = self.rts[r]
-        for bus, arb_id, data, ext, ts in inputs["in"]:
-            rt.deliver(bus, (arb_id, data, ext, ts))
+        for item in inputs["in"]:
+            if item[0] == "can0":
+                _, arb_id, data, ext, ts = item
+                rt.deliver("can0", (arb_id, data, ext, ts))
+            else:  # ["uart:DEVICE", bytes]
+                rt.deliver(item[0], item[1])
         rt.resume(t_ns)
         out: dict[str, Any] = {"out": rt.outbox, "wake": rt.wake_ns, "wom": rt.wom}
         rt.outbox = []
@@ -55,6 +84,10 @@ class LogicHost:
             if rt.error:
                 out["err"] = rt.error
         return out
+
+    def stats(self) -> dict[str, dict]:
+        return {f"r{r:03d}/logic": {"rx_dropped": rt.rx_dropped, "unrouted": rt.unrouted}
+                for r, rt in self.rts.items()}
 
     def stop(self) -> None:
         for rt in self.rts.values():

@@ -32,6 +32,8 @@ def die_with_parent(sig: int = signal.SIGKILL) -> None:
 class Host(Protocol):
     def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]: ...
 
+    def stats(self) -> dict[str, dict]: ...
+
     def stop(self) -> None: ...
 
 
@@ -61,8 +63,9 @@ def serve(proc: str, endpoint: str, namespace: str, host: Host, parent_pid: int)
                 print(f"{proc}: malformed tick dropped", file=sys.stderr)
                 continue
             if tick.get("stop"):
+                stats = host.stats() if hasattr(host, "stats") else {}
                 host.stop()
-                done.put(transport.pack({"k": k, "bye": True}))
+                done.put(transport.pack({"k": k, "bye": True, "stats": stats}))
                 break
             t = tick["t"]
             ents: dict[str, Any] = {}

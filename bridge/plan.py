@@ -25,6 +25,12 @@ class RobotPlan:
     behaviour: str
     params: dict
     pose: tuple[float, float, float]  # x, y, yaw (rad)
+    xbee: dict | None = None  # the group's XBeeCfg as a dict, or None without a radio
+    uwb: bool = False
+
+    def modules(self) -> tuple[str, ...]:
+        """The firmware entities' roles of this robot: its LLC and the radio modules it carries."""
+        return ("llc",) + (("xbee",) if self.xbee else ()) + (("uwb",) if self.uwb else ())
 
 
 @dataclass(frozen=True)
@@ -33,9 +39,10 @@ class ProcPlan:
     kind: str  # "firmware" | "logic"
     robots: tuple[int, ...]
 
-    def entities(self) -> list[str]:
-        role = "llc" if self.kind == "firmware" else "logic"
-        return [entity(r, role) for r in self.robots]
+    def entities(self, robots: list[RobotPlan]) -> list[str]:
+        if self.kind == "logic":
+            return [entity(r, "logic") for r in self.robots]
+        return [entity(r, role) for r in self.robots for role in robots[r].modules()]
 
 
 @dataclass
@@ -65,6 +72,16 @@ def robot_of(ent: str) -> int:
     return int(ent[1:ent.index("/")])
 
 
+def xbee_serial64(robot: int) -> int:
+    """The 64-bit serial number (SH:SL) of a robot's XBee: Digi's OUI block 0013A200, then a unique low word."""
+    return 0x0013A200_40A00000 + robot
+
+
+def uwb_addr16(robot: int) -> int:
+    """A robot's UWB short address (DWM1001 modules carry a unique 16-bit id)."""
+    return 0x1000 + robot
+
+
 def make_plan(cfg: Config, path: str = "config") -> Plan:
     robots: list[RobotPlan] = []
     for gi, group in enumerate(cfg.robots):
@@ -72,7 +89,8 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
         poses = _place(cfg, gi, prof.radius_m, path)
         for pose in poses:
             rid = len(robots)
-            robots.append(RobotPlan(rid, f"r{rid:03d}", group.profile, group.behaviour, dict(group.params), pose))
+            robots.append(RobotPlan(rid, f"r{rid:03d}", group.profile, group.behaviour, dict(group.params), pose,
+                                    group.xbee.model_dump() if group.xbee else None, group.uwb))
     k = cfg.session.robots_per_process
     ids = [r.id for r in robots]
     chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]

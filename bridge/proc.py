@@ -51,6 +51,7 @@ def _world(args: argparse.Namespace, plan) -> int:
         try:
             if hasattr(hub, "session"):
                 hub.shutdown()
+            result["radio"] = hub.radio_report()
         finally:
             hub.rec.finish()
             hub.world.close()

@@ -37,6 +37,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "sonar_m": {"type": "number"},
             "lux": {"type": "number"},
             "battery_v": {"type": "number"},
+            "rssi_pwm": {"type": "number", "description": "XBee RSSI PWM duty (0..1) at the board's pin"},
             "pwm": {"type": "array", "items": {"type": "integer"}},
             "led": {"type": "array", "items": {"type": "integer"}},
         },
@@ -51,6 +52,48 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "alive": {"type": "array", "items": {"type": "boolean"}},
             "led": {"type": "array", "items": {"type": "array", "items": {"type": "integer"}}},
         },
+    },
+    "swarm_sitl.Uart": {
+        "type": "object",
+        "description": "Bytes on a robot's serial line to one of its modules (to_module: as handed to the host's "
+                       "UART; to_host: as the module clocked them out)",
+        "properties": {"dir": {"enum": ["to_module", "to_host"]}, "data": {"type": "string", "description": "hex"}},
+    },
+    "swarm_sitl.RadioRx": {
+        "type": "object",
+        "description": "A frame a module decoded off the air (before its address filter), with the RSSI it measured",
+        "properties": {
+            "t_ns": {"type": "integer", "description": "end of the frame on the air"},
+            "dst": {"type": "integer", "description": "receiving robot"},
+            "src": {"type": "integer", "description": "sending robot"},
+            "handle": {"type": ["integer", "null"], "description": "the sender's handle of the frame"},
+            "rssi_dbm": {"type": ["integer", "null"]},
+            "len": {"type": "integer", "description": "payload bytes"},
+            "distance_m": {"type": ["number", "null"], "description": "ground-truth distance at delivery"},
+        },
+    },
+    "swarm_sitl.RadioTx": {
+        "type": "object",
+        "description": "The outcome of one transmission as the sending module learns it",
+        "properties": {
+            "t_ns": {"type": "integer"},
+            "src": {"type": "integer"},
+            "handle": {"type": ["integer", "null"]},
+            "status": {"type": ["string", "null"], "description": "ok, no_ack or cca_fail"},
+            "attempts": {"type": ["integer", "null"]},
+            "dst": {"type": ["integer", "null"], "description": "addressed robot of a unicast, null for broadcast"},
+            "distance_m": {"type": ["number", "null"], "description": "ground-truth distance to dst at the outcome"},
+            "walls": {"type": ["integer", "null"], "description": "obstacles between src and dst at the outcome"},
+        },
+    },
+    "swarm_sitl.Connectivity": {
+        "type": "object",
+        "description": "Algebraic connectivity (Fiedler value) of the radio graph of live robots, from ground truth",
+        "properties": {"lambda2": {"type": "number"}},
+    },
+    "swarm_sitl.Log": {
+        "type": "object",
+        "description": "A record the swarm logic logged (Robot.log); on a real robot it goes to a JSONL file",
     },
     "swarm_sitl.Event": {
         "type": "object",

@@ -43,7 +43,7 @@ class RobotRuntime:
         self.robot_id = robot_id
         self.t_ns = 0
         self.wake_ns: int | None = 0
-        self.wom = False
+        self.wom: bool | list[str] = False
         self.rx: dict[str, deque] = {}
         self.unrouted = 0
         self.rx_dropped = 0
@@ -100,10 +100,11 @@ class RobotRuntime:
         self._back.acquire(timeout=timeout_s)
 
     # -- robot side ---------------------------------------------------------------------------------
-    def block(self, wake_ns: int | None, on_message: bool) -> None:
-        """Give the CPU back until ``wake_ns`` (sim time) or, if ``on_message``, the next delivery."""
+    def block(self, wake_ns: int | None, on_message: bool | str) -> None:
+        """Give the CPU back until ``wake_ns`` (sim time) or the next delivery: on any device if ``on_message`` is
+        True, on that device if it names one (``"can0"``, ``"uart:xbee"``), on none if False."""
         self.wake_ns = wake_ns
-        self.wom = on_message
+        self.wom = [on_message] if isinstance(on_message, str) else on_message
         self._back.release()
         self._go.acquire()
         if self.stopping:

@@ -71,7 +71,7 @@ class SitlBus(BusABC):
                     return msg
             if deadline is not None and rt.t_ns >= deadline:
                 return None
-            rt.block(deadline, True)
+            rt.block(deadline, self.channel)
 
     def shutdown(self) -> None:
         if self._open:

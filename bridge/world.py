@@ -169,6 +169,7 @@ class World:
         self._light_rng = [stream(self.seed, "robot", i, "light") for i in range(n)]
         self._light_noise = [q.light_noise_rel for q in p]
         self._sampled: tuple | None = None
+        self._walls_rows: dict[int, np.ndarray] = {}
         self._sonar_period_ns = round(1e9 / max(q.sonar_rate_hz for q in p)) if n else 0
         self._next_sonar_ns = 0
         offsets = [np.linspace(-1, 1, q.sonar_rays) * math.radians(q.sonar_half_beam_deg) if q.sonar_rays > 1
@@ -243,6 +244,7 @@ class World:
         self.soc = np.clip(self.soc - current * (q_ns * 1e-9) / self.capacity_as, 0.0, 1.0)
         self.battery_v = self._battery_voltage(current)
         self._sampled = None
+        self._walls_rows.clear()
         t_end = t_ns + q_ns
         if self.n and t_end >= self._next_sonar_ns:
             self._update_sonar()
@@ -297,6 +299,45 @@ class World:
                 r = spurious
             # inside its blind zone the ranger reports its minimum range (as MaxBotix sensors do)
             self.sonar_m[i] = float(min(max(r, prof.sonar_min_range_m), prof.sonar_max_range_m))
+
+    # -- radio geometry (the Geometry the radio and UWB media ask) ---------------------------------------
+    STATIC_RAY_MASK = 2  # Bullet puts static bodies (walls, obstacles) in its StaticFilter group: robots are skipped
+    MAX_WALLS = 32
+
+    def positions(self) -> np.ndarray:
+        return self.pos
+
+    def alive_mask(self) -> np.ndarray:
+        return self.alive
+
+    def walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
+        """Obstacles crossed by the straight line between robot ``src``'s antenna and each of ``dsts``'.
+
+        One ray batch per crossing level: pybullet's ``reportHitNumber`` returns the k-th static body a ray
+        enters, so the count is the number of levels that still hit. Robots do not count as walls.
+        """
+        dsts = np.asarray(dsts, dtype=int)
+        row = self._walls_rows.get(src)  # robots move only in step_quantum: a row holds for the quantum
+        if row is None:
+            row = self._walls_rows[src] = self._cast_walls(src, np.arange(self.n))
+        return row[dsts]
+
+    def _cast_walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
+        counts = np.zeros(len(dsts), dtype=int)
+        if not len(dsts):
+            return counts
+        z0 = self.profiles[src].height_m * 0.9
+        frm = [[float(self.pos[src, 0]), float(self.pos[src, 1]), z0]] * len(dsts)
+        to = [[float(self.pos[d, 0]), float(self.pos[d, 1]), self.profiles[d].height_m * 0.9] for d in dsts.tolist()]
+        for level in range(self.MAX_WALLS):
+            hits = pb.rayTestBatch(frm, to, numThreads=1, reportHitNumber=level,
+                                   collisionFilterMask=self.STATIC_RAY_MASK, fractionEpsilon=1e-4,
+                                   physicsClientId=self.cid)
+            hit = np.array([h[0] >= 0 for h in hits])
+            if not hit.any():
+                break
+            counts += hit
+        return counts
 
     # -- sensing ------------------------------------------------------------------------------------
     def _sample_all(self) -> None:

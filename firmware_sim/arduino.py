@@ -29,6 +29,7 @@ class Board:
         self.digital: dict[str, int] = {}
         self.encoder_counts = [0, 0]
         self.led_rgb = (0, 0, 0)
+        self.pwm_inputs: dict[str, tuple[float, float]] = {}  # pin -> (duty 0..1, frequency Hz) of a PWM source
         self.can = CanController(rx_depth=can_rx_depth)
 
     # -- Arduino API -------------------------------------------------------------------------------
@@ -52,6 +53,16 @@ class Board:
 
     def digital_read(self, pin: str) -> int:
         return self.digital.get(pin, LOW)
+
+    def pulse_in(self, pin: str, timeout_us: int = 1_000_000) -> int:
+        """``pulseIn(pin, HIGH)``: length in us of a high pulse on ``pin``, 0 when none comes (a flat line).
+
+        The timer counts in 4 us steps on a 16 MHz board, so the result is a multiple of 4.
+        """
+        duty, hz = self.pwm_inputs.get(pin, (0.0, 0.0))
+        if hz <= 0 or duty <= 0.0 or duty >= 1.0 or 1e6 / hz > timeout_us:
+            return 0
+        return int(duty * 1e6 / hz) // 4 * 4
 
     def encoder(self, channel: int) -> int:
         """Signed pulse count kept by the encoder interrupt routine of wheel ``channel``."""

@@ -22,6 +22,10 @@ from swarm_logic.interfaces import eswarbot_llc_db
 PIN_SONAR, PIN_LDR, PIN_BATTERY = "A0", "A1", "A2"
 PIN_PWM = ("D5", "D6")
 PIN_DIR = ("D7", "D8")
+PIN_RSSI = "D2"  # the XBee's RSSI PWM output (pin 6), wired to a digital input
+
+RSSI_PWM_HZ = 120.0  # the XBee's RSSI PWM frequency (Couceiro 2013, section 3.2.3)
+XBEE_SENSITIVITY_DBM = -94.0  # XBee Series 2 receiver sensitivity, as the thesis' eq. 3.9 uses it
 
 WATCHDOG_MS = 500
 PERIOD_ODOM_MS = 50
@@ -29,6 +33,8 @@ PERIOD_SONAR_MS = 50
 PERIOD_LIGHT_MS = 100
 PERIOD_STATUS_MS = 100
 PERIOD_BATTERY_MS = 1000
+PERIOD_RSSI_MS = 100
+RSSI_KEEPALIVE_MS = 1000
 STALL_MS = 1000
 SONAR_NO_ECHO_MARGIN_MM = 30  # about two ADC steps below full range
 
@@ -49,6 +55,7 @@ class LlcParams:
     kp: float = 18.0  # PWM per pulse of tracking error
     ki: float = 30.0  # PWM per pulse-second
     max_err_pulses: float = 6.0
+    rssi_pwm_input: bool = False  # an XBee's RSSI PWM output is wired to PIN_RSSI (eSwarBot radio hack)
 
 
 class WheelPid:
@@ -119,8 +126,10 @@ class LowLevelController:
         self.last_loop_us: int | None = None
         self.overflows_reported = 0
         self.led = (0, 0, 0)
+        self.rssi_pulse_us = -1
+        self.rssi_sent_ms = 0
         now = b.millis()
-        self.next_ms = {"odom": now, "sonar": now, "light": now, "status": now, "battery": now}
+        self.next_ms = {"odom": now, "sonar": now, "light": now, "status": now, "battery": now, "rssi": now}
         self._set_motor(0, 0)
         self._set_motor(1, 0)
         self._sample_battery()
@@ -177,6 +186,18 @@ class LowLevelController:
             self.next_ms["light"] += PERIOD_LIGHT_MS
             self.ldr_raw = b.analog_read(PIN_LDR)
             self._send("LIGHT", ldr_raw=self.ldr_raw)
+        if self.p.rssi_pwm_input and now >= self.next_ms["rssi"]:
+            # sampled at 10 Hz, sent when it changed (a new packet came in, or the output went off) and
+            # at least once a second
+            self.next_ms["rssi"] += PERIOD_RSSI_MS
+            high_us = b.pulse_in(PIN_RSSI, timeout_us=round(2e6 / RSSI_PWM_HZ))
+            if high_us != self.rssi_pulse_us or now >= self.rssi_sent_ms + RSSI_KEEPALIVE_MS:
+                self.rssi_pulse_us = high_us
+                self.rssi_sent_ms = now
+                duty = high_us * RSSI_PWM_HZ / 1e6
+                self._send("RADIO_RSSI", pulse_us=min(high_us, 65535), duty_permille=min(1000, round(duty * 1000)),
+                           rssi_dbm=max(-128, min(0, round(rssi_dbm_from_duty(duty)))) if high_us else -128,
+                           valid=int(high_us > 0))
         if now >= self.next_ms["battery"]:
             self.next_ms["battery"] += PERIOD_BATTERY_MS
             self._sample_battery()
@@ -267,6 +288,12 @@ class LowLevelController:
     def _send(self, name: str, **signals: float) -> None:
         msg = self.db.get_message_by_name(name)
         self.board.can.write(msg.frame_id, msg.encode(signals, scaling=True), self.board.micros())
+
+
+def rssi_dbm_from_duty(duty: float) -> float:
+    """Received power from the XBee RSSI PWM duty (0..1), the inverse of the thesis' eq. 3.9:
+    duty % = (295 + 17.5 x dBm above sensitivity) / 10.24."""
+    return XBEE_SENSITIVITY_DBM + (duty * 100 * 10.24 - 295) / 17.5
 
 
 def _clamp16(v: int) -> int:

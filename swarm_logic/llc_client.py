@@ -33,6 +33,8 @@ class LlcState:
     heartbeat: int = -1
     status_t: float | None = None
     faults: dict[str, bool] = field(default_factory=dict)
+    rssi_dbm: float | None = None  # the XBee's last-packet RSSI read from its PWM pin; None when the output is off
+    rssi_t: float | None = None
 
 
 class LlcClient:
@@ -85,6 +87,9 @@ class LlcClient:
         elif name == "BATTERY":
             st.battery_v = s["voltage_mv"] / 1000.0
             st.battery_soc = int(s["soc_pct"])
+        elif name == "RADIO_RSSI":
+            st.rssi_dbm = float(s["rssi_dbm"]) if s["valid"] else None
+            st.rssi_t = ts
         elif name == "STATUS":
             st.heartbeat = int(s["heartbeat"])
             st.status_t = ts

@@ -1,20 +1,32 @@
 """A robot as the swarm logic sees it: its devices, its clock, its parameters and its random stream.
 
 ``Robot.open`` builds the devices from a HAL config, the only thing that differs between SITL and a
-real robot, e.g. ``{"llc_can": {"interface": "sitl", "channel": "can0"}}`` in a session, or
-``{"llc_can": {"interface": "socketcan", "channel": "can0"}}`` on the robot.
+real robot, e.g. in a session::
+
+    {"llc_can": {"interface": "sitl", "channel": "can0"},
+     "xbee": {"port": "sitl://xbee", "baudrate": 9600}, "uwb": {"port": "sitl://uwb", "baudrate": 115200}}
+
+and on the robot ``{"llc_can": {"interface": "socketcan", "channel": "can0"}, "xbee": {"port": "/dev/ttyUSB0"},
+"log": {"path": "robot.jsonl"}}``. The XBee and UWB modules are optional: a robot without them has
+``xbee`` / ``uwb`` set to None.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import can
 import numpy as np
+import serial
 
 from swarm_logic.clock import Clock
 from swarm_logic.llc_client import LlcClient
+from swarm_logic.log import JsonlLog, Sink, plain
+
+if TYPE_CHECKING:
+    from swarm_logic.uwb import Uwb
+    from swarm_logic.xbee import XBee
 
 
 @dataclass
@@ -25,21 +37,66 @@ class Robot:
     rng: np.random.Generator
     params: dict[str, Any] = field(default_factory=dict)
     buses: list[can.BusABC] = field(default_factory=list)
+    xbee: XBee | None = None
+    uwb: Uwb | None = None
+    ports: list[serial.SerialBase] = field(default_factory=list)
+    log_sink: Sink | None = None
 
     @classmethod
     def open(cls, robot_id: int, hal: dict[str, Any], clock: Clock, seed: int,
-             params: dict[str, Any] | None = None) -> Robot:
+             params: dict[str, Any] | None = None, log_sink: Sink | None = None) -> Robot:
         llc_cfg = dict(hal.get("llc_can") or {})
         if "interface" not in llc_cfg:
             raise ValueError("HAL config needs llc_can.interface (a python-can interface name)")
         bus = can.Bus(**llc_cfg)
         rng = np.random.Generator(np.random.PCG64(seed))
-        return cls(robot_id, clock, LlcClient(bus), rng, dict(params or {}), [bus])
+        robot = cls(robot_id, clock, LlcClient(bus), rng, dict(params or {}), [bus])
+        try:
+            if hal.get("xbee"):
+                from swarm_logic.xbee import XBee
+
+                x = dict(hal["xbee"])
+                port = _open_port(x, "xbee", 9600)
+                robot.ports.append(port)
+                robot.xbee = XBee(port, clock, api_mode=int(x.get("api_mode", 1)),
+                                  rssi_from_db=bool(x.get("rssi_from_db", False)))
+            if hal.get("uwb"):
+                from swarm_logic.uwb import Uwb
+
+                u = dict(hal["uwb"])
+                port = _open_port(u, "uwb", 115200)
+                robot.ports.append(port)
+                robot.uwb = Uwb(port, clock)
+            if log_sink is None and (hal.get("log") or {}).get("path"):
+                log_sink = JsonlLog(hal["log"]["path"], clock)
+            robot.log_sink = log_sink
+        except BaseException:
+            robot.close()
+            raise
+        return robot
+
+    def log(self, topic: str, **values: Any) -> None:
+        """Record ``values`` under ``topic`` (a recording topic in SITL, a JSONL line on a robot)."""
+        if self.log_sink is not None:
+            self.log_sink(topic, plain(values))
 
     def poll(self) -> None:
         """Drain every device's receive queue (non-blocking)."""
         self.llc.poll()
+        if self.xbee is not None:
+            self.xbee.poll()
 
     def close(self) -> None:
         for b in self.buses:
             b.shutdown()
+        for p in self.ports:
+            p.close()
+        if isinstance(self.log_sink, JsonlLog):
+            self.log_sink.close()
+
+
+def _open_port(cfg: dict[str, Any], what: str, default_baud: int) -> serial.SerialBase:
+    url = cfg.get("port")
+    if not url:
+        raise ValueError(f"HAL config {what}.port: a serial device or URL is needed (e.g. /dev/ttyUSB0, sitl://{what})")
+    return serial.serial_for_url(str(url), baudrate=int(cfg.get("baudrate", default_baud)), timeout=0)

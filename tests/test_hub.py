@@ -49,7 +49,8 @@ def test_malformed_frames_and_pins_are_counted_and_dropped(hub: Hub) -> None:
            "pins": {"pwm": [300, 0], "led": [0, 0, 0]}, "wake": Q}
     hub._outputs(0, {"fw0": reply(**{entity(0, "llc"): res})}, {entity(0, "llc"): {"enc": [0, 0]}},
                  {"fw0": [entity(0, "llc")]})
-    assert hub.counts["malformed_frames"] == 5 and hub.counts["malformed_pins"] == 1
+    assert hub.counts["malformed_frames"] == 3 and hub.counts["malformed_pins"] == 1
+    assert hub.counts["malformed_items"] == 2  # a bus the robot does not have, and not a list at all
     assert hub.can[0].frames == 1 and not hub.dead
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 # what a companion computer would run (cantools decodes the robot's DBC)
-ALLOWED = {"numpy", "can", "serial", "pymavlink", "filterpy", "cantools", "swarm_logic"}
+ALLOWED = {"numpy", "can", "serial", "pymavlink", "filterpy", "cantools", "digi", "swarm_logic"}
 
 
 def imports_of(path: Path) -> set[str]:

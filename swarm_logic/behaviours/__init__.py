@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import importlib
 
+from swarm_logic.behaviours.radio_survey import RadioSurvey
 from swarm_logic.behaviours.random_walk import RandomWalk
+from swarm_logic.behaviours.rssi_keeper import RssiKeeper
 from swarm_logic.controller import Controller
 
-BEHAVIOURS: dict[str, type[Controller]] = {"random_walk": RandomWalk}
+BEHAVIOURS: dict[str, type[Controller]] = {"random_walk": RandomWalk, "radio_survey": RadioSurvey,
+                                           "rssi_keeper": RssiKeeper}
 
 
 def load_behaviour(name: str) -> type[Controller]:

@@ -1,0 +1,148 @@
+"""``sitl://DEVICE``: a robot's simulated serial line to one of its modules (``sitl://xbee``, ``sitl://uwb``).
+
+A pyserial port like any other, so the swarm logic opens ``sitl://xbee`` in a session and
+``/dev/ttyUSB0`` on the robot with the same code. Bytes written leave at the end of the current quantum and
+reach the module as the line clocks them out at the port's baud rate (10 bits a byte); bytes from the module
+arrive as it sends them. ``read`` with a timeout waits in simulated time. The baud rate is sent along with
+the data: a host and a module that disagree on it garble each other's bytes, as real ones do.
+"""
+
+from __future__ import annotations
+
+import numbers
+import threading
+import urllib.parse
+from collections import deque
+
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+
+from bridge import sim_context
+
+DEVICES = ("xbee", "uwb")
+
+
+class Serial(SerialBase):
+    BAUDRATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
+
+    def __init__(self, *args, **kwargs) -> None:
+        self._rt: sim_context.RobotRuntime | None = None
+        self._rx: deque | None = None
+        self._buf = bytearray()
+        self.device = ""
+        super().__init__(*args, **kwargs)
+
+    # -- SerialBase ------------------------------------------------------------------------------------
+    def open(self) -> None:
+        if self.is_open:
+            raise SerialException("Port is already open.")
+        if self._port is None:
+            raise SerialException("Port must be configured before it can be used.")
+        self.device = self._parse(self.port)
+        try:
+            self._rt = sim_context.current()
+        except sim_context.NotInSession as e:
+            raise SerialException(str(e)) from None
+        try:
+            self._rx = self._rt.open_bus(f"uart:{self.device}")
+        except OSError as e:
+            raise SerialException(str(e)) from None
+        self._reconfigure_port()
+        self.is_open = True
+
+    def close(self) -> None:
+        if self.is_open and self._rt is not None:
+            self._rt.close_bus(f"uart:{self.device}")
+        self.is_open = False
+        self._rx = None
+
+    def _reconfigure_port(self) -> None:
+        if not isinstance(self._baudrate, numbers.Integral) or not 0 < self._baudrate < 2**32:
+            raise ValueError(f"invalid baudrate: {self._baudrate!r}")
+
+    @staticmethod
+    def _parse(url: str) -> str:
+        parts = urllib.parse.urlsplit(url)
+        device = parts.netloc or parts.path.lstrip("/")
+        if parts.scheme != "sitl" or device not in DEVICES or parts.query:
+            raise SerialException(f"expected sitl://DEVICE with DEVICE one of {', '.join(DEVICES)}, got {url!r}")
+        return device
+
+    def _check(self) -> sim_context.RobotRuntime:
+        if not self.is_open or self._rt is None:
+            raise PortNotOpenError()
+        if threading.current_thread() is not self._rt.thread:
+            raise SerialException("a sitl:// port is used from its robot's own thread only (simulated time)")
+        return self._rt
+
+    def _pull(self) -> None:
+        rx = self._rx
+        while rx:
+            self._buf += rx.popleft()
+
+    @property
+    def in_waiting(self) -> int:
+        self._check()
+        self._pull()
+        return len(self._buf)
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes; blocks up to ``timeout`` simulated seconds (forever if None, not at all if 0)."""
+        rt = self._check()
+        timeout = self._timeout
+        deadline = None if timeout is None else rt.t_ns + max(0, round(timeout * 1e9))
+        while True:
+            self._pull()
+            if len(self._buf) >= size or (deadline is not None and rt.t_ns >= deadline):
+                break
+            rt.block(deadline, f"uart:{self.device}")
+        out = bytes(self._buf[:size])
+        del self._buf[:size]
+        return out
+
+    def write(self, data) -> int:
+        rt = self._check()
+        data = to_bytes(data)
+        if data:
+            rt.outbox.append(["uart", self.device, bytes(data), int(self._baudrate)])
+        return len(data)
+
+    def flush(self) -> None:
+        self._check()
+
+    def reset_input_buffer(self) -> None:
+        self._check()
+        self._pull()
+        self._buf.clear()
+
+    def reset_output_buffer(self) -> None:
+        self._check()
+
+    @property
+    def out_waiting(self) -> int:
+        self._check()
+        return 0
+
+    def _update_break_state(self) -> None:
+        pass
+
+    def _update_rts_state(self) -> None:
+        pass
+
+    def _update_dtr_state(self) -> None:
+        pass
+
+    @property
+    def cts(self) -> bool:
+        return True
+
+    @property
+    def dsr(self) -> bool:
+        return True
+
+    @property
+    def ri(self) -> bool:
+        return False
+
+    @property
+    def cd(self) -> bool:
+        return True
