@@ -102,6 +102,7 @@ class FirmwareHost:
         self.nominal_ns: dict[int, int] = {}  # the loop's own fixed-rate schedule (millis()-based, as on the board)
         self.last_pins: dict[int, tuple] = {}
         self.xbees: dict[int, XBeeModule] = {}
+        self.xbee_baud: dict[int, int] = {}
         self.ptys: dict[int, PtyLink] = {}
         self.uwbs: dict[int, UwbModule] = {}
         uwb_team = [r.id for r in plan.robots if r.uwb]
@@ -186,6 +187,9 @@ class FirmwareHost:
                 out.append(["uart", "xbee", res.uart_tx, m.baud])
         if res.node is not None:
             out.append(["node", res.node])
+        if m.baud != self.xbee_baud.get(r):  # BD changed: the line from the host is now sampled at the new rate
+            self.xbee_baud[r] = m.baud
+            out.append(["baud", "xbee", m.baud])
         if res.rssi_pwm is not None:
             out.append(["rssi_pwm", float(res.rssi_pwm)])
         wake = m.next_wake()

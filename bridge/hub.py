@@ -435,6 +435,12 @@ class Hub:
                 self.deliveries[t + q].append(("ent", entity(r, "logic"), [f"uart:{dev}", data]))
                 self.deliveries[t + q].append(("rec", f"/r{r:03d}/{dev}/uart", "swarm_sitl.Uart",
                                                {"dir": "to_host", "data": data.hex()}))
+            elif kind == "baud" and role in ("xbee", "uwb"):
+                _, dev, baud = item
+                if dev != role or type(baud) is not int or baud <= 0:
+                    raise ValueError
+                if (r, dev) in self.lines:
+                    self.lines[(r, dev)].baud = baud
             elif kind == "air" and role == "xbee" and self.radio is not None and isinstance(item[1], dict):
                 f = item[1]
                 self.radio.submit(r, t + q, f)

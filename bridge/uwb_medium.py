@@ -35,21 +35,14 @@ discretisation is written out here; the filter that consumes these ranges (swarm
 from __future__ import annotations
 
 import math
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from bridge.radio_medium import Geometry
 from bridge.rng import stream
 from firmware_sim.uwb import tdma_budget
-
-
-class Geometry(Protocol):
-    def positions(self) -> np.ndarray: ...  # (n, 2) metres, now
-
-    def walls(self, src: int, dsts: np.ndarray) -> np.ndarray: ...  # obstacles crossed from src to each dst
-
-    def alive(self) -> np.ndarray: ...  # (n,) bool
 
 
 class UwbCfg(BaseModel):

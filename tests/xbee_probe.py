@@ -1,0 +1,70 @@
+"""What a host does with its XBee, written once and run against two implementations of the port: a SITL
+``sitl://xbee`` port inside a robot program, and a pseudo-terminal opened from outside the session."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from swarm_logic.behaviours.random_walk import RandomWalk
+from swarm_logic.clock import Clock
+from swarm_logic.controller import Controller
+from swarm_logic.xbee import XBee
+
+
+def probe(xb: XBee, clock: Clock, peers64: list[int]) -> dict[str, Any]:
+    """Identify the module, wait until it joined, unicast to the first peer, broadcast to all, collect echoes."""
+    t0 = clock.now()
+    while xb.at("AI")[0] != 0:  # Series 2: associated (joined) is AI = 0
+        if clock.now() - t0 > 15:
+            raise TimeoutError("module did not join")
+        clock.sleep(0.2)
+    info = xb.identify()
+    res: dict[str, Any] = {
+        "sh": xb.at("SH").hex(), "sl": xb.at("SL").hex(), "ni": xb.at("NI").decode(), "series": info.series,
+        "unicast_status": xb.send(peers64[0], b"ping-unicast", timeout=8).status,
+        "broadcast_status": xb.send(None, b"ping-broadcast", timeout=8).status,
+    }
+    echoes = []
+    deadline = clock.now() + 4.0
+    while clock.now() < deadline and len(echoes) < 1 + len(peers64):
+        pkt = xb.recv(timeout=max(0.0, deadline - clock.now()))
+        if pkt is not None and pkt.data.startswith(b"echo:"):
+            echoes.append({"src64": pkt.src64, "data": pkt.data.decode(), "rssi_dbm": pkt.rssi_dbm,
+                           "broadcast": pkt.broadcast})
+    res["echoes"] = echoes
+    res["db"] = xb.at("DB")[0]  # -dBm of the last packet received
+    return res
+
+
+class Probe(Controller):
+    """Runs the probe once from robot 0's own program (sitl://xbee), logs the result, then idles."""
+
+    period_s = 1.0
+    defaults: ClassVar[dict[str, Any]] = {}
+
+    def init(self, robot) -> None:
+        super().init(robot)
+        self.done = False
+
+    def step(self) -> None:
+        if not self.done:
+            self.done = True
+            peers = [0x0013A200_40A00000 + i for i in (1, 2)]
+            self.robot.log("probe", **probe(self.robot.xbee, self.robot.clock, peers))
+
+
+class Echo(RandomWalk):
+    """Answers every ``ping`` packet with a unicast ``echo:<data>`` to its sender; stands still."""
+
+    def step(self) -> None:
+        xb = self.robot.xbee
+        while (pkt := xb.recv(timeout=0)) is not None:
+            if pkt.data.startswith(b"ping"):
+                xb.send_nowait(pkt.src64, b"echo:" + pkt.data + b" from %d" % self.robot.id)
+
+
+class Idle(Controller):
+    period_s = 1.0
+
+    def step(self) -> None:
+        pass
