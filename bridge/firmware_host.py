@@ -39,7 +39,7 @@ from firmware_sim.uwb import UwbModule
 from firmware_sim.xbee import XBeeModule
 
 
-def llc_params(p: RobotProfile, rssi_pwm_input: bool = False) -> LlcParams:
+def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
     return LlcParams(
         wheel_radius_m=p.wheel_radius_m,
         half_track_m=p.half_track_m,
@@ -50,7 +50,9 @@ def llc_params(p: RobotProfile, rssi_pwm_input: bool = False) -> LlcParams:
         battery_cells=p.battery_cells,
         sonar_min_mm=round(p.sonar_min_range_m * 1000),
         sonar_max_mm=round(p.sonar_max_range_m * 1000),
-        rssi_pwm_input=rssi_pwm_input,
+        rssi_pwm_input=xbee is not None,
+        # the firmware inverts eq. 3.9 with the sensitivity of the module it is built for
+        xbee_sensitivity_dbm=-92.0 if xbee is not None and xbee["series"] == 1 else -94.0,
     )
 
 
@@ -67,8 +69,12 @@ class PtyLink:
         os.set_blocking(self.master, False)
         self.link = Path(link)
         self.link.parent.mkdir(parents=True, exist_ok=True)
-        self.link.unlink(missing_ok=True)
+        if self.link.is_symlink():
+            self.link.unlink()  # a stale link of an earlier session
+        elif self.link.exists():
+            raise FileExistsError(f"xbee.pty: {link} exists and is not a link; it is left alone")
         self.link.symlink_to(os.ttyname(self.slave))
+        self.dropped = 0
 
     def read(self) -> bytes:
         chunks = []
@@ -83,11 +89,17 @@ class PtyLink:
         return b"".join(chunks)
 
     def write(self, data: bytes) -> None:
-        with contextlib.suppress(BlockingIOError, OSError):  # nobody reading and the buffer full: bytes lost
-            os.write(self.master, data)
+        """What does not fit (nobody reads and the terminal's buffer is full) is lost and counted, as on a
+        serial line without flow control."""
+        try:
+            n = os.write(self.master, data)
+        except OSError:
+            n = 0
+        self.dropped += len(data) - n
 
     def close(self) -> None:
-        self.link.unlink(missing_ok=True)
+        if self.link.is_symlink():
+            self.link.unlink()
         for fd in (self.master, self.slave):
             with contextlib.suppress(OSError):
                 os.close(fd)
@@ -111,7 +123,7 @@ class FirmwareHost:
             rp = plan.robots[r]
             board = Board()
             self.boards[r] = board
-            self.llcs[r] = LowLevelController(board, llc_params(PROFILES[rp.profile], rp.xbee is not None))
+            self.llcs[r] = LowLevelController(board, llc_params(PROFILES[rp.profile], rp.xbee))
             if rp.xbee:
                 x = rp.xbee
                 self.xbees[r] = XBeeModule(
@@ -214,6 +226,8 @@ class FirmwareHost:
         out: dict[str, dict] = {}
         for r, m in self.xbees.items():
             out[f"r{r:03d}/xbee"] = dict(m.counters)
+            if r in self.ptys:
+                out[f"r{r:03d}/xbee"]["pty_dropped_bytes"] = self.ptys[r].dropped
         for r, m in self.uwbs.items():
             out[f"r{r:03d}/uwb"] = dict(m.counters)
         return out

@@ -42,6 +42,7 @@ from bridge.recorder import Recorder
 from bridge.uart import SerialLine
 from bridge.uwb_medium import UwbMedium
 from bridge.world import World
+from firmware_sim.xbee import valid_air_frame
 from swarm_logic.interfaces import eswarbot_llc_db
 
 LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
@@ -126,8 +127,9 @@ class Hub:
         self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
         self.module_stats: dict[str, dict] = {}
         self.addr_robot: dict[tuple[str, int], int] = {}  # ("64" | "16", address) -> robot, from the modules
-        self.tx_dst: dict[tuple[int, Any], int | None] = {}  # (robot, frame handle) -> addressed robot
+        self.tx_dst: dict[tuple[int, int], tuple] = {}  # (robot, frame handle) -> (addressed robot, MAC seq)
         self.node_sens: dict[int, float] = {}  # each module's receiver sensitivity, as it reported it
+        self.node_net: dict[int, tuple[int, int]] = {}  # each module's (channel, PAN id)
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def open(self) -> None:
@@ -390,7 +392,8 @@ class Hub:
             return
         for t_ev, r, ev in self.radio.advance(t + 2 * q):
             self._radio_event(t_ev, r, ev)
-        if t % CONNECTIVITY_EVERY_NS < q:
+        if t % CONNECTIVITY_EVERY_NS < q and all(r in self.node_net for r in range(self.n)
+                                                 if "xbee" in self.roles[r] and r not in self.dead):
             lam = self.algebraic_connectivity()
             self.connectivity.append((t / 1e9, lam))
             self.rec.write(t, "/radio/connectivity", "swarm_sitl.Connectivity", {"lambda2": round(lam, 6)})
@@ -401,10 +404,12 @@ class Hub:
         live = [r for r in range(self.n) if r not in self.dead and "xbee" in self.roles[r]]
         if len(live) < 2:
             return 0.0
-        rssi = self.radio.mean_rssi()[np.ix_(live, live)]
+        rssi = self.radio.mean_rssi()[np.ix_(live, live)]  # row: sender, column: receiver
         sens = np.array([self.node_sens.get(r, -94.0) for r in live])
-        up = (rssi >= sens[None, :]) & (sens[None, :] <= rssi.T).T
-        adj = (up & up.T).astype(float)
+        net = [self.node_net.get(r) for r in live]  # modules hear only their own channel and PAN
+        same = np.array([[a is not None and a == b for b in net] for a in net])
+        up = rssi >= sens[None, :]
+        adj = (up & up.T & same).astype(float)
         np.fill_diagonal(adj, 0.0)
         lap = np.diag(adj.sum(axis=1)) - adj
         return float(max(0.0, np.sort(np.linalg.eigvalsh(lap))[1]))
@@ -416,7 +421,12 @@ class Hub:
         kind = item[0]
         role = e[e.index("/") + 1:]
         try:
-            if kind == "uart" and role == "logic":
+            if kind == "baud" and role == "logic":  # the host set its port's rate
+                _, dev, baud = item
+                if (r, dev) not in self.host_baud or type(baud) is not int or baud <= 0:
+                    raise ValueError
+                self.host_baud[(r, dev)] = baud
+            elif kind == "uart" and role == "logic":
                 _, dev, data, baud = item
                 line = self.lines.get((r, dev))
                 if line is None or not isinstance(data, bytes) or type(baud) is not int or baud <= 0:
@@ -441,27 +451,28 @@ class Hub:
                     raise ValueError
                 if (r, dev) in self.lines:
                     self.lines[(r, dev)].baud = baud
-            elif kind == "air" and role == "xbee" and self.radio is not None and isinstance(item[1], dict):
+            elif kind == "air" and role == "xbee" and self.radio is not None and valid_air_frame(item[1]):
                 f = item[1]
                 self.radio.submit(r, t + q, f)
                 self.counts["air_frames"] += 1
                 dst = f.get("dst")
-                self.tx_dst[(r, f.get("handle"))] = (self.addr_robot.get((dst, f.get("dst_addr"))) if dst != "bcast"
-                                                     else None)
-            elif kind == "node" and role == "xbee" and self.radio is not None and isinstance(item[1], dict):
+                self.tx_dst[(r, f["handle"])] = (self.addr_robot.get((dst, f["dst_addr"])) if dst != "bcast" else None,
+                                                 f["seq"])
+            elif kind == "node" and role == "xbee" and self.radio is not None and _valid_node(item[1]):
                 node = item[1]
                 self.radio.set_node(r, node)
                 self.addr_robot[("64", int(node["addr64"]))] = r
                 self.addr_robot[("16", int(node["addr16"]))] = r
                 self.node_sens[r] = float(node["sensitivity_dbm"])
+                self.node_net[r] = (node["channel"], node["pan_id"])
             elif kind == "rssi_pwm" and role == "xbee":
                 self.rssi_pwm[r] = min(1.0, max(0.0, float(item[1])))
             elif kind == "uwb" and role == "uwb" and self.uwb is not None and isinstance(item[1], dict):
                 req = item[1]
-                peer = int(req["peer"])
-                if not (0 <= peer < self.n) or peer == r:
+                peer, t_req = req.get("peer"), req.get("t_ns", 0)
+                if type(peer) is not int or type(t_req) is not int or not (0 <= peer < self.n) or peer == r:
                     raise ValueError
-                start = max(t + q, int(req.get("t_ns", 0)))
+                start = max(t + q, min(t_req, t + 2 * q))
                 for t_ev, rr, ev in self.uwb.exchange(start, r, peer):
                     if "uwb" in self.roles[rr]:
                         self.deliveries[max(t + q, -(-t_ev // q) * q)].append(("ent", entity(rr, "uwb"), ["uwb", ev]))
@@ -469,12 +480,13 @@ class Hub:
                 _, topic, values = item
                 if not (isinstance(topic, str) and topic.isidentifier() and isinstance(values, dict)):
                     raise ValueError
+                json.dumps(values, allow_nan=False)  # strict JSON only: NaN would make the recording unreadable
                 self.rec.write(t, f"/r{r:03d}/log/{topic}", "swarm_sitl.Log", values)
                 if topic == "uwb_ranges":
                     self._uwb_log(r, values)
             else:
                 raise ValueError
-        except (ValueError, TypeError, KeyError, IndexError):
+        except (ValueError, TypeError, KeyError, IndexError, OverflowError):
             self.counts["malformed_items"] += 1
 
     def _radio_event(self, t_ev: int, r: int, ev: dict) -> None:
@@ -492,14 +504,14 @@ class Hub:
                 "t_ns": t_ev, "dst": r, "src": src, "handle": f.get("handle"), "rssi_dbm": ev.get("rssi_dbm"),
                 "len": len(f.get("payload", b"")), "distance_m": None if d is None else round(d, 3)}))
         elif ev.get("ev") == "done":
-            dst = self.tx_dst.pop((r, ev.get("handle")), None)
+            dst, seq = self.tx_dst.pop((r, ev.get("handle")), (None, None))
             d = walls = None
             if dst is not None and dst != r:
                 d = round(float(np.hypot(*(self.world.pos[r] - self.world.pos[dst]))), 3)
                 walls = int(self.world.walls(r, np.array([dst]))[0])
             self.deliveries[t_del].append(("rec", "/radio/tx", "swarm_sitl.RadioTx", {
                 "t_ns": t_ev, "src": r, "handle": ev.get("handle"), "status": ev.get("status"),
-                "attempts": ev.get("attempts"), "dst": dst, "distance_m": d, "walls": walls}))
+                "attempts": ev.get("attempts"), "dst": dst, "seq": seq, "distance_m": d, "walls": walls}))
 
     def _uwb_log(self, r: int, values: dict) -> None:
         """The logic's own ranges (raw and filtered) against the ground truth now: the error it lives with."""
@@ -606,9 +618,11 @@ class Hub:
             except queue.Empty:
                 continue
             if key.startswith("done/"):
-                waiting.discard(key[5:])
                 msg = _unpack_dict(data)
-                if msg and isinstance(msg.get("stats"), dict):  # the modules' own counters
+                if not (msg and msg.get("bye")):  # a late answer to a quantum, not the goodbye
+                    continue
+                waiting.discard(key[5:])
+                if isinstance(msg.get("stats"), dict):  # the modules' own counters
                     self.module_stats.update({str(k): v for k, v in msg["stats"].items() if isinstance(v, dict)})
 
     def radio_report(self) -> dict[str, Any]:
@@ -724,6 +738,17 @@ def _valid_can(item: Any) -> bool:
     _, arb, data, ext = item
     return (isinstance(arb, int) and isinstance(data, bytes) and isinstance(ext, bool)
             and frame_fault(arb, data, ext) is None)
+
+
+def _valid_node(node: Any) -> bool:
+    """A module's radio settings, as the medium uses them."""
+    if not isinstance(node, dict):
+        return False
+    ints = {"channel": (11, 26), "pan_id": (0, (1 << 64) - 1), "addr64": (0, (1 << 64) - 1), "addr16": (0, 0xFFFF),
+            "series": (1, 2)}
+    nums = {"tx_power_dbm": (-40.0, 30.0), "sensitivity_dbm": (-130.0, -40.0)}
+    return (all(type(node.get(k)) is int and lo <= node[k] <= hi for k, (lo, hi) in ints.items())
+            and all(isinstance(node.get(k), int | float) and lo <= node[k] <= hi for k, (lo, hi) in nums.items()))
 
 
 def _valid_pins(pins: Any) -> bool:

@@ -5,8 +5,9 @@ Two eSwarBots wander among the obstacles of CONFIG's arena; one sends a unicast 
 receiver's module measures the RSSI of each packet it decodes. The session is a normal SITL run (its
 recording holds every frame); the survey reads the recording and writes
 
-- ``survey.csv``: one row per message: time, ground-truth distance and walls in between, delivered or not,
-  the RSSI the receiving module measured, the sender's attempts and transmit status;
+- ``survey.csv``: one row per message (its retries folded in): time, ground-truth distance and walls in
+  between, delivered or not, the RSSI the receiving module measured, the air transmissions it took and the
+  last transmit status;
 - ``survey.png``: RSSI box plots per 1 m of distance with the received/sent counts, the -75 dBm connectivity
   threshold and the receiver's sensitivity;
 - ``calibration.json``: the figures the thesis states (median RSSI near 3 m, delivery beyond 10 m, the
@@ -31,6 +32,7 @@ from bridge.recorder import iter_messages
 
 CSV_FIELDS = ("t_s", "src", "dst", "distance_m", "walls", "delivered", "rssi_dbm", "attempts", "status")
 Q_MIN_DBM = -75.0  # the thesis' connectivity threshold, "about 3 m" (section 3.2.3)
+RETRY_WINDOW_NS = 6_000_000_000  # attempts of one message (same MAC sequence number) come within this
 
 
 def survey_config(config: str | Path, duration_s: float, interval_s: float, seed: int | None,
@@ -64,28 +66,39 @@ def survey_config(config: str | Path, duration_s: float, interval_s: float, seed
 
 
 def rows_from_recording(mcap: str | Path) -> list[dict[str, Any]]:
-    """One row per survey message: the sender's transmit outcome joined with the receiver's decode."""
-    rx: dict[tuple[int, int], dict] = {}
+    """One row per survey message: the sender's attempts (a module's retries keep the frame's MAC sequence
+    number) joined with the addressee's decodes; delivered if any attempt got through, with the RSSI of the
+    first copy the addressee decoded."""
+    rx: dict[tuple[int, int, int], dict] = {}
     tx: list[dict] = []
     for topic, _t, data in iter_messages(mcap):
         if topic not in ("/radio/rx", "/radio/tx"):
             continue
         msg = json.loads(data)
         if topic == "/radio/rx":
-            key = (msg["src"], msg["handle"])
-            if key not in rx:  # a retry's duplicate: the first copy counts, as the receiver keeps only it
-                rx[key] = msg
-        elif topic == "/radio/tx" and msg.get("dst") is not None:
+            rx.setdefault((msg["src"], msg["handle"], msg["dst"]), msg)
+        elif msg.get("dst") is not None:
             tx.append(msg)
-    rows = []
+    tx.sort(key=lambda m: (m["t_ns"], m["src"], m["handle"]))
+    rows: list[dict[str, Any]] = []
+    last: dict[tuple[int, int], dict] = {}  # (src, dst) -> the message being retried
     for m in tx:
-        got = rx.get((m["src"], m["handle"]))
-        rows.append({
-            "t_s": round(m["t_ns"] / 1e9, 4), "src": m["src"], "dst": m["dst"], "distance_m": m.get("distance_m"),
-            "walls": m.get("walls"), "delivered": int(got is not None and got["dst"] == m["dst"]),
-            "rssi_dbm": got["rssi_dbm"] if got is not None and got["dst"] == m["dst"] else "",
-            "attempts": m.get("attempts"), "status": m.get("status"),
-        })
+        key = (m["src"], m["dst"])
+        got = rx.get((m["src"], m["handle"], m["dst"]))
+        row = last.get(key)
+        if row is None or row["_seq"] != m.get("seq") or m["t_ns"] - row["_t_ns"] > RETRY_WINDOW_NS:
+            row = {"t_s": round(m["t_ns"] / 1e9, 4), "src": m["src"], "dst": m["dst"],
+                   "distance_m": m.get("distance_m"), "walls": m.get("walls"), "delivered": 0, "rssi_dbm": "",
+                   "attempts": 0, "status": m.get("status"), "_seq": m.get("seq"), "_t_ns": m["t_ns"]}
+            rows.append(row)
+            last[key] = row
+        row["attempts"] += m.get("attempts") or 0
+        row["status"] = m.get("status")
+        row["_t_ns"] = m["t_ns"]
+        if got is not None and not row["delivered"]:
+            row.update(delivered=1, rssi_dbm=got["rssi_dbm"])
+    for row in rows:
+        del row["_seq"], row["_t_ns"]
     return rows
 
 

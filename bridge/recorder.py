@@ -82,6 +82,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "status": {"type": ["string", "null"], "description": "ok, no_ack or cca_fail"},
             "attempts": {"type": ["integer", "null"]},
             "dst": {"type": ["integer", "null"], "description": "addressed robot of a unicast, null for broadcast"},
+            "seq": {"type": ["integer", "null"], "description": "the frame's MAC sequence number (kept by retries)"},
             "distance_m": {"type": ["number", "null"], "description": "ground-truth distance to dst at the outcome"},
             "walls": {"type": ["integer", "null"], "description": "obstacles between src and dst at the outcome"},
         },

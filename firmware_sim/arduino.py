@@ -52,6 +52,9 @@ class Board:
         self.digital[pin] = HIGH if level else LOW
 
     def digital_read(self, pin: str) -> int:
+        if pin in self.pwm_inputs:  # a PWM source held at 100 % duty reads high, at 0 % low
+            duty, _ = self.pwm_inputs[pin]
+            return HIGH if duty >= 1.0 else LOW if duty <= 0.0 else self.digital.get(pin, LOW)
         return self.digital.get(pin, LOW)
 
     def pulse_in(self, pin: str, timeout_us: int = 1_000_000) -> int:

@@ -56,6 +56,7 @@ class LlcParams:
     ki: float = 30.0  # PWM per pulse-second
     max_err_pulses: float = 6.0
     rssi_pwm_input: bool = False  # an XBee's RSSI PWM output is wired to PIN_RSSI (eSwarBot radio hack)
+    xbee_sensitivity_dbm: float = -94.0  # the module's sensitivity, as eq. 3.9 uses it (Series 2; Series 1: -92)
 
 
 class WheelPid:
@@ -190,14 +191,17 @@ class LowLevelController:
             # sampled at 10 Hz, sent when it changed (a new packet came in, or the output went off) and
             # at least once a second
             self.next_ms["rssi"] += PERIOD_RSSI_MS
-            high_us = b.pulse_in(PIN_RSSI, timeout_us=round(2e6 / RSSI_PWM_HZ))
+            period_us = round(1e6 / RSSI_PWM_HZ)
+            high_us = b.pulse_in(PIN_RSSI, timeout_us=2 * period_us)
+            if high_us == 0 and b.digital_read(PIN_RSSI):  # no edge but held high: the duty saturated at 100 %
+                high_us = period_us
             if high_us != self.rssi_pulse_us or now >= self.rssi_sent_ms + RSSI_KEEPALIVE_MS:
                 self.rssi_pulse_us = high_us
                 self.rssi_sent_ms = now
-                duty = high_us * RSSI_PWM_HZ / 1e6
+                duty = min(1.0, high_us * RSSI_PWM_HZ / 1e6)
+                dbm = rssi_dbm_from_duty(duty, self.p.xbee_sensitivity_dbm)
                 self._send("RADIO_RSSI", pulse_us=min(high_us, 65535), duty_permille=min(1000, round(duty * 1000)),
-                           rssi_dbm=max(-128, min(0, round(rssi_dbm_from_duty(duty)))) if high_us else -128,
-                           valid=int(high_us > 0))
+                           rssi_dbm=max(-128, min(0, round(dbm))) if high_us else -128, valid=int(high_us > 0))
         if now >= self.next_ms["battery"]:
             self.next_ms["battery"] += PERIOD_BATTERY_MS
             self._sample_battery()
@@ -290,10 +294,11 @@ class LowLevelController:
         self.board.can.write(msg.frame_id, msg.encode(signals, scaling=True), self.board.micros())
 
 
-def rssi_dbm_from_duty(duty: float) -> float:
+def rssi_dbm_from_duty(duty: float, sensitivity_dbm: float = XBEE_SENSITIVITY_DBM) -> float:
     """Received power from the XBee RSSI PWM duty (0..1), the inverse of the thesis' eq. 3.9:
-    duty % = (295 + 17.5 x dBm above sensitivity) / 10.24."""
-    return XBEE_SENSITIVITY_DBM + (duty * 100 * 10.24 - 295) / 17.5
+    duty % = (295 + 17.5 x dBm above sensitivity) / 10.24. A saturated (100 %) duty reads as its floor,
+    about -52 dBm for Series 2: anything stronger looks the same."""
+    return sensitivity_dbm + (duty * 100 * 10.24 - 295) / 17.5
 
 
 def _clamp16(v: int) -> int:

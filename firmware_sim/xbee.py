@@ -780,7 +780,7 @@ class XBeeModule:
             self._done(t, ev)
             return
         fr, rssi = ev.get("frame"), ev.get("rssi_dbm")
-        if not isinstance(fr, dict) or not isinstance(rssi, int | float) or not _valid_air_frame(fr):
+        if not isinstance(fr, dict) or not isinstance(rssi, int | float) or not valid_air_frame(fr):
             self.counters["rx_malformed"] += 1
             return
         self.counters["rx_frames"] += 1
@@ -849,13 +849,21 @@ def _valid_ni(b: bytes) -> bool:
     return len(b) <= 20 and all(0x20 <= x < 0x7F for x in b)
 
 
-def _valid_air_frame(fr: dict) -> bool:
-    ints = ("handle", "src64", "src16", "dst_addr", "pan_id", "channel", "seq")
+def valid_air_frame(fr: object) -> bool:
+    """The shape of an air frame as modules submit and receive it (anything else is dropped and counted)."""
+    if not isinstance(fr, dict):
+        return False
+    ints = ("handle", "src64", "src16", "dst_addr", "pan_id", "channel", "seq", "psdu_len", "mac_retries")
     return (
-        all(isinstance(fr.get(k), int) and not isinstance(fr.get(k), bool) for k in ints)
+        all(type(fr.get(k)) is int for k in ints)
         and fr.get("dst") in ("bcast", "64", "16")
         and isinstance(fr.get("payload"), bytes)
         and isinstance(fr.get("ack"), bool)
         and 0 <= fr["src64"] < 1 << 64
         and 0 <= fr["src16"] <= 0xFFFF
+        and 0 <= fr["dst_addr"] < 1 << 64
+        and 0 <= fr["handle"] < 1 << 62
+        and 11 <= fr["channel"] <= 26
+        and 1 <= fr["psdu_len"] <= 127
+        and 0 <= fr["mac_retries"] <= 7
     )

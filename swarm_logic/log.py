@@ -7,6 +7,7 @@ truth, so a run can score the logic's beliefs. The controller calls ``robot.log(
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -17,8 +18,19 @@ Sink = Callable[[str, dict[str, Any]], None]
 
 
 def plain(values: dict[str, Any]) -> dict[str, Any]:
-    """JSON-safe copy: numpy scalars and arrays become numbers and lists."""
-    return json.loads(json.dumps(values, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+    """Strict-JSON copy: numpy scalars and arrays become numbers and lists, NaN and infinities become None."""
+    raw = json.loads(json.dumps(values, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+    return _finite(raw)
+
+
+def _finite(v: Any) -> Any:
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, list):
+        return [_finite(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    return v
 
 
 class JsonlLog:

@@ -78,6 +78,7 @@ COUNTER_NAMES = (
     "modem_status",
     "tx_frames",  # frames written to the port
     "at_errors",  # AT responses with a non-zero status
+    "db_ambiguous",  # Series 2 packets handed out without RSSI: a later packet made ATDB ambiguous
     "timeouts",
     "db_failed",  # ATDB after a Series 2 packet failed or timed out
 )
@@ -416,14 +417,25 @@ class XBee:
     def recv(self, timeout: float | None = 0.0) -> Received | None:
         """The next received packet, waiting up to ``timeout`` s (None: forever, 0: only what has arrived).
 
-        With ``rssi_from_db`` a Series 2 packet's RSSI is read with ``ATDB`` when it is handed out, which is
-        right after it arrived if the caller keeps up (the module reports its last packet, as on real hardware).
+        With ``rssi_from_db`` a Series 2 packet's RSSI is read with ``ATDB`` when it is handed out. The module
+        reports the RSSI of its *last* packet, so the answer belongs to this packet only if no later one has
+        arrived, before the query or while it was answered; otherwise ``rssi_dbm`` is None (counted as
+        ``db_ambiguous``) rather than another neighbour's value.
         """
         if not self._rx and not self._wait(lambda: bool(self._rx), timeout):
             return None
         pkt = self._rx.popleft()
         if pkt.rssi_dbm is None and self.rssi_from_db:  # a Series 2 receive packet: ask ATDB at once
-            pkt = Received(pkt.src64, pkt.src16, pkt.data, self._query_db(), pkt.broadcast, pkt.t)
+            self.poll()  # anything already on the line may be a later packet
+            rssi = None
+            if not self._rx:
+                before = self.counters["rx_packets"]
+                rssi = self._query_db()
+                if self.counters["rx_packets"] != before:
+                    rssi = None
+            if rssi is None:
+                self.counters["db_ambiguous"] += 1
+            pkt = Received(pkt.src64, pkt.src16, pkt.data, rssi, pkt.broadcast, pkt.t)
         return pkt
 
     def poll(self) -> None:

@@ -139,15 +139,46 @@ def test_plan_places_modules_in_the_firmware_process(radio_hub: Hub) -> None:
     assert radio_hub.proc_of[entity(1, "uwb")] == "fw1"
 
 
+FRAME = {"handle": 1, "src64": 1, "src16": 2, "dst": "bcast", "dst_addr": 0xFFFF, "pan_id": 1, "channel": 12,
+         "ack": False, "mac_retries": 0, "psdu_len": 40, "seq": 0, "payload": b"x", "opts": 0}
+
+
 @pytest.mark.parametrize("item", [
     ["air", "not a frame"], ["air"], ["uart", "xbee", "text", 9600], ["uart", "xbee", b"x"], ["node", 3],
-    ["uwb", {"peer": 99}], ["uwb", {"peer": 0}], ["rssi_pwm", "high"], ["log", "x", {}], ["teleport", 1],
+    ["uwb", {"peer": 99}], ["uwb", {"peer": 0}], ["uwb", {"peer": 1, "t_ns": float("inf")}], ["rssi_pwm", "high"],
+    ["log", "x", {}], ["teleport", 1],
+    ["air", {**FRAME, "channel": "x"}], ["air", {**FRAME, "payload": 5}], ["air", {**FRAME, "handle": [1]}],
+    ["air", {**FRAME, "psdu_len": float("inf")}], ["air", {**FRAME, "psdu_len": 300}],
+    ["node", {"channel": 2**63, "pan_id": 1, "addr64": 1, "addr16": 1, "series": 2, "tx_power_dbm": 3,
+              "sensitivity_dbm": -94}],
 ])
 def test_malformed_module_items_are_counted_not_fatal(radio_hub: Hub, item: list) -> None:
     e = entity(0, "xbee") if item[0] != "uwb" else entity(0, "uwb")
     res = {"out": [item], "wake": Q, "wom": True}
     radio_hub._outputs(0, {"fw0": {"k": 0, "ents": {e: res}}}, {}, {"fw0": [e]})
     assert radio_hub.counts["malformed_items"] == 1 and not radio_hub.dead
+
+
+def test_a_valid_air_frame_goes_on_the_air_and_is_heard(radio_hub: Hub) -> None:
+    e = entity(0, "xbee")
+    node = {"channel": 12, "pan_id": 1, "addr64": 1, "addr16": 2, "series": 2, "tx_power_dbm": 3.0,
+            "sensitivity_dbm": -94.0}
+    res = {"out": [["node", node], ["air", FRAME]], "wake": None, "wom": True}
+    radio_hub._outputs(0, {"fw0": {"k": 0, "ents": {e: res}}}, {}, {"fw0": [e]})
+    assert radio_hub.counts["malformed_items"] == 0 and radio_hub.counts["air_frames"] == 1
+
+
+def test_nan_in_a_log_record_is_refused_not_recorded(radio_hub: Hub) -> None:
+    e = entity(1, "logic")
+    res = {"out": [["log", "x", {"v": float("nan")}]], "wake": None}
+    radio_hub._outputs(0, {"lg1": {"k": 0, "ents": {e: res}}}, {}, {"lg1": [e]})
+    assert radio_hub.counts["malformed_items"] == 1
+
+
+def test_saturated_rssi_pwm_reads_as_its_floor_not_as_silence() -> None:
+    frames = _llc_rssi_frames([(1.0, 1.0)])
+    assert frames[-1]["valid"] == 1 and frames[-1]["duty_permille"] == 1000
+    assert frames[-1]["rssi_dbm"] == round(rssi_dbm_from_duty(1.0))  # about -52 dBm: anything stronger looks alike
 
 
 def test_logic_bytes_reach_the_module_paced_by_the_line(radio_hub: Hub) -> None:

@@ -20,17 +20,22 @@ def probe(xb: XBee, clock: Clock, peers64: list[int]) -> dict[str, Any]:
         clock.sleep(0.2)
     info = xb.identify()
     res: dict[str, Any] = {
-        "sh": xb.at("SH").hex(), "sl": xb.at("SL").hex(), "ni": xb.at("NI").decode(), "series": info.series,
-        "unicast_status": xb.send(peers64[0], b"ping-unicast", timeout=8).status,
-        "broadcast_status": xb.send(None, b"ping-broadcast", timeout=8).status,
-    }
-    echoes = []
-    deadline = clock.now() + 4.0
-    while clock.now() < deadline and len(echoes) < 1 + len(peers64):
-        pkt = xb.recv(timeout=max(0.0, deadline - clock.now()))
-        if pkt is not None and pkt.data.startswith(b"echo:"):
-            echoes.append({"src64": pkt.src64, "data": pkt.data.decode(), "rssi_dbm": pkt.rssi_dbm,
-                           "broadcast": pkt.broadcast})
+        "sh": xb.at("SH").hex(), "sl": xb.at("SL").hex(), "ni": xb.at("NI").decode(), "series": info.series}
+    echoes: list[dict] = []
+
+    def collect(n: int) -> None:
+        deadline = clock.now() + 4.0
+        want = len(echoes) + n
+        while clock.now() < deadline and len(echoes) < want:
+            pkt = xb.recv(timeout=max(0.0, deadline - clock.now()))
+            if pkt is not None and pkt.data.startswith(b"echo:"):
+                echoes.append({"src64": pkt.src64, "data": pkt.data.decode(), "rssi_dbm": pkt.rssi_dbm,
+                               "broadcast": pkt.broadcast})
+
+    res["unicast_status"] = xb.send(peers64[0], b"ping-unicast", timeout=8).status
+    collect(1)
+    res["broadcast_status"] = xb.send(None, b"ping-broadcast", timeout=8).status
+    collect(len(peers64))
     res["echoes"] = echoes
     res["db"] = xb.at("DB")[0]  # -dBm of the last packet received
     return res
@@ -54,13 +59,22 @@ class Probe(Controller):
 
 
 class Echo(RandomWalk):
-    """Answers every ``ping`` packet with a unicast ``echo:<data>`` to its sender; stands still."""
+    """Answers every ``ping`` packet with a unicast ``echo:<data>`` to its sender, robot k after (k - 1) x 0.5 s
+    (so answers to a broadcast do not arrive together); stands still."""
+
+    def init(self, robot) -> None:
+        super().init(robot)
+        self.replies: list[tuple[float, int, bytes]] = []
 
     def step(self) -> None:
-        xb = self.robot.xbee
+        xb, now = self.robot.xbee, self.robot.clock.now()
         while (pkt := xb.recv(timeout=0)) is not None:
             if pkt.data.startswith(b"ping"):
-                xb.send_nowait(pkt.src64, b"echo:" + pkt.data + b" from %d" % self.robot.id)
+                due = now + 0.5 * (self.robot.id - 1)
+                self.replies.append((due, pkt.src64, b"echo:" + pkt.data + b" from %d" % self.robot.id))
+        for reply in [r for r in self.replies if r[0] <= now]:
+            self.replies.remove(reply)
+            xb.send_nowait(reply[1], reply[2])
 
 
 class Idle(Controller):

@@ -54,10 +54,14 @@ class Serial(SerialBase):
             self._rt.close_bus(f"uart:{self.device}")
         self.is_open = False
         self._rx = None
+        self._buf.clear()
 
     def _reconfigure_port(self) -> None:
         if not isinstance(self._baudrate, numbers.Integral) or not 0 < self._baudrate < 2**32:
             raise ValueError(f"invalid baudrate: {self._baudrate!r}")
+        if self.is_open and self._rt is not None:  # the line now samples the module's bytes at the new rate
+            self._check()
+            self._rt.outbox.append(["baud", self.device, int(self._baudrate)])
 
     @staticmethod
     def _parse(url: str) -> str:

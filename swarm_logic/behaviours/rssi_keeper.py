@@ -36,6 +36,7 @@ class RssiKeeper(RandomWalk):
         "rssi_smoothing": 0.5,
         "log_every_s": 1.0,
         "uwb_poll_s": 0.5,
+        "uwb_update_s": 1.0,  # the UWB modules' ranging period (1 Hz, the Zebro figure)
     }
 
     def init(self, robot: Robot) -> None:
@@ -46,7 +47,7 @@ class RssiKeeper(RandomWalk):
         self.returning_until: float | None = None
         self.turn_until = 0.0
         self.tracker = None
-        self.raw: dict[int, float] = {}  # peer -> latest raw UWB range
+        self.raw: dict[int, tuple[float, float]] = {}  # peer -> (latest raw UWB range m, its time s)
         super().init(robot)
         now = robot.clock.now()
         self.next_hello = now + float(robot.rng.uniform(0, self.p["hello_s"]))  # no synchronised hellos
@@ -64,10 +65,12 @@ class RssiKeeper(RandomWalk):
         while (pkt := r.xbee.recv(timeout=0)) is not None:
             if not pkt.data.startswith(HELLO):
                 continue
-            rssi = pkt.rssi_dbm if pkt.rssi_dbm is not None else r.llc.state.rssi_dbm  # PWM pin as fallback
-            if rssi is None:
-                continue
+            rssi = pkt.rssi_dbm  # None when the module's last-packet RSSI could belong to another packet
             old = self.table.get(pkt.src64)
+            if rssi is None:
+                if old is not None:  # heard, RSSI unknown: still a neighbour
+                    self.table[pkt.src64] = (old[0], now)
+                continue
             self.table[pkt.src64] = (rssi if old is None else a * rssi + (1 - a) * old[0], now)
         horizon = 3.5 * self.p["hello_s"]  # three missed hellos break the link
         self.table = {k: v for k, v in self.table.items() if now - v[1] <= horizon}
@@ -89,12 +92,16 @@ class RssiKeeper(RandomWalk):
             self.next_uwb += self.p["uwb_poll_s"]
             for m in r.uwb.loc_get():
                 self.tracker.update_reading(m.addr16, m)
-                self.raw[m.addr16] = m.range_m
+                self.raw[m.addr16] = (m.range_m, m.t)
         if now >= self.next_log:
+            # score the filter against the raw ranges of the last update period only (both as the logic holds them
+            # now): an older raw range would be blamed for the robots' motion since
             est = self.tracker.estimates(now)
+            fresh = 1.5 * self.p["uwb_update_s"]
+            self.raw = {p: v for p, v in self.raw.items() if now - v[1] <= fresh}
             peers = sorted(p for p in est if p in self.raw)
             if peers:
-                self.robot.log("uwb_ranges", peers=peers, raw=[self.raw[p] for p in peers],
+                self.robot.log("uwb_ranges", peers=peers, raw=[self.raw[p][0] for p in peers],
                                filtered=[est[p].range_m for p in peers])
 
     # -- control -----------------------------------------------------------------------------------------
