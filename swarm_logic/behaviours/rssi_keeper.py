@@ -37,6 +37,8 @@ class RssiKeeper(RandomWalk):
         "log_every_s": 1.0,
         "uwb_poll_s": 0.5,
         "uwb_update_s": 1.0,  # the UWB modules' ranging period (1 Hz, the Zebro figure)
+        "uwb_nlos_bias_m": 0.6,  # mean excess of a range the module flags as NLOS (calibrate it per site)
+        "uwb_accel_sigma": 0.1,  # m/s^2: how hard the range between two robots may change its rate
     }
 
     def init(self, robot: Robot) -> None:
@@ -56,7 +58,7 @@ class RssiKeeper(RandomWalk):
         if robot.uwb is not None:
             from swarm_logic.ranging import RangeTracker
 
-            self.tracker = RangeTracker()
+            self.tracker = RangeTracker(nlos_bias_m=self.p["uwb_nlos_bias_m"], accel_sigma=self.p["uwb_accel_sigma"])
 
     # -- radio -------------------------------------------------------------------------------------------
     def _radio(self, now: float) -> None:
