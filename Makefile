@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= runs/demo
 
-.PHONY: setup demo test lint bench bench-smoke clean
+.PHONY: setup demo test lint bench bench-smoke survey survey-smoke clean
 
 setup: $(STAMP)
 
@@ -33,6 +33,12 @@ bench: $(STAMP)
 
 bench-smoke: $(STAMP)
 	$(BIN)/swarm-sitl bench --quick
+
+survey: $(STAMP)
+	$(BIN)/swarm-sitl radio-survey hil_configs/demo.toml --out runs/radio-survey
+
+survey-smoke: $(STAMP)
+	$(BIN)/swarm-sitl radio-survey hil_configs/demo.toml --duration 300 --out runs/radio-survey-smoke --quiet
 
 clean:
 	rm -rf $(VENV) runs build *.egg-info .pytest_cache .ruff_cache

@@ -85,7 +85,7 @@ def cmd_radio_survey(a: argparse.Namespace) -> int:
 
     out = a.out or f"runs/{Path(a.config).stem}-radio-survey"
     cal = run_survey(a.config, out, duration_s=a.duration, interval_s=a.interval, seed=a.seed, series=a.series,
-                     progress=None if a.quiet else sys.stderr)
+                     progress=None if a.quiet else sys.stderr, aps_retries=a.aps_retries)
     for k, v in cal.items():
         if isinstance(v, dict):
             verdict = "" if "pass" not in v else ("  PASS" if v["pass"] else "  FAIL")
@@ -146,6 +146,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--interval", type=float, default=2.0, help="seconds between messages (default 2, as the thesis)")
     p.add_argument("--seed", type=int)
     p.add_argument("--series", type=int, choices=[1, 2], help="XBee series (default: the config's, else 2)")
+    p.add_argument("--aps-retries", action="store_true",
+                   help="Series 2: let the module re-send a lost packet (ZigBee APS retries); rows become messages")
     p.add_argument("--out", help="output directory (default runs/<config>-radio-survey)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(fn=cmd_radio_survey)

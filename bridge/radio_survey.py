@@ -1,9 +1,9 @@
 """``swarm-sitl radio-survey CONFIG``: the thesis' RSSI-versus-distance experiment (Couceiro 2013, Fig. 3.7).
 
-Two eSwarBots wander among the obstacles of CONFIG's arena; one sends a unicast message to the other every
-``interval`` seconds through its XBee (API frames, MAC acknowledgements and retries as configured), and the
-receiver's module measures the RSSI of each packet it decodes. The session is a normal SITL run (its
-recording holds every frame); the survey reads the recording and writes
+Two eSwarBots wander among the obstacles of CONFIG's arena; one sends a unicast packet to the other every
+``interval`` seconds through its XBee (API frames, the MAC's acknowledgement and retries; on Series 2 no
+APS retries unless ``--aps-retries``), and the receiver's module measures the RSSI of each packet it decodes.
+The session is a normal SITL run (its recording holds every frame); the survey reads the recording and writes
 
 - ``survey.csv``: one row per message (its retries folded in): time, ground-truth distance and walls in
   between, delivered or not, the RSSI the receiving module measured, the air transmissions it took and the
@@ -36,7 +36,7 @@ RETRY_WINDOW_NS = 6_000_000_000  # attempts of one message (same MAC sequence nu
 
 
 def survey_config(config: str | Path, duration_s: float, interval_s: float, seed: int | None,
-                  series: int | None) -> dict[str, Any]:
+                  series: int | None, aps_retries: bool = False) -> dict[str, Any]:
     """CONFIG's session, world and arena with the survey's two robots in place of its own."""
     path = Path(config)
     try:
@@ -59,7 +59,7 @@ def survey_config(config: str | Path, duration_s: float, interval_s: float, seed
         session["seed"] = seed
     raw["robots"] = [{
         "profile": groups[0].get("profile", "eswarbot"), "count": 2, "behaviour": "radio_survey",
-        "params": {"interval_s": interval_s}, "xbee": xbee,
+        "params": {"interval_s": interval_s, "aps_retries": int(aps_retries)}, "xbee": xbee,
         "placement": {"kind": "random", "min_separation_m": 0.6},
     }]
     return raw
@@ -184,13 +184,14 @@ def plot(rows: list[dict[str, Any]], path: str | Path, sensitivity_dbm: float, t
 
 
 def run_survey(config: str, out_dir: str, duration_s: float = 3600.0, interval_s: float = 2.0,
-               seed: int | None = None, series: int | None = None, progress: Any = None) -> dict[str, Any]:
+               seed: int | None = None, series: int | None = None, progress: Any = None,
+               aps_retries: bool = False) -> dict[str, Any]:
     from bridge.config import XBeeCfg
     from bridge.launcher import run_session
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    raw = survey_config(config, duration_s, interval_s, seed, series)
+    raw = survey_config(config, duration_s, interval_s, seed, series, aps_retries)
     cfg_path = out / "survey.toml"
     cfg_path.write_text(_toml(raw))
     res = run_session(str(cfg_path), None, str(out / "session"), progress=progress, plot=False)
@@ -204,7 +205,7 @@ def run_survey(config: str, out_dir: str, duration_s: float = 3600.0, interval_s
     write_csv(rows, out / "survey.csv")
     cal = calibration(rows, sens)
     cal.update(config=str(config), duration_s=duration_s, interval_s=interval_s, series=series_used,
-               seed=raw["session"].get("seed"))
+               seed=raw["session"].get("seed"), aps_retries=aps_retries)
     (out / "calibration.json").write_text(json.dumps(cal, indent=1))
     plot(rows, out / "survey.png", sens, f"XBee Series {series_used} RSSI vs distance, {Path(config).name}: "
          f"{cal['delivered']}/{cal['messages']} messages received")

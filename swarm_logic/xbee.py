@@ -384,20 +384,23 @@ class XBee:
         )
         return self.info
 
-    def send_nowait(self, dest64: int | None, data: bytes) -> int:
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
         """Hand ``data`` to the module for ``dest64`` (None: broadcast) in a TX64 (Series 1) or transmit request
         (Series 2, 16-bit address unknown) frame; returns the frame ID of its TX status (see ``tx_result``).
+        ``options`` is the frame's transmit options byte (0x01: Series 1 no MAC ACK, Series 2 no APS retries).
         Payload limits are the module's: Series 2 answers 0x74 beyond NP, Series 1 drops the frame silently."""
         dest = BROADCAST64 if dest64 is None else dest64
         if not 0 <= dest < 1 << 64:
             raise ValueError(f"dest64 out of range: {dest64!r}")
+        if not 0 <= options <= 0xFF:
+            raise ValueError(f"options must be a byte: {options!r}")
         addr = XBee64BitAddress(dest.to_bytes(8, "big"))
         series = self.series
         fid = self._new_frame_id("TX")
         if series == 1:
-            pkt = TX64Packet(fid, addr, 0, bytearray(data))
+            pkt = TX64Packet(fid, addr, options, bytearray(data))
         else:
-            pkt = TransmitPacket(fid, addr, XBee16BitAddress.UNKNOWN_ADDRESS, 0, 0, bytearray(data))
+            pkt = TransmitPacket(fid, addr, XBee16BitAddress.UNKNOWN_ADDRESS, 0, options, bytearray(data))
         self._write(pkt)
         return fid
 

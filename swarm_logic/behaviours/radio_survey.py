@@ -3,8 +3,10 @@ one sends the other a message every ``interval_s`` seconds; what arrives, and at
 
 Both robots random-walk. The receiver (odd id) announces itself with a broadcast every ``announce_s``; the
 sender (even id) learns its address from the first announcement it hears and from then on sends it one
-unicast message per interval, with the module's MAC acknowledgements and retries. The receiver keeps what it
-gets; the session's recording holds both ends, which ``swarm-sitl radio-survey`` turns into a CSV and a plot.
+unicast packet per interval, with the MAC's acknowledgement and retries (802.15.4) but, on Series 2, without
+the ZigBee APS retries (``aps_retries = 0``), which would re-send it up to twice more, 1.6 s apart: the thesis
+counts packets that arrive at each distance, not eventual deliveries. The receiver keeps what it gets; the
+session's recording holds both ends, which ``swarm-sitl radio-survey`` turns into a CSV and a plot.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ ANNOUNCE = b"SURVEY-RX"
 
 
 class RadioSurvey(RandomWalk):
-    defaults: ClassVar[dict[str, float]] = {**RandomWalk.defaults, "interval_s": 2.0, "announce_s": 5.0}
+    defaults: ClassVar[dict[str, float]] = {**RandomWalk.defaults, "interval_s": 2.0, "announce_s": 5.0,
+                                            "aps_retries": 0}
 
     def init(self, robot: Robot) -> None:
         if robot.xbee is None:
@@ -48,7 +51,8 @@ class RadioSurvey(RandomWalk):
             self.next_radio += self.p["interval_s"]
             if self.peer64 is not None:
                 self.seq += 1
-                x.send_nowait(self.peer64, b"S" + struct.pack("<I", self.seq))
+                opts = 0x01 if x.series == 2 and not self.p["aps_retries"] else 0  # 0x01: no APS retries
+                x.send_nowait(self.peer64, b"S" + struct.pack("<I", self.seq), options=opts)
         else:
             self.next_radio += self.p["announce_s"]
             x.send_nowait(None, ANNOUNCE)
