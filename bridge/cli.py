@@ -88,7 +88,9 @@ def cmd_radio_survey(a: argparse.Namespace) -> int:
                      progress=None if a.quiet else sys.stderr, aps_retries=a.aps_retries)
     for k, v in cal.items():
         if isinstance(v, dict):
-            verdict = "" if "pass" not in v else ("  PASS" if v["pass"] else "  FAIL")
+            verdict = {True: "  PASS", False: "  FAIL", None: "  (no data: run longer)"}.get(v.get("pass"), "")
+            if "pass" not in v:
+                verdict = ""
             print(f"{k}: {json.dumps({kk: vv for kk, vv in v.items() if kk != 'pass'})}{verdict}")
     print(f"wrote {out}/survey.csv, {out}/survey.png, {out}/calibration.json")
     return 0

@@ -131,11 +131,11 @@ def calibration(rows: list[dict[str, Any]], sensitivity_dbm: float) -> dict[str,
     return {
         "messages": len(rows), "delivered": int(ok.sum()),
         "median_rssi_2_4m_dbm": {"ours": med3, "thesis": -75.0, "tolerance": 3.0,
-                                 "pass": med3 is not None and abs(med3 + 75.0) <= 3.0},
+                                 "pass": None if med3 is None else abs(med3 + 75.0) <= 3.0},
         "median_crosses_q_min_at_m": {"ours": crossing, "thesis": "2-4", "pass": crossing is not None
                                       and 2.0 <= crossing <= 4.0},
         "delivery_beyond_10m": {"ours": pdr_far, "n": int(far.sum()), "thesis": 0.67, "range": [0.55, 0.8],
-                                "pass": pdr_far is not None and 0.55 <= pdr_far <= 0.8},
+                                "pass": None if pdr_far is None else 0.55 <= pdr_far <= 0.8},
         "weakest_received_dbm": {"ours": weakest, "floor": sensitivity_dbm,
                                  "pass": weakest is not None and weakest >= sensitivity_dbm},
         "furthest_delivery_m": {"ours": furthest},
