@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.config import Config
-from bridge.plan import Plan, robot_of, uwb_addr16, xbee_serial64
+from bridge.plan import Plan, entity, robot_of, uwb_addr16, xbee_serial64
 from bridge.profiles import PROFILES, RobotProfile
 from bridge.rng import stream
 from firmware_sim import sensors
@@ -225,11 +225,11 @@ class FirmwareHost:
         """Each module's counters (malformed frames, buffer drops, ...), reported when the session ends."""
         out: dict[str, dict] = {}
         for r, m in self.xbees.items():
-            out[f"r{r:03d}/xbee"] = dict(m.counters)
+            out[entity(r, "xbee")] = dict(m.counters)
             if r in self.ptys:
-                out[f"r{r:03d}/xbee"]["pty_dropped_bytes"] = self.ptys[r].dropped
+                out[entity(r, "xbee")]["pty_dropped_bytes"] = self.ptys[r].dropped
         for r, m in self.uwbs.items():
-            out[f"r{r:03d}/uwb"] = dict(m.counters)
+            out[entity(r, "uwb")] = dict(m.counters)
         return out
 
     def stop(self) -> None:

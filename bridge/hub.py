@@ -39,7 +39,7 @@ from bridge.plan import Plan, entity, robot_of, uwb_addr16
 from bridge.profiles import PROFILES
 from bridge.radio_medium import RadioMedium
 from bridge.recorder import Recorder
-from bridge.uart import SerialLine
+from bridge.uart import SerialLine, garble
 from bridge.uwb_medium import UwbMedium
 from bridge.world import World
 from firmware_sim.xbee import valid_air_frame
@@ -122,7 +122,6 @@ class Hub:
                 self.lines[(r, "uwb")] = SerialLine(cfg.uwb.uart_baud)
                 self.host_baud[(r, "uwb")] = cfg.uwb.uart_baud
         self.rssi_pwm = [0.0] * self.n
-        self.uart_unrouted = 0
         self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
         self.module_stats: dict[str, dict] = {}
@@ -430,7 +429,7 @@ class Hub:
                 _, dev, data, baud = item
                 line = self.lines.get((r, dev))
                 if line is None or not isinstance(data, bytes) or type(baud) is not int or baud <= 0:
-                    self.uart_unrouted += 1
+                    self.counts["uart_unrouted_writes"] += 1
                     return
                 self.host_baud[(r, dev)] = baud
                 line.offer(t + q, data, baud)
@@ -441,7 +440,7 @@ class Hub:
                     raise ValueError
                 if baud != self.host_baud.get((r, dev), baud):  # the host listens at another rate: garbage
                     self.counts["uart_garbled_bytes"] += len(data)
-                    data = bytes(((b * 73 + 41) ^ 0x5A) & 0xFF for b in data)
+                    data = garble(data)
                 self.deliveries[t + q].append(("ent", entity(r, "logic"), [f"uart:{dev}", data]))
                 self.deliveries[t + q].append(("rec", f"/r{r:03d}/{dev}/uart", "swarm_sitl.Uart",
                                                {"dir": "to_host", "data": data.hex()}))
@@ -643,7 +642,6 @@ class Hub:
                 if "xbee" in self.roles[r]:
                     out["per_robot"].setdefault(r, {})["radio"] = stats["robots"][r]
                     out["per_robot"][r]["xbee_module"] = self.module_stats.get(entity(r, "xbee"))
-            out["uart_unrouted_writes"] = self.uart_unrouted
         if self.uwb is not None:
             ustats = self.uwb.stats()
             out["uwb_medium"] = ustats.get("all", {})

@@ -10,7 +10,7 @@ from typing import Any
 
 from bridge import urlhandler
 from bridge.config import Config
-from bridge.plan import Plan, RobotPlan, robot_of
+from bridge.plan import Plan, RobotPlan, entity, robot_of
 from bridge.rng import stream_seed
 from bridge.sim_context import RobotRuntime, SessionClock
 from swarm_logic.behaviours import load_behaviour
@@ -86,7 +86,7 @@ class LogicHost:
         return out
 
     def stats(self) -> dict[str, dict]:
-        return {f"r{r:03d}/logic": {"rx_dropped": rt.rx_dropped, "unrouted": rt.unrouted}
+        return {entity(r, "logic"): {"rx_dropped": rt.rx_dropped, "unrouted": rt.unrouted}
                 for r, rt in self.rts.items()}
 
     def stop(self) -> None:

@@ -14,6 +14,11 @@ from collections import deque
 BITS_PER_BYTE = 10
 
 
+def garble(data: bytes) -> bytes:
+    """What a UART sampling at the wrong baud rate latches instead of ``data`` (a fixed scrambling)."""
+    return bytes(((b * 73 + 41) ^ 0x5A) & 0xFF for b in data)
+
+
 class SerialLine:
     def __init__(self, baud: int) -> None:
         self.baud = baud  # the receiving end's rate
@@ -44,7 +49,7 @@ class SerialLine:
             chunk = data[:done]
             if baud != self.baud:
                 self.garbled += len(chunk)
-                chunk = bytes(((b * 73 + 41) ^ 0x5A) & 0xFF for b in chunk)
+                chunk = garble(chunk)
             out += chunk
             if done >= len(data):
                 q.popleft()

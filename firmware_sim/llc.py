@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 from firmware_sim import sensors
 from firmware_sim.arduino import Board
+from firmware_sim.xbee import rssi_dbm_from_pwm
 from swarm_logic.interfaces import eswarbot_llc_db
 
 PIN_SONAR, PIN_LDR, PIN_BATTERY = "A0", "A1", "A2"
@@ -25,7 +26,6 @@ PIN_DIR = ("D7", "D8")
 PIN_RSSI = "D2"  # the XBee's RSSI PWM output (pin 6), wired to a digital input
 
 RSSI_PWM_HZ = 120.0  # the XBee's RSSI PWM frequency (Couceiro 2013, section 3.2.3)
-XBEE_SENSITIVITY_DBM = -94.0  # XBee Series 2 receiver sensitivity, as the thesis' eq. 3.9 uses it
 
 WATCHDOG_MS = 500
 PERIOD_ODOM_MS = 50
@@ -199,7 +199,7 @@ class LowLevelController:
                 self.rssi_pulse_us = high_us
                 self.rssi_sent_ms = now
                 duty = min(1.0, high_us * RSSI_PWM_HZ / 1e6)
-                dbm = rssi_dbm_from_duty(duty, self.p.xbee_sensitivity_dbm)
+                dbm = rssi_dbm_from_pwm(duty, self.p.xbee_sensitivity_dbm)
                 self._send("RADIO_RSSI", pulse_us=min(high_us, 65535), duty_permille=min(1000, round(duty * 1000)),
                            rssi_dbm=max(-128, min(0, round(dbm))) if high_us else -128, valid=int(high_us > 0))
         if now >= self.next_ms["battery"]:
@@ -292,13 +292,6 @@ class LowLevelController:
     def _send(self, name: str, **signals: float) -> None:
         msg = self.db.get_message_by_name(name)
         self.board.can.write(msg.frame_id, msg.encode(signals, scaling=True), self.board.micros())
-
-
-def rssi_dbm_from_duty(duty: float, sensitivity_dbm: float = XBEE_SENSITIVITY_DBM) -> float:
-    """Received power from the XBee RSSI PWM duty (0..1), the inverse of the thesis' eq. 3.9:
-    duty % = (295 + 17.5 x dBm above sensitivity) / 10.24. A saturated (100 %) duty reads as its floor,
-    about -52 dBm for Series 2: anything stronger looks the same."""
-    return sensitivity_dbm + (duty * 100 * 10.24 - 295) / 17.5
 
 
 def _clamp16(v: int) -> int:

@@ -140,6 +140,12 @@ def encode_frame(data: bytes, api_mode: int) -> bytes:
     return bytes((START,)) + body
 
 
+def rssi_dbm_from_pwm(duty: float, sensitivity_dbm: float) -> float:
+    """Eq. 3.9 inverted, as the robot's controller reads the PWM: received power (dBm) from the duty (0..1). A
+    saturated (100 %) duty reads as its floor, about -52 dBm for Series 2: anything stronger looks the same."""
+    return sensitivity_dbm + (duty * 100 * 10.24 - 295) / 17.5
+
+
 def rssi_pwm_formula(rssi_dbm: float, sensitivity_dbm: float) -> float:
     """Thesis eq. 3.9: duty % = (295 + 17.5 (RSSI - sensitivity)) / 10.24, clamped to 0..100 %; as 0..1."""
     pct = (295.0 + 17.5 * (rssi_dbm - sensitivity_dbm)) / 10.24

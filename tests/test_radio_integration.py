@@ -16,8 +16,8 @@ from bridge.plan import entity, make_plan, xbee_serial64
 from bridge.radio_survey import _toml, calibration, survey_config
 from bridge.uart import SerialLine
 from firmware_sim.arduino import Board
-from firmware_sim.llc import PIN_RSSI, RSSI_PWM_HZ, LlcParams, LowLevelController, rssi_dbm_from_duty
-from firmware_sim.xbee import rssi_pwm_formula
+from firmware_sim.llc import PIN_RSSI, RSSI_PWM_HZ, LlcParams, LowLevelController
+from firmware_sim.xbee import rssi_dbm_from_pwm, rssi_pwm_formula
 from swarm_logic.interfaces import eswarbot_llc_db
 
 DB = eswarbot_llc_db()
@@ -29,12 +29,12 @@ Q = 10_000_000
 def test_pwm_duty_of_the_module_reads_back_as_dbm(dbm: int) -> None:
     """Eq. 3.9 forward in the XBee, inverse in the LLC: the same dBm within the pulse timer's resolution."""
     duty = rssi_pwm_formula(dbm, -94.0)
-    assert rssi_dbm_from_duty(duty) == pytest.approx(dbm, abs=1e-9)
+    assert rssi_dbm_from_pwm(duty, -94.0) == pytest.approx(dbm, abs=1e-9)
     b = Board()
     b.pwm_inputs[PIN_RSSI] = (duty, RSSI_PWM_HZ)
     high = b.pulse_in(PIN_RSSI)
     assert high % 4 == 0 and abs(high - duty / RSSI_PWM_HZ * 1e6) < 4
-    assert rssi_dbm_from_duty(high * RSSI_PWM_HZ / 1e6) == pytest.approx(dbm, abs=0.2)
+    assert rssi_dbm_from_pwm(high * RSSI_PWM_HZ / 1e6, -94.0) == pytest.approx(dbm, abs=0.2)
 
 
 def test_thesis_duty_values() -> None:
@@ -178,7 +178,7 @@ def test_nan_in_a_log_record_is_refused_not_recorded(radio_hub: Hub) -> None:
 def test_saturated_rssi_pwm_reads_as_its_floor_not_as_silence() -> None:
     frames = _llc_rssi_frames([(1.0, 1.0)])
     assert frames[-1]["valid"] == 1 and frames[-1]["duty_permille"] == 1000
-    assert frames[-1]["rssi_dbm"] == round(rssi_dbm_from_duty(1.0))  # about -52 dBm: anything stronger looks alike
+    assert frames[-1]["rssi_dbm"] == round(rssi_dbm_from_pwm(1.0, -94.0))  # about -52 dBm: stronger looks alike
 
 
 def test_logic_bytes_reach_the_module_paced_by_the_line(radio_hub: Hub) -> None:

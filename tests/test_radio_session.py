@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import json
-import subprocess
 from pathlib import Path
 
 import pytest
 
 from bridge.recorder import file_digest
-from tests.conftest import ROOT
-from tests.test_session import _check_messages_match_their_schemas, cli
+from tests.test_session import _check_messages_match_their_schemas
+from tests.test_session import run as session_run
 
 pytestmark = pytest.mark.session
 
@@ -39,13 +37,11 @@ min_separation_m = 0.8
 
 
 def run(tmp_path: Path, name: str, *extra: str, duration: float = 12, seed: int = 2) -> dict:
-    cfg = tmp_path / "radios.toml"
+    cfg = tmp_path / f"radios-{name}.toml"
     cfg.write_text(CFG.format(duration=duration, seed=seed))
     out = tmp_path / name
-    r = subprocess.run(cli("run", str(cfg), "--out", str(out), "--quiet", *extra), cwd=ROOT, capture_output=True,
-                       text=True, timeout=240)
-    assert r.returncode == 0, r.stderr
-    s = json.loads((out / "summary.json").read_text())
+    code, s = session_run(cfg, out, *extra, timeout=240)
+    assert code == 0, s.get("error")
     s["_out"] = out
     return s
 
