@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= runs/demo
 
-.PHONY: setup demo test lint bench bench-smoke survey survey-smoke clean
+.PHONY: setup demo test lint bench bench-smoke survey survey-smoke experiments experiments-smoke clean
 
 setup: $(STAMP)
 
@@ -39,6 +39,20 @@ survey: $(STAMP)
 
 survey-smoke: $(STAMP)
 	$(BIN)/swarm-sitl radio-survey hil_configs/demo.toml --duration 300 --out runs/radio-survey-smoke --quiet
+
+# `swarm-sitl experiment NAME $(1)` for every registered experiment; fails if any had a failed trial
+define each_experiment
+	@names=$$($(BIN)/swarm-sitl experiment --list) || exit 1; status=0; \
+	for e in $$(printf '%s\n' "$$names" | cut -d' ' -f1); do \
+		echo "$(BIN)/swarm-sitl experiment $$e$(if $(1), $(1))"; $(BIN)/swarm-sitl experiment $$e $(1) || status=1; \
+	done; exit $$status
+endef
+
+experiments: $(STAMP)
+	$(call each_experiment,)
+
+experiments-smoke: $(STAMP)
+	$(call each_experiment,--smoke --quiet)
 
 clean:
 	rm -rf $(VENV) runs build *.egg-info .pytest_cache .ruff_cache

@@ -23,6 +23,16 @@ def _speed(v: str) -> float | str:
     return f
 
 
+def _at_least_one(v: str) -> int:
+    try:
+        n = int(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {v!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
+    return n
+
+
 def _overrides(a: argparse.Namespace) -> dict[str, Any]:
     return {
         "robots.count": a.robots,
@@ -46,8 +56,12 @@ def cmd_run(a: argparse.Namespace) -> int:
 def cmd_validate(a: argparse.Namespace) -> int:
     from bridge.plan import make_plan
 
+    from bridge.config import config_warnings
+
     cfg = load_config(a.config, _overrides(a))
     plan = make_plan(cfg, a.config)
+    for w in config_warnings(cfg):
+        print(f"{a.config}: warning: {w}", file=sys.stderr)
     print(f"{a.config}: ok: {len(plan.robots)} robots, {len(plan.procs) + 1} processes, "
           f"{cfg.session.duration_s} s at quantum {cfg.session.quantum_ms} ms, seed {cfg.session.seed}")
     return 0
@@ -111,6 +125,34 @@ def cmd_radio_fit(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_experiment(a: argparse.Namespace) -> int:
+    from bridge.experiment import UnknownExperimentError, execute_experiment, experiments
+
+    if a.list:
+        known = experiments()
+        width = max((len(n) for n in known), default=0)
+        for name, cls in known.items():
+            print(f"{name:<{width}}  {cls.title}")
+        return 0
+    if not a.name:
+        print("swarm-sitl experiment: name an experiment (--list shows them)", file=sys.stderr)
+        return 2
+    try:
+        run = execute_experiment(a.name, trials=a.trials, jobs=a.jobs, out=a.out, smoke=a.smoke, seed=a.seed,
+                                 progress=not a.quiet)
+    except UnknownExperimentError as e:
+        print(f"swarm-sitl experiment: {e}", file=sys.stderr)
+        return 2
+    for t, ours, ok, _note in run.verdicts:
+        verdict = {True: "PASS", False: "FAIL"}.get(ok, "not judged")
+        print(f"{t.id}: {ours} (thesis {t.thesis}; {t.tolerance})  {verdict}")
+    state = "interrupted: " if run.interrupted else ""
+    print(f"{a.name}: {state}{len(run.outcomes)}/{run.total} trials ran, {run.failed} failed, {run.wall_s:.0f} s")
+    plots = f", {run.out}/plots/" if (run.out / "plots").is_dir() else ""
+    print(f"wrote {run.out}/report.md, {run.out}/trials.csv{plots}")
+    return 130 if run.interrupted else 1 if run.failed else 0
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -161,6 +203,18 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--sensitivity", type=float, default=-94.0, help="receiver sensitivity, dBm")
     p.add_argument("--d0", type=float, default=1.0, help="reference distance, m")
     p.set_defaults(fn=cmd_radio_fit)
+
+    p = sub.add_parser("experiment", help="run a named, seeded experiment: many trials in parallel, CSV, plots and a "
+                                          "report against the thesis' figures")
+    p.add_argument("name", nargs="?", help="experiment name (--list shows them)")
+    p.add_argument("--list", action="store_true", help="list the experiments and exit")
+    p.add_argument("--trials", type=_at_least_one, help="trials per cell (default: the experiment's own)")
+    p.add_argument("--jobs", type=_at_least_one, help="worker processes (default: one per CPU; 1 runs in-process)")
+    p.add_argument("--out", help="output directory (default runs/experiments/<name>, with --smoke <name>-smoke)")
+    p.add_argument("--smoke", action="store_true", help="a few short trials per cell (for CI)")
+    p.add_argument("--seed", type=int, default=0, help="base seed; each trial's seed derives from it (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(fn=cmd_experiment)
 
     p = sub.add_parser("digest", help="recompute the digest of a recording")
     p.add_argument("recording")

@@ -6,6 +6,7 @@ Every error names the file, the field and the reason, e.g.
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from pathlib import Path
@@ -114,7 +115,7 @@ class LightCfg(_Model):
 
 
 class Placement(_Model):
-    kind: Literal["grid", "random", "explicit"] = "grid"
+    kind: Literal["grid", "random", "explicit", "spiral"] = "grid"
     origin: tuple[float, float] = (1.0, 1.0)
     spacing_m: float = Field(0.5, gt=0)
     columns: int = Field(5, ge=1)
@@ -123,18 +124,24 @@ class Placement(_Model):
     )
     min_separation_m: float = Field(0.3, gt=0)
     poses: list[tuple[float, float, float]] = Field([], description="explicit [x, y, yaw_deg] per robot")
+    centres: list[tuple[float, float]] = Field([], description="spiral: one spiral of Theodorus per centre; the "
+                                               "robots are split into as many consecutive blocks (as the RDPSO "
+                                               "splits them into initial subgroups), spacing_m apart")
     yaw_deg: float | Literal["random"] = "random"
 
     @model_validator(mode="after")
     def _fields_fit_kind(self) -> Placement:
         applies = {"grid": {"origin", "spacing_m", "columns", "yaw_deg"},
                    "random": {"region", "min_separation_m", "yaw_deg"},
-                   "explicit": {"poses"}}[self.kind]
+                   "explicit": {"poses"},
+                   "spiral": {"centres", "spacing_m", "yaw_deg"}}[self.kind]
         fields = type(self).model_fields
         stray = sorted(f for f in self.model_fields_set - applies - {"kind"}
                        if getattr(self, f) != fields[f].default)
         if stray:
             raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {self.kind!r}")
+        if self.kind == "spiral" and not self.centres:
+            raise ValueError("centres: a spiral placement needs at least one centre")
         return self
 
 
@@ -171,6 +178,11 @@ class RobotGroup(_Model):
     placement: Placement = Placement()
     xbee: XBeeCfg | None = Field(None, description="the robot's XBee radio module (none: no radio)")
     uwb: bool = Field(False, description="fit a DWM1001-class UWB ranging module")
+    pose_source: Literal["odometry", "ground_truth"] = Field(
+        "odometry", description="odometry: the LLC reports its dead-reckoned pose in ODOMETRY (from (0, 0, 0) at "
+                                "power-up, or ODOM_SET); ground_truth: the LLC reports the true pose in ODOMETRY, "
+                                "as if a motion-capture system fed it; an idealisation for algorithm tests, "
+                                "flagged in STATUS and summary.json")
 
     @model_validator(mode="after")
     def _pty_per_robot(self) -> RobotGroup:
@@ -186,6 +198,15 @@ class RobotGroup(_Model):
         return v
 
 
+class FaultCfg(_Model):
+    """An injected fault: at ``at_s`` the robot's firmware crashes, and the robot is dead from then on (as a
+    battery death in the thesis: motors stop, its radio goes silent, its logic stops)."""
+
+    robot: int = Field(ge=0, description="robot id")
+    at_s: float = Field(gt=0, description="simulated time of the crash")
+    kind: Literal["firmware_crash"] = "firmware_crash"
+
+
 class Config(_Model):
     session: SessionCfg = SessionCfg()
     world: WorldCfg = WorldCfg()
@@ -195,6 +216,7 @@ class Config(_Model):
     radio: RadioCfg = Field(RadioCfg(), description="the 2.4 GHz channel the XBees share (docs/radio.md)")
     uwb: UwbCfg = Field(UwbCfg(), description="UWB ranging noise and TDMA budget (docs/uwb.md)")
     robots: list[RobotGroup] = Field(min_length=1)
+    faults: list[FaultCfg] = Field([], description="injected faults (a robot's firmware crashing mid-run)")
 
     @model_validator(mode="after")
     def _quantum_fits_physics(self) -> Config:
@@ -303,6 +325,24 @@ def _check_behaviours(path: str, cfg: Config) -> None:
             if isinstance(d, int | float) and not isinstance(d, bool) and (
                     isinstance(v, bool) or not isinstance(v, int | float)):
                 raise ConfigError(f"{path}: robots[{i}].params.{k}: expected a number, got {v!r}")
+        resolve = getattr(cls, "resolve", None)  # a controller that checks the meaning of its parameters
+        if resolve is not None:
+            try:
+                resolve(dict(g.params))
+            except ValueError as e:
+                raise ConfigError(f"{path}: robots[{i}].params: {e}") from None
+
+
+def config_warnings(cfg: Config) -> list[str]:
+    """What is allowed but unwise: e.g. controller parameters outside their stable region (each names the bound)."""
+    from swarm_logic.behaviours import load_behaviour
+
+    out = []
+    for i, g in enumerate(cfg.robots):
+        warn = getattr(load_behaviour(g.behaviour), "warnings", None)
+        if warn is not None:
+            out += [f"robots[{i}].params: {w}" for w in warn(dict(g.params))]
+    return out
 
 
 def _check_geometry(path: str, cfg: Config) -> None:
@@ -310,6 +350,9 @@ def _check_geometry(path: str, cfg: Config) -> None:
     for i, ob in enumerate(cfg.obstacles):
         if not (0 <= ob.x <= w and 0 <= ob.y <= length):
             raise ConfigError(f"{path}: obstacles[{i}]: centre ({ob.x}, {ob.y}) is outside the {w} x {length} m arena")
+    for i, f in enumerate(cfg.faults):
+        if f.robot >= cfg.robot_count:
+            raise ConfigError(f"{path}: faults[{i}].robot: no robot {f.robot} (the session has {cfg.robot_count})")
     for i, light in enumerate(cfg.light.sources):
         if not (math.isfinite(light.x) and math.isfinite(light.y)):
             raise ConfigError(f"{path}: light.sources[{i}]: position must be finite")
@@ -327,3 +370,43 @@ def _check_geometry(path: str, cfg: Config) -> None:
             x0, y0, x1, y1 = pl.region
             if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= length):
                 raise ConfigError(f"{path}: robots[{i}].placement.region: must lie inside the arena with x0<x1, y0<y1")
+
+
+def to_toml(d: dict[str, Any]) -> str:
+    """A minimal TOML writer for config dicts (tables, arrays of tables, scalars, arrays of scalars)."""
+    lines: list[str] = []
+
+    def scalar(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int | float):
+            return repr(v)
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(scalar(x) for x in v) + "]"
+        raise TypeError(f"cannot write {v!r} as TOML")
+
+    def table(prefix: str, t: dict[str, Any], header: str | None) -> None:
+        if header is not None:
+            lines.append(header)
+        subs = []
+        for k, v in t.items():
+            if isinstance(v, dict):
+                subs.append((k, v, False))
+            elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+                subs.append((k, v, True))
+            else:
+                lines.append(f"{k} = {scalar(v)}")
+        for k, v, many in subs:
+            name = f"{prefix}{k}"
+            if many:
+                for item in v:
+                    lines.append("")
+                    table(name + ".", item, f"[[{name}]]")
+            else:
+                lines.append("")
+                table(name + ".", v, f"[{name}]")
+
+    table("", d, None)
+    return "\n".join(lines).lstrip("\n") + "\n"

@@ -47,6 +47,7 @@ def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
         loop_hz=p.llc_loop_hz,
         max_wheel_rad_s=p.motor_max_wheel_rad_s,
         deadband_pwm=p.motor_deadband_pwm,
+        motor_time_constant_s=p.motor_time_constant_s,
         battery_cells=p.battery_cells,
         sonar_min_mm=round(p.sonar_min_range_m * 1000),
         sonar_max_mm=round(p.sonar_max_range_m * 1000),
@@ -117,6 +118,7 @@ class FirmwareHost:
         self.xbee_baud: dict[int, int] = {}
         self.ptys: dict[int, PtyLink] = {}
         self.uwbs: dict[int, UwbModule] = {}
+        self.crash_ns = {f.robot: round(f.at_s * 1e9) for f in cfg.faults if f.kind == "firmware_crash"}
         uwb_team = [r.id for r in plan.robots if r.uwb]
         self.uwb_baud = cfg.uwb.uart_baud
         for r in robots:
@@ -140,6 +142,8 @@ class FirmwareHost:
 
     def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         r = robot_of(ent)
+        if t_ns >= self.crash_ns.get(r, t_ns + 1):
+            raise RuntimeError(f"injected fault: robot {r}'s firmware crashed at {self.crash_ns[r] / 1e9:g} s")
         role = ent[ent.index("/") + 1:]
         if role == "llc":
             return self._llc(r, t_ns, inputs)
@@ -156,6 +160,8 @@ class FirmwareHost:
         b.analog_volts[PIN_LDR] = sensors.ldr_volts(s["lux"])
         b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(s["battery_v"])
         b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
+        pose = s.get("pose")  # a ground-truth robot's motion-capture receiver: the world pose (x, y, yaw)
+        b.external_pose = (float(pose[0]), float(pose[1]), float(pose[2])) if pose is not None else None
         for _bus, arb_id, data, ext, ts in inputs["in"]:
             b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
         if r not in self.nominal_ns:  # first tick: power-up

@@ -122,6 +122,7 @@ class Hub:
                 self.lines[(r, "uwb")] = SerialLine(cfg.uwb.uart_baud)
                 self.host_baud[(r, "uwb")] = cfg.uwb.uart_baud
         self.rssi_pwm = [0.0] * self.n
+        self.ideal_pose = {r for r, rp in enumerate(robots) if rp.pose_source == "ground_truth"}
         self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
         self.module_stats: dict[str, dict] = {}
@@ -563,7 +564,10 @@ class Hub:
                                          "battery_v": s.battery_v}
                         if "xbee" in self.roles[r]:
                             entry["sens"]["rssi_pwm"] = self.rssi_pwm[r]
-                        sensed[e] = entry["sens"]
+                        sensed[e] = entry["sens"]  # recorded as the pins' values; the pose is in /world/poses
+                        if r in self.ideal_pose:  # its mocap receiver: the true pose in the world frame
+                            entry["sens"] = {**entry["sens"], "pose": [
+                                float(world.pos[r, 0]), float(world.pos[r, 1]), float(world.yaw[r])]}
                     run[e] = entry
                 self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
                 self.proc_ticks += 1
@@ -684,6 +688,7 @@ class Hub:
                  "final_pose": [round(float(self.world.pos[r, 0]), 3), round(float(self.world.pos[r, 1]), 3),
                                 round(float(self.world.yaw[r]), 3)],
                  "battery_v": round(float(self.world.battery_v[r]), 3),
+                 "pose_source": self.plan.robots[r].pose_source,
                  "can_frames": self.can[r].frames,
                  "can_bus_load": round(self.can[r].bits / self.can[r].bitrate / max(self.sim_end_ns / 1e9, 1e-9), 4)}
                 for r in range(self.n)

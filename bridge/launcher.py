@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from bridge import transport
-from bridge.config import load_config
+from bridge.config import config_warnings, load_config
 from bridge.plan import make_plan
 
 # One worker thread per zenoh runtime: a session runs tens of processes on a few cores, and fewer
@@ -83,6 +83,9 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
                 progress: TextIO | None = sys.stderr, plot: bool = True) -> SessionResult:
     cfg = load_config(config_path, overrides)
     plan = make_plan(cfg, config_path)
+    if progress is not None:
+        for w in config_warnings(cfg):
+            print(f"{config_path}: warning: {w}", file=progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("session.mcap", "summary.json", "world_result.json", "trajectories.png", "plan.json"):

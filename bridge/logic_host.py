@@ -14,6 +14,7 @@ from bridge.plan import Plan, RobotPlan, entity, robot_of
 from bridge.rng import stream_seed
 from bridge.sim_context import RobotRuntime, SessionClock
 from swarm_logic.behaviours import load_behaviour
+from swarm_logic.log import plain
 from swarm_logic.robot import Robot
 from swarm_logic.runner import run_controller
 
@@ -30,6 +31,7 @@ def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
                        "rssi_from_db": rp.xbee["series"] == 2}
     if rp.uwb:
         hal["uwb"] = {"port": "sitl://uwb", "baudrate": cfg.uwb.uart_baud}
+    hal["start_pose"] = list(rp.pose)  # where the robot was put down, as an operator would tell it
     return hal
 
 
@@ -54,7 +56,7 @@ class LogicHost:
 
             def program(rt: RobotRuntime = rt, rp=rp, cls=cls, hal=hal) -> None:
                 def sink(topic: str, values: dict, rt: RobotRuntime = rt) -> None:
-                    rt.outbox.append(["log", topic, values])
+                    rt.outbox.append(["log", topic, plain(values)])
 
                 robot = Robot.open(rp.id, hal, SessionClock(rt), stream_seed(seed, "robot", rp.id, "logic"),
                                    rp.params, log_sink=sink)

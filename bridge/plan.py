@@ -27,6 +27,7 @@ class RobotPlan:
     pose: tuple[float, float, float]  # x, y, yaw (rad)
     xbee: dict | None = None  # the group's XBeeCfg as a dict, or None without a radio
     uwb: bool = False
+    pose_source: str = "odometry"  # "ground_truth": the LLC is fed the true pose (RobotGroup.pose_source)
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC and the radio modules it carries."""
@@ -90,7 +91,7 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
         for pose in poses:
             rid = len(robots)
             robots.append(RobotPlan(rid, f"r{rid:03d}", group.profile, group.behaviour, dict(group.params), pose,
-                                    group.xbee.model_dump() if group.xbee else None, group.uwb))
+                                    group.xbee.model_dump() if group.xbee else None, group.uwb, group.pose_source))
     k = cfg.session.robots_per_process
     ids = [r.id for r in robots]
     chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
@@ -135,6 +136,21 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
                 raise ConfigError(f"{path}: robots[{gi}].placement.poses[{j}]: ({x}, {y}) is inside a wall or an "
                                   "obstacle (or closer to one than the robot's radius)")
         return [(x, y, math.radians(yd)) for x, y, yd in pl.poses]
+    if pl.kind == "spiral":
+        from swarm_logic.rdpso.deployment import theodorus_spiral
+
+        blocks = len(pl.centres)
+        for b, centre in enumerate(pl.centres):
+            n_b = sum(1 for i in range(g.count) if i * blocks // g.count == b)
+            phi0 = float(rng.uniform(-math.pi, math.pi))
+            sigma = 1 if rng.random() < 0.5 else -1
+            for j, (x, y) in enumerate(theodorus_spiral(n_b, pl.spacing_m, centre, phi0, sigma)):
+                if _blocked(cfg, x, y, clearance, occ):
+                    raise ConfigError(f"{path}: robots[{gi}].placement: spiral {b}, robot {j} at ({x:.2f}, {y:.2f}) "
+                                      "is outside the arena or inside an obstacle (move the centre or shorten "
+                                      "spacing_m)")
+                out.append((x, y, yaw()))
+        return out
     if pl.kind == "grid":
         for i in range(g.count):
             x = pl.origin[0] + (i % pl.columns) * pl.spacing_m

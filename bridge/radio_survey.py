@@ -186,14 +186,14 @@ def plot(rows: list[dict[str, Any]], path: str | Path, sensitivity_dbm: float, t
 def run_survey(config: str, out_dir: str, duration_s: float = 3600.0, interval_s: float = 2.0,
                seed: int | None = None, series: int | None = None, progress: Any = None,
                aps_retries: bool = False) -> dict[str, Any]:
-    from bridge.config import XBeeCfg
+    from bridge.config import XBeeCfg, to_toml
     from bridge.launcher import run_session
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     raw = survey_config(config, duration_s, interval_s, seed, series, aps_retries)
     cfg_path = out / "survey.toml"
-    cfg_path.write_text(_toml(raw))
+    cfg_path.write_text(to_toml(raw))
     res = run_session(str(cfg_path), None, str(out / "session"), progress=progress, plot=False)
     if res.code != 0:
         raise RuntimeError(f"the survey session failed (exit {res.code}): {res.summary.get('error')}")
@@ -210,43 +210,3 @@ def run_survey(config: str, out_dir: str, duration_s: float = 3600.0, interval_s
     plot(rows, out / "survey.png", sens, f"XBee Series {series_used} RSSI vs distance, {Path(config).name}: "
          f"{cal['delivered']}/{cal['messages']} messages received")
     return cal
-
-
-def _toml(d: dict[str, Any]) -> str:
-    """A minimal TOML writer for config dicts (tables, arrays of tables, scalars, arrays of scalars)."""
-    lines: list[str] = []
-
-    def scalar(v: Any) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, int | float):
-            return repr(v)
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list | tuple):
-            return "[" + ", ".join(scalar(x) for x in v) + "]"
-        raise TypeError(f"cannot write {v!r} as TOML")
-
-    def table(prefix: str, t: dict[str, Any], header: str | None) -> None:
-        if header is not None:
-            lines.append(header)
-        subs = []
-        for k, v in t.items():
-            if isinstance(v, dict):
-                subs.append((k, v, False))
-            elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
-                subs.append((k, v, True))
-            else:
-                lines.append(f"{k} = {scalar(v)}")
-        for k, v, many in subs:
-            name = f"{prefix}{k}"
-            if many:
-                for item in v:
-                    lines.append("")
-                    table(name + ".", item, f"[[{name}]]")
-            else:
-                lines.append("")
-                table(name + ".", v, f"[{name}]")
-
-    table("", d, None)
-    return "\n".join(lines).lstrip("\n") + "\n"

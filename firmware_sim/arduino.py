@@ -30,6 +30,8 @@ class Board:
         self.encoder_counts = [0, 0]
         self.led_rgb = (0, 0, 0)
         self.pwm_inputs: dict[str, tuple[float, float]] = {}  # pin -> (duty 0..1, frequency Hz) of a PWM source
+        # a motion-capture receiver's latest pose (x m, y m, yaw rad, world frame), when one is fitted
+        self.external_pose: tuple[float, float, float] | None = None
         self.can = CanController(rx_depth=can_rx_depth)
 
     # -- Arduino API -------------------------------------------------------------------------------

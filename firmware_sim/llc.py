@@ -5,6 +5,11 @@ step per wheel, apply the command watchdog (motors stop 0.5 s after the last DRI
 sonar, light sensor and battery through the 10-bit ADC, set the LED strip and send telemetry on the
 robot's CAN bus at fixed rates. The CAN interface is described by ``eswarbot_llc.dbc``.
 
+Besides wheel speeds (DRIVE_CMD) the LLC executes the thesis' "rotate-then-go" displacement (MOVE_CMD,
+Couceiro 2013 section 4.6.1): it turns the rotation and the distance into wheel pulses (eq. 4.21, 4.22),
+skips rotations below one encoder pulse, turns in place, then drives straight, counting pulses, and reports
+the pulses it executed (MOVE_STATUS).
+
 The PID tracks an integrated position set-point in encoder pulses (a velocity PID on 48-CPR encoders
 at 100 Hz would see less than one pulse per loop), with velocity feed-forward, a motor dead-band
 offset, anti-windup and a bounded tracking error.
@@ -37,6 +42,12 @@ PERIOD_RSSI_MS = 100
 RSSI_KEEPALIVE_MS = 1000
 STALL_MS = 1000
 SONAR_NO_ECHO_MARGIN_MM = 30  # about two ADC steps below full range
+PERIOD_MOVE_STATUS_MS = 100
+MOVE_TIMEOUT_FACTOR = 3.0  # a move not finished within 3x its nominal duration + 1 s is aborted (stall safety)
+MOVE_TIMEOUT_MARGIN_MS = 1000
+MOVE_ACCEL_PPS2 = 200.0  # the wheels' set-point ramps up and down at this rate (pulses/s^2, about 0.55 m/s^2)
+
+MOVE_IDLE, MOVE_ROTATING, MOVE_FORWARD, MOVE_DONE, MOVE_ABORTED = range(5)  # MOVE_STATUS.state
 
 
 @dataclass(frozen=True)
@@ -49,6 +60,7 @@ class LlcParams:
     loop_hz: float = 100.0
     max_wheel_rad_s: float = 16.6
     deadband_pwm: int = 25
+    motor_time_constant_s: float = 0.06  # the drive's response time, for the MOVE ramp's acceleration feed-forward
     battery_cells: int = 2
     sonar_min_mm: int = 150
     sonar_max_mm: int = 6000
@@ -57,6 +69,18 @@ class LlcParams:
     max_err_pulses: float = 6.0
     rssi_pwm_input: bool = False  # an XBee's RSSI PWM output is wired to PIN_RSSI (eSwarBot radio hack)
     xbee_sensitivity_dbm: float = -94.0  # the module's sensitivity, as eq. 3.9 uses it (Series 2; Series 1: -92)
+    rot_threshold_deg: float = 3.6  # theta_T: smaller rotations of a MOVE are skipped (one pulse, digest A12)
+
+
+def rotation_pulses(theta_rad: float, p: LlcParams) -> float:
+    """Pulses per wheel for an in-place rotation by ``theta_rad`` (thesis eq. 4.21, R_robot the half-track,
+    digest A26); signed like ``theta_rad``, unrounded."""
+    return p.encoder_cpr * theta_rad / (2 * math.pi) * p.half_track_m / p.wheel_radius_m
+
+
+def forward_pulses(h_m: float, p: LlcParams) -> float:
+    """Pulses per wheel for a straight run of ``h_m`` metres (thesis eq. 4.22), unrounded."""
+    return p.encoder_cpr * h_m / (2 * math.pi * p.wheel_radius_m)
 
 
 class WheelPid:
@@ -69,8 +93,12 @@ class WheelPid:
         self.integral = 0.0
         self.active = False
 
+    def reset(self) -> None:
+        """Forget the set-point: the next non-zero target starts from the wheel's count then."""
+        self.active = False
+        self.integral = 0.0
+
     def update(self, target_pps: float, count: int, dt: float) -> int:
-        p = self.p
         if target_pps == 0.0:
             self.active = False
             self.integral = 0.0
@@ -79,11 +107,25 @@ class WheelPid:
             self.active = True
             self.target_pos = float(count)
         self.target_pos += target_pps * dt
+        return self._servo(target_pps, count, dt)
+
+    def follow(self, target_pos: float, target_pps: float, count: int, dt: float, accel_pps2: float = 0.0) -> int:
+        """Track a set-point profile the caller computes (a MOVE's speed ramp): position ``target_pos`` (pulses)
+        moving at ``target_pps`` and accelerating at ``accel_pps2``, which the feed-forward leads by the motor's
+        time constant; at rest it holds the position."""
+        self.active = True
+        self.target_pos = target_pos
+        return self._servo(target_pps, count, dt, target_pps + self.p.motor_time_constant_s * accel_pps2)
+
+    def _servo(self, target_pps: float, count: int, dt: float, ff_pps: float | None = None) -> int:
+        p = self.p
+        ff = target_pps if ff_pps is None else ff_pps
         err = self.target_pos - count
         if abs(err) > p.max_err_pulses:  # do not lurch after a stall: drag the set-point along
             err = math.copysign(p.max_err_pulses, err)
             self.target_pos = count + err
-        u_pre = self.kff * target_pps + math.copysign(p.deadband_pwm, target_pps) + p.kp * err
+        push = ff or err  # the dead-band offset goes the way the wheel has to turn
+        u_pre = self.kff * ff + (math.copysign(p.deadband_pwm, push) if push else 0.0) + p.kp * err
         new_integral = self.integral + err * dt
         u = u_pre + p.ki * new_integral
         if -255 < u < 255 or (u >= 255 and err < 0) or (u <= -255 and err > 0):
@@ -129,8 +171,18 @@ class LowLevelController:
         self.led = (0, 0, 0)
         self.rssi_pulse_us = -1
         self.rssi_sent_ms = 0
+        self.move_seq = 0
+        self.move_state = MOVE_IDLE
+        self.move_dir = 1  # +1: counter-clockwise (left wheel back, right forward), -1: clockwise
+        self.move_pulses = (0, 0)  # the pulse targets (eq. 4.21, 4.22), rounded
+        self.move_pps = 0.0
+        self.move_start = (0, 0)  # encoder counts when the current phase began
+        self.move_start_us = 0  # micros() then
+        self.move_done = [0, 0]  # executed rotation and forward pulses
+        self.move_deadline_ms = 0
         now = b.millis()
-        self.next_ms = {"odom": now, "sonar": now, "light": now, "status": now, "battery": now, "rssi": now}
+        self.next_ms = {"odom": now, "sonar": now, "light": now, "status": now, "battery": now, "rssi": now,
+                        "move": now}
         self._set_motor(0, 0)
         self._set_motor(1, 0)
         self._sample_battery()
@@ -156,12 +208,16 @@ class LowLevelController:
                 self.fault_watchdog = True
             self.v_cmd = self.w_cmd = 0.0
         pps_per_mps = 1.0 / self.m_per_pulse
-        target = (
-            (self.v_cmd - self.w_cmd * self.p.half_track_m) * pps_per_mps,
-            (self.v_cmd + self.w_cmd * self.p.half_track_m) * pps_per_mps,
-        )
+        if self.move_state in (MOVE_ROTATING, MOVE_FORWARD):
+            pwms = self._move_step(counts, now, now_us, dt)
+        else:
+            target = (
+                (self.v_cmd - self.w_cmd * self.p.half_track_m) * pps_per_mps,
+                (self.v_cmd + self.w_cmd * self.p.half_track_m) * pps_per_mps,
+            )
+            pwms = tuple(self.pid[i].update(target[i], counts[i], dt) for i in (0, 1))
         for i in (0, 1):
-            pwm = self.pid[i].update(target[i], counts[i], dt)
+            pwm = pwms[i]
             self._set_motor(i, pwm)
             self._stall_check(i, pwm, counts[i] != prev[i], now)
 
@@ -176,13 +232,20 @@ class LowLevelController:
         if now >= self.next_ms["odom"]:
             self.next_ms["odom"] += PERIOD_ODOM_MS
             self._send("ENCODERS", left=counts[0], right=counts[1])
+            # a motion-capture receiver, when fitted, replaces the dead-reckoned pose in the report
+            x, y, theta = self.x, self.y, self.theta
+            if b.external_pose is not None:
+                x, y, yaw = b.external_pose
+                theta = math.atan2(math.sin(yaw), math.cos(yaw))
             self._send(
                 "ODOMETRY",
-                x_mm=_clamp16(round(self.x * 1000)),
-                y_mm=_clamp16(round(self.y * 1000)),
-                theta_mrad=round(self.theta * 1000),
+                x_mm=_clamp16(round(x * 1000)),
+                y_mm=_clamp16(round(y * 1000)),
+                theta_mrad=round(theta * 1000),
                 v_mm_s=_clamp16(round(self.v_est * 1000)),
             )
+        if self.move_state in (MOVE_ROTATING, MOVE_FORWARD) and now >= self.next_ms["move"]:
+            self._move_status(now)
         if now >= self.next_ms["light"]:
             self.next_ms["light"] += PERIOD_LIGHT_MS
             self.ldr_raw = b.analog_read(PIN_LDR)
@@ -218,6 +281,7 @@ class LowLevelController:
                 fault_battery_low=int(self.fault_battery_low),
                 fault_can_overflow=int(can.rx_overflows > self.overflows_reported),
                 fault_bad_frame=int(self.fault_bad_frame),
+                pose_ideal=int(b.external_pose is not None),
                 rx_bad_frames=min(255, self.rx_bad + can.rx_errors),
                 rx_overflows=min(255, can.rx_overflows),
                 uptime_s=min(65535, now // 1000),
@@ -242,6 +306,7 @@ class LowLevelController:
                 continue
             sig = msg.decode(frame.data, decode_choices=False, scaling=True)
             if msg.name == "DRIVE_CMD":
+                self._abort_move(now)
                 self.v_cmd = sig["v_mm_s"] / 1000.0
                 self.w_cmd = sig["w_mrad_s"] / 1000.0
                 self.last_cmd_ms = now
@@ -252,6 +317,90 @@ class LowLevelController:
                 self.x = sig["x_mm"] / 1000.0
                 self.y = sig["y_mm"] / 1000.0
                 self.theta = sig["theta_mrad"] / 1000.0
+            elif msg.name == "MOVE_CMD":
+                if sig["dist_mm"] < 0 or sig["speed_mm_s"] <= 0:  # forward only, and it must get somewhere
+                    self._bad_frame()
+                    continue
+                self._abort_move(now)
+                self._start_move(int(sig["seq"]), sig["rot_mrad"] / 1000.0, sig["dist_mm"] / 1000.0,
+                                 sig["speed_mm_s"] / 1000.0, now)
+
+    # -- rotate-then-go -------------------------------------------------------------------------------
+    def _start_move(self, seq: int, theta: float, h: float, speed: float, now: int) -> None:
+        p = self.p
+        if abs(theta) > math.pi + 1e-3:  # beyond +/- pi (and its rounding to mrad): the shorter way round
+            theta = math.atan2(math.sin(theta), math.cos(theta))
+        tau1 = round(rotation_pulses(abs(theta), p)) if abs(theta) >= math.radians(p.rot_threshold_deg) else 0
+        tau2 = round(forward_pulses(h, p))
+        speed = min(speed, p.max_wheel_rad_s * p.wheel_radius_m)  # the wheels' top speed
+        self.v_cmd = self.w_cmd = 0.0  # a move replaces any wheel-speed command
+        self.move_seq = seq
+        self.move_dir = 1 if theta >= 0 else -1
+        self.move_pulses = (tau1, tau2)
+        self.move_pps = speed / self.m_per_pulse
+        self.move_start = (self.board.encoder(0), self.board.encoder(1))
+        self.move_start_us = self.board.micros()
+        self.move_done = [0, 0]
+        nominal_s = _ramp_duration(tau1, self.move_pps) + _ramp_duration(tau2, self.move_pps)
+        self.move_deadline_ms = now + round(MOVE_TIMEOUT_FACTOR * nominal_s * 1000) + MOVE_TIMEOUT_MARGIN_MS
+        for pid in self.pid:
+            pid.reset()
+        self.move_state = MOVE_ROTATING if tau1 else MOVE_FORWARD if tau2 else MOVE_DONE
+        self._move_status(now)
+
+    def _abort_move(self, now: int) -> None:
+        if self.move_state in (MOVE_ROTATING, MOVE_FORWARD):
+            self._move_progress((self.board.encoder(0), self.board.encoder(1)))
+            self.move_state = MOVE_ABORTED
+            for pid in self.pid:
+                pid.reset()
+            self._move_status(now)
+
+    def _move_step(self, counts: tuple[int, int], now: int, now_us: int, dt: float) -> tuple[int, int]:
+        """One loop of the running move: the wheels' PWM. Both wheels follow the same set-point ramp (so the
+        robot turns in place, or runs straight); a wheel stops when it has counted its pulses, and the phase
+        ends when both have."""
+        if now >= self.move_deadline_ms:  # stall safety: the move is bounded
+            self._abort_move(now)
+            return (0, 0)
+        while True:
+            signs, left = self._move_progress(counts)
+            if left[0] > 0 or left[1] > 0:
+                break
+            rotating = self.move_state == MOVE_ROTATING
+            self.move_state = MOVE_FORWARD if rotating and self.move_pulses[1] else MOVE_DONE
+            self.move_start = counts
+            self.move_start_us = now_us
+            for pid in self.pid:
+                pid.reset()
+            self._move_status(now)
+            if self.move_state == MOVE_DONE:
+                return (0, 0)
+        goal = self.move_pulses[0 if self.move_state == MOVE_ROTATING else 1]
+        pos, pps, acc = _ramp(goal, self.move_pps, (now_us - self.move_start_us) * 1e-6)
+        pwm = [0, 0]
+        for i in (0, 1):
+            if left[i] > 0:
+                pwm[i] = self.pid[i].follow(self.move_start[i] + signs[i] * pos, signs[i] * pps, counts[i], dt,
+                                            signs[i] * acc)
+            else:
+                self.pid[i].reset()
+        return pwm[0], pwm[1]
+
+    def _move_progress(self, counts: tuple[int, int]) -> tuple[tuple[int, int], tuple[int, int]]:
+        """The current phase's wheel directions and pulses still to go per wheel; updates the executed pulses
+        (what the pose is recomputed from): rotation (right - left) / 2, distance (left + right) / 2."""
+        rotating = self.move_state == MOVE_ROTATING
+        signs = (-self.move_dir, self.move_dir) if rotating else (1, 1)
+        goal = self.move_pulses[0 if rotating else 1]
+        d = (counts[0] - self.move_start[0], counts[1] - self.move_start[1])
+        self.move_done[0 if rotating else 1] = _clamp16(int((d[1] - d[0] if rotating else d[0] + d[1]) / 2))
+        return signs, (goal - signs[0] * d[0], goal - signs[1] * d[1])
+
+    def _move_status(self, now: int) -> None:
+        self.next_ms["move"] = now + PERIOD_MOVE_STATUS_MS
+        self._send("MOVE_STATUS", seq=self.move_seq, state=self.move_state, rot_pulses=self.move_done[0],
+                   fwd_pulses=self.move_done[1])
 
     def _bad_frame(self) -> None:
         self.rx_bad += 1
@@ -292,6 +441,30 @@ class LowLevelController:
     def _send(self, name: str, **signals: float) -> None:
         msg = self.db.get_message_by_name(name)
         self.board.can.write(msg.frame_id, msg.encode(signals, scaling=True), self.board.micros())
+
+
+def _ramp_duration(goal: float, v: float, a: float = MOVE_ACCEL_PPS2) -> float:
+    """Seconds a trapezoidal ramp (top speed ``v``, acceleration ``a``) takes to cover ``goal`` pulses."""
+    if goal <= 0:
+        return 0.0
+    return goal / v + v / a if goal >= v * v / a else 2 * math.sqrt(goal / a)
+
+
+def _ramp(goal: float, v: float, t: float, a: float = MOVE_ACCEL_PPS2) -> tuple[float, float, float]:
+    """Position, speed and acceleration at ``t`` s of a trapezoidal ramp from 0 to ``goal`` pulses (a triangle
+    when too short to reach ``v``)."""
+    v = min(v, math.sqrt(goal * a))
+    ta = v / a
+    end = goal / v + ta
+    if t <= 0:
+        return 0.0, 0.0, 0.0
+    if t < ta:
+        return 0.5 * a * t * t, a * t, a
+    if t < end - ta:
+        return 0.5 * a * ta * ta + v * (t - ta), v, 0.0
+    if t < end:
+        return goal - 0.5 * a * (end - t) ** 2, a * (end - t), -a
+    return float(goal), 0.0, 0.0
 
 
 def _clamp16(v: int) -> int:

@@ -2,6 +2,10 @@
 
 ``poll()`` drains received frames without blocking and decodes them with the robot's DBC; commands are
 encoded with the same database. Frames with an unknown ID or a wrong length are counted and dropped.
+
+Two ways to move: ``drive(v, w)`` sets wheel speeds (repeat it, the LLC stops 0.5 s after the last), and
+``move(rot, dist, speed)`` hands the LLC a rotate-then-go displacement, which it executes on its own and
+reports in ``state.move_*``.
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ from dataclasses import dataclass, field
 import can
 
 from swarm_logic.interfaces import eswarbot_llc_db
+
+MOVE_STATES = ("idle", "rotating", "forward", "done", "aborted")  # MOVE_STATUS.state, by value
 
 
 @dataclass
@@ -35,6 +41,12 @@ class LlcState:
     faults: dict[str, bool] = field(default_factory=dict)
     rssi_dbm: float | None = None  # the XBee's last-packet RSSI read from its PWM pin; None when the output is off
     rssi_t: float | None = None
+    pose_ideal: bool = False  # the LLC reports an external (motion-capture) pose, not its dead reckoning
+    move_seq: int | None = None  # the MOVE that MOVE_STATUS last reported on
+    move_state: str = "idle"  # "idle", "rotating", "forward", "done" or "aborted"
+    move_rot_pulses: int = 0  # executed rotation, encoder pulses (positive counter-clockwise)
+    move_fwd_pulses: int = 0  # executed forward run, encoder pulses
+    move_t: float | None = None
 
 
 class LlcClient:
@@ -46,6 +58,7 @@ class LlcClient:
         self.rx_unknown = 0
         self.rx_bad_length = 0
         self._seq = 0
+        self._move_seq = 0
 
     def poll(self) -> int:
         """Decode every frame waiting on the bus; returns how many were accepted."""
@@ -94,6 +107,13 @@ class LlcClient:
             st.heartbeat = int(s["heartbeat"])
             st.status_t = ts
             st.faults = {k[6:]: bool(v) for k, v in s.items() if k.startswith("fault_")}
+            st.pose_ideal = bool(s["pose_ideal"])
+        elif name == "MOVE_STATUS":
+            state = int(s["state"])
+            st.move_seq = int(s["seq"])
+            st.move_state = MOVE_STATES[state] if state < len(MOVE_STATES) else f"unknown({state})"
+            st.move_rot_pulses, st.move_fwd_pulses = int(s["rot_pulses"]), int(s["fwd_pulses"])
+            st.move_t = ts
         self.rx_frames += 1
         return True
 
@@ -110,6 +130,24 @@ class LlcClient:
             w_mrad_s=max(-20000, min(20000, round(w * 1000))),
             seq=self._seq,
         )
+
+    def move(self, rot_rad: float, dist_m: float, speed_mps: float) -> int:
+        """Rotate in place by ``rot_rad`` (counter-clockwise positive; taken the shorter way round), then drive
+        ``dist_m`` (>= 0) straight, at wheel rim speed ``speed_mps`` (> 0; the LLC caps it at the wheels' top
+        speed). Aborts a running move. Returns the move's ``seq``, which ``state.move_seq`` echoes."""
+        if not (math.isfinite(rot_rad) and math.isfinite(dist_m) and math.isfinite(speed_mps)):
+            raise ValueError("move: arguments must be finite")
+        if dist_m < 0 or speed_mps <= 0:
+            raise ValueError("move: the distance must be >= 0 (turn by pi to go back) and the speed > 0")
+        self._move_seq = (self._move_seq + 1) & 0xFF
+        self._send(
+            "MOVE_CMD",
+            rot_mrad=max(-3142, min(3142, round(math.atan2(math.sin(rot_rad), math.cos(rot_rad)) * 1000))),
+            dist_mm=min(32767, round(dist_m * 1000)),
+            speed_mm_s=max(1, min(65535, round(speed_mps * 1000))),
+            seq=self._move_seq,
+        )
+        return self._move_seq
 
     def stop(self) -> None:
         self.drive(0.0, 0.0)

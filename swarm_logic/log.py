@@ -14,7 +14,7 @@ from typing import Any
 
 from swarm_logic.clock import Clock
 
-Sink = Callable[[str, dict[str, Any]], None]
+Sink = Callable[[str, dict[str, Any]], None]  # gets the values as the controller gave them: plain() them to store
 
 
 def plain(values: dict[str, Any]) -> dict[str, Any]:
@@ -43,7 +43,7 @@ class JsonlLog:
         self.clock = clock
 
     def __call__(self, topic: str, values: dict[str, Any]) -> None:
-        self._f.write(json.dumps({"t": round(self.clock.now(), 6), "topic": topic, **values}) + "\n")
+        self._f.write(json.dumps({"t": round(self.clock.now(), 6), "topic": topic, **plain(values)}) + "\n")
         self._f.flush()
 
     def close(self) -> None:

@@ -7,12 +7,14 @@ real robot, e.g. in a session::
      "xbee": {"port": "sitl://xbee", "baudrate": 9600}, "uwb": {"port": "sitl://uwb", "baudrate": 115200}}
 
 and on the robot ``{"llc_can": {"interface": "socketcan", "channel": "can0"}, "xbee": {"port": "/dev/ttyUSB0"},
-"log": {"path": "robot.jsonl"}}``. The XBee and UWB modules are optional: a robot without them has
-``xbee`` / ``uwb`` set to None.
+"log": {"path": "robot.jsonl"}, "start_pose": [1.2, 0.4, 0.0]}``. The XBee and UWB modules are optional: a robot
+without them has ``xbee`` / ``uwb`` set to None. ``start_pose`` (x, y, yaw in the arena frame) is where the robot
+was put down, as the operator or the deploying robot tells it; a session fills it in from the placement.
 """
 
 from __future__ import annotations
 
+import random
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -22,9 +24,10 @@ import serial
 
 from swarm_logic.clock import Clock
 from swarm_logic.llc_client import LlcClient
-from swarm_logic.log import JsonlLog, Sink, plain
+from swarm_logic.log import JsonlLog, Sink
 
 if TYPE_CHECKING:
+    from swarm_logic.hal import LowLevel, Radio
     from swarm_logic.uwb import Uwb
     from swarm_logic.xbee import XBee
 
@@ -33,14 +36,20 @@ if TYPE_CHECKING:
 class Robot:
     id: int
     clock: Clock
-    llc: LlcClient
+    llc: LowLevel
     rng: np.random.Generator
     params: dict[str, Any] = field(default_factory=dict)
     buses: list[can.BusABC] = field(default_factory=list)
-    xbee: XBee | None = None
+    xbee: XBee | Radio | None = None
     uwb: Uwb | None = None
     ports: list[serial.SerialBase] = field(default_factory=list)
     log_sink: Sink | None = None
+    start_pose: tuple[float, float, float] | None = None
+    rng_py: random.Random = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # the same stream for scalar draws in hot loops (random.Random is ~10x faster per number than numpy)
+        self.rng_py = random.Random(int(self.rng.integers(1 << 62)))
 
     @classmethod
     def open(cls, robot_id: int, hal: dict[str, Any], clock: Clock, seed: int,
@@ -51,6 +60,11 @@ class Robot:
         bus = can.Bus(**llc_cfg)
         rng = np.random.Generator(np.random.PCG64(seed))
         robot = cls(robot_id, clock, LlcClient(bus), rng, dict(params or {}), [bus])
+        if hal.get("start_pose") is not None:
+            pose = tuple(float(v) for v in hal["start_pose"])
+            if len(pose) != 3:
+                raise ValueError(f"HAL config start_pose: [x, y, yaw] expected, got {hal['start_pose']!r}")
+            robot.start_pose = pose  # type: ignore[assignment]
         try:
             if hal.get("xbee"):
                 from swarm_logic.xbee import XBee
@@ -78,7 +92,7 @@ class Robot:
     def log(self, topic: str, **values: Any) -> None:
         """Record ``values`` under ``topic`` (a recording topic in SITL, a JSONL line on a robot)."""
         if self.log_sink is not None:
-            self.log_sink(topic, plain(values))
+            self.log_sink(topic, values)
 
     def poll(self) -> None:
         """Drain every device's receive queue (non-blocking)."""

@@ -3,9 +3,11 @@ to the emulated LLC board, with no part of the session (hub, zenoh, SITL bus) in
 
 from __future__ import annotations
 
+import math
 import uuid
 
 import can
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -84,6 +86,59 @@ def test_random_frames_never_crash_the_client(frames: list[tuple[int, bytes]]) -
             llc.bus.send(can.Message(arbitration_id=arb, data=data, is_extended_id=False))
         client.poll()
         assert client.rx_frames + client.rx_unknown + client.rx_bad_length == len(frames)
+    finally:
+        bus.shutdown()
+        llc.bus.shutdown()
+
+
+def test_client_moves_and_decodes_move_status() -> None:
+    client, llc, bus = pair()
+    try:
+        seq = client.move(math.pi / 2, 0.0, 0.1)
+        llc.loop_ms(100)
+        client.poll()
+        st_ = client.state
+        assert (st_.move_seq, st_.move_state, st_.move_rot_pulses) == (seq, "rotating", 0) and st_.move_t is not None
+        llc.board.encoder_counts = [-25, 25]  # the wheels turned (no plant here): 25 pulses each
+        llc.loop_ms(40)
+        client.poll()
+        assert (st_.move_seq, st_.move_state, st_.move_rot_pulses, st_.move_fwd_pulses) == (seq, "done", 25, 0)
+        seq2 = client.move(-0.5, 0.2, 5.0)  # 5 m/s: the LLC caps it at the wheels' top speed
+        assert seq2 == (seq + 1) & 0xFF
+        llc.loop_ms(40)
+        client.drive(0.0, 0.0)  # a DRIVE_CMD aborts it
+        llc.loop_ms(40)
+        client.poll()
+        assert (st_.move_seq, st_.move_state) == (seq2, "aborted")
+        assert llc.llc.move_pps * llc.llc.m_per_pulse == pytest.approx(16.6 * 0.02109)
+        assert not st_.pose_ideal and st_.faults and "pose_ideal" not in st_.faults
+    finally:
+        bus.shutdown()
+        llc.bus.shutdown()
+
+
+def test_client_refuses_moves_the_llc_would_refuse() -> None:
+    client, llc, bus = pair()
+    try:
+        for args in ((0.0, -0.1, 0.1), (0.0, 0.1, 0.0), (math.nan, 0.1, 0.1)):
+            with pytest.raises(ValueError):
+                client.move(*args)
+        client.move(3 * math.pi / 2, 0.1, 0.1)  # 270 deg counter-clockwise is 90 deg clockwise
+        llc.loop_ms(20)
+        assert llc.llc.move_dir == -1 and llc.llc.move_pulses == (25, 36) and llc.llc.rx_bad == 0
+    finally:
+        bus.shutdown()
+        llc.bus.shutdown()
+
+
+def test_client_sees_the_ideal_pose_flag() -> None:
+    client, llc, bus = pair()
+    try:
+        llc.board.external_pose = (1.2, 3.4, -0.5)
+        llc.loop_ms(200)
+        client.poll()
+        st_ = client.state
+        assert st_.pose_ideal and (st_.x, st_.y, st_.theta) == (1.2, 3.4, -0.5)
     finally:
         bus.shutdown()
         llc.bus.shutdown()

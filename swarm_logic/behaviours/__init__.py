@@ -8,9 +8,10 @@ from swarm_logic.behaviours.radio_survey import RadioSurvey
 from swarm_logic.behaviours.random_walk import RandomWalk
 from swarm_logic.behaviours.rssi_keeper import RssiKeeper
 from swarm_logic.controller import Controller
+from swarm_logic.rdpso.controller import Rdpso
 
 BEHAVIOURS: dict[str, type[Controller]] = {"random_walk": RandomWalk, "radio_survey": RadioSurvey,
-                                           "rssi_keeper": RssiKeeper}
+                                           "rssi_keeper": RssiKeeper, "rdpso": Rdpso}
 
 
 def load_behaviour(name: str) -> type[Controller]:
