@@ -30,9 +30,11 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/swarm-sitl bench
+	$(BIN)/swarm-sitl bench --rdpso
 
 bench-smoke: $(STAMP)
 	$(BIN)/swarm-sitl bench --quick
+	$(BIN)/swarm-sitl bench --rdpso --quick
 
 survey: $(STAMP)
 	$(BIN)/swarm-sitl radio-survey hil_configs/demo.toml --out runs/radio-survey

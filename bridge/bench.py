@@ -1,4 +1,6 @@
-"""``swarm-sitl bench``: the demo behaviour at several robot counts and process packings.
+"""``swarm-sitl bench``: the demo behaviour at several robot counts and process packings; with ``--rdpso``, the
+RDPSO figures: one E9 cell in the numerical runner (100 robots, 500 iterations, one core) and the
+co-simulation's real-time factor with the 12-robot arena.
 
 Prints, per case: robots, processes, real-time factor, per-tick barrier latency (median and p99: from
 sending a quantum's ticks to the last answer, physics overlapped), CPU per robot (all processes,
@@ -31,6 +33,47 @@ DEMO = ROOT / "hil_configs" / "demo.toml"
 FULL = [(1, 1), (10, 1), (10, 5), (25, 5), (50, 10), (50, 25), (100, 25)]
 QUICK = [(10, 1)]
 TARGETS = {(10, 1): 5.0, (50, 10): 1.0, (50, 25): 1.0}
+
+
+def numerical_cell(iterations: int = 500, n: int = 100, seed: int = 1) -> tuple[float, float, float]:
+    """One E9 cell (peaks, S1, 300 x 300 m with obstacles) in the numerical runner, in this process: wall and CPU
+    seconds, and the final best solution."""
+    from bridge.experiment import Trial
+    from bridge.rdpso_experiments import E9Static
+
+    exp = E9Static()
+    trial = Trial(exp.name, {"fn": "peaks", "n": n, "set": "S1"}, 0, seed, smoke=False, workdir=".")
+    w0, c0 = time.perf_counter(), time.process_time()
+    if iterations == 500:
+        res = exp.run(trial)
+    else:
+        from bridge.rdpso_experiments import SETS, numeric_trial
+
+        params = {**SETS["S1"], "dx_max_m": 0.5, "d_max_m": 30.0, "subgroups_init": 5, "subgroups_max": 8,
+                  "r_w_m": 5.0}
+        res = numeric_trial(trial, "peaks", 300.0, n, iterations, params, 30.0)
+    return time.perf_counter() - w0, time.process_time() - c0, float(res.metrics["final"])
+
+
+def run_rdpso_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
+    """The RDPSO figures of the issue: numerical E9 cell wall time (< 10 s target) and the arena's RTF."""
+    iterations = 100 if quick else 500
+    walls = []
+    for seed in (1,) if quick else (1, 2, 3):
+        wall, cpu, final = numerical_cell(iterations, seed=seed)
+        walls.append(wall)
+        print(f"numerical runner, E9 cell (peaks, S1, 100 robots, {iterations} iterations), seed {seed}: "
+              f"{wall:.2f} s wall, {cpu:.2f} s CPU, final best {final:.4f}", file=sys.stderr)
+    dur = duration or (20.0 if quick else 60.0)
+    res = run_session(str(ROOT / "hil_configs" / "rdpso_arena.toml"), {"session.duration_s": dur},
+                      str(Path(out_dir) / "rdpso_arena"), progress=None, plot=False)
+    s = res.summary
+    print(f"\nswarm-sitl bench --rdpso ({os.cpu_count()} cores)")
+    print(f"  numerical E9 cell, {iterations} iterations: median {sorted(walls)[len(walls) // 2]:.2f} s wall "
+          f"(target for 500 iterations: < 10 s)")
+    print(f"  co-simulation, rdpso_arena.toml, 12 robots, {dur:g} s: rtf {s['rtf']}x, {s['processes']} processes, "
+          f"start-up {s['startup_s']} s (exit {res.code})")
+    return res.code
 
 
 def run_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench",

@@ -54,9 +54,8 @@ def cmd_run(a: argparse.Namespace) -> int:
 
 
 def cmd_validate(a: argparse.Namespace) -> int:
-    from bridge.plan import make_plan
-
     from bridge.config import config_warnings
+    from bridge.plan import make_plan
 
     cfg = load_config(a.config, _overrides(a))
     plan = make_plan(cfg, a.config)
@@ -88,7 +87,10 @@ def cmd_plot(a: argparse.Namespace) -> int:
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
-    from bridge.bench import run_bench
+    from bridge.bench import run_bench, run_rdpso_bench
+
+    if a.rdpso:
+        return run_rdpso_bench(quick=a.quick, duration=a.duration, out_dir=a.out)
 
     return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
                      config=a.config)
@@ -182,6 +184,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
     p.add_argument("--config", help="session config to benchmark (default: the demo)")
+    p.add_argument("--rdpso", action="store_true", help="the RDPSO figures: a numerical E9 cell's wall time and "
+                                                         "the 12-robot arena's real-time factor")
     p.set_defaults(fn=cmd_bench)
 
     p = sub.add_parser("radio-survey", help="the thesis' RSSI-vs-distance survey (Fig. 3.7) in a config's arena")

@@ -325,6 +325,9 @@ def _check_behaviours(path: str, cfg: Config) -> None:
             if isinstance(d, int | float) and not isinstance(d, bool) and (
                     isinstance(v, bool) or not isinstance(v, int | float)):
                 raise ConfigError(f"{path}: robots[{i}].params.{k}: expected a number, got {v!r}")
+        if getattr(cls, "needs_radio", False) and g.xbee is None:
+            raise ConfigError(f"{path}: robots[{i}].xbee: {g.behaviour} talks over the radio: give the group an "
+                              "XBee, e.g. xbee = { series = 2, baud = 115200 }")
         resolve = getattr(cls, "resolve", None)  # a controller that checks the meaning of its parameters
         if resolve is not None:
             try:

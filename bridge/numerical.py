@@ -348,7 +348,7 @@ def _apply_moves(world: NumericalWorld) -> None:
     if len(world.obstacles):
         hit = segment_hits(x0, y0, x1, y1, world.obstacles)
         world.collisions += int(hit.sum())
-        x1 = np.where(hit, x0, x1)  # a point robot that would run into an obstacle stops before it
+        x1 = np.where(hit, x0, x1)  # a point robot that would run into an obstacle does not move (a collision)
         y1 = np.where(hit, y0, y1)
     world.pos[idx, 0], world.pos[idx, 1] = x1, y1
     world.theta[idx] = th

@@ -480,7 +480,8 @@ class E2Arena(Experiment):
         "spots (the brighter reads about 830 counts on the 10-bit LDR, the dimmer about 715), no fixed obstacles, "
         "robots placed in two spirals (one per initial subgroup, Table 4.6: 0/2/3), dx_max 0.1 m, d_max 0.5 m "
         "enforced logically from shared positions (the thesis emulated the MANET range this way in the small "
-        "arena), alpha 0.5, rho 0.2/0.4/0.8/0.8, SC_max 30, 1 s iterations, 180 s trials. Converged (A30): the "
+        "arena), alpha 0.5, rho 0.2/0.4/0.8/0.8, SC_max 30, 1.5 s iterations (a move of up to 0.1 m fits after "
+        "the hellos), 180 s trials. Converged (A30): the "
         "swarm's best reading within 5 % of the brighter spot's peak; also reported: the first time a robot is "
         "within 0.25 m of it. Improvement rate (R2): iterations in which a robot improved its personal best, over "
         "all robot-iterations.")
@@ -599,3 +600,62 @@ def score_arena(out: Path, cfg: Path, n: int, duration: float) -> TrialResult:
         "robots": n,
     }
     return TrialResult(metrics, {"best_light": curve.tolist()}, {"best_light": list(range(len(curve)))})
+
+
+# -- N1: the XBee radio's figures in the pavilion (co-simulation) -----------------------------------------------
+
+@register
+class N1Radio(Experiment):
+    name = "n1-radio"
+    title = "N1: XBee Series 2 RSSI and delivery vs distance in the 10 x 20 m pavilion (co-simulation)"
+    description = (
+        "Thesis section 3.2.3 (digest target N1): two robots wander among the pavilion's obstacles "
+        "(hil_configs/demo.toml's arena) and one sends a message every 2 s through its emulated XBee Series 2 "
+        "module over the radio medium (log-distance path loss, walls by ray casts, correlated shadowing, Rician "
+        "fading, 802.15.4 PER, CSMA-CA); the receiver's RSSI is read from the module. One trial is one survey "
+        "session (`swarm-sitl radio-survey`) with its own seed; 3600 s simulated (300 s in the smoke run).")
+    trials = 5
+    smoke_trials = 1
+    x_label = "trial"
+    boxes = (("median_rssi_2_4m_dbm", "median RSSI 2-4 m [dBm]"), ("pdr_beyond_10m", "delivery beyond 10 m"))
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"arena": "pavilion"}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        from bridge.radio_survey import run_survey
+
+        cal = run_survey(str(CONFIGS / "demo.toml"), str(Path(trial.workdir) / "survey"),
+                         duration_s=300.0 if trial.smoke else 3600.0, seed=trial.seed % (1 << 31))
+        return TrialResult({
+            "messages": cal["messages"], "delivered": cal["delivered"],
+            "median_rssi_2_4m_dbm": cal["median_rssi_2_4m_dbm"]["ours"],
+            "crossing_m": cal["median_crosses_q_min_at_m"]["ours"],
+            "pdr_beyond_10m": cal["delivery_beyond_10m"]["ours"],
+            "weakest_dbm": cal["weakest_received_dbm"]["ours"],
+            "furthest_m": cal["furthest_delivery_m"]["ours"],
+        })
+
+    def targets(self) -> list[Target]:
+        return [
+            Target("N1a", "median RSSI -75 dBm crossing distance", "about 3 m (2-4 m)", "median over trials in "
+                   "[2, 4] m", lambda o: _median_in(o, "crossing_m", 2.0, 4.0, "{:.2f} m")),
+            Target("N1b", "delivery ratio beyond 10 m", "about 2/3", "median over trials in [0.55, 0.8]",
+                   lambda o: _median_in(o, "pdr_beyond_10m", 0.55, 0.8, "{:.3f}")),
+            Target("N1c", "weakest packet received", "no reception below -94 dBm", ">= -94 dBm in every trial",
+                   self._floor),
+        ]
+
+    def _floor(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
+        v = values(ok(outcomes), "weakest_dbm")
+        if not len(v):
+            return "no trials", None, ""
+        return f"{v.min():.0f} dBm", bool(v.min() >= -94.0), "minimum over trials"
+
+
+def _median_in(outcomes: list[Outcome], metric: str, lo: float, hi: float, fmt: str) -> tuple[str, bool | None, str]:
+    rs = ok(outcomes)
+    m = median(rs, metric)
+    if math.isnan(m):
+        return "no trials", None, ""
+    return fmt.format(m) + f" (IQR {iqr(rs, metric):.3g}, {len(rs)} trials)", lo <= m <= hi, ""

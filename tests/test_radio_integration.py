@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import serial
 
-from bridge.config import Config, ConfigError, load_config
+from bridge.config import Config, ConfigError, load_config, to_toml
 from bridge.hub import Hub
 from bridge.plan import entity, make_plan, xbee_serial64
-from bridge.radio_survey import _toml, calibration, survey_config
+from bridge.radio_survey import calibration, survey_config
 from bridge.uart import SerialLine
 from firmware_sim.arduino import Board
 from firmware_sim.llc import PIN_RSSI, RSSI_PWM_HZ, LlcParams, LowLevelController
@@ -211,7 +211,7 @@ def test_uwb_log_is_scored_against_ground_truth(radio_hub: Hub) -> None:
 
 def test_survey_config_keeps_the_arena_and_swaps_the_robots(tmp_path: Path) -> None:
     raw = survey_config(Path(__file__).parent.parent / "hil_configs" / "demo.toml", 100.0, 2.0, 4, None)
-    text = _toml(raw)
+    text = to_toml(raw)
     back = tomllib.loads(text)
     assert back == raw
     cfg = Config.model_validate(back)

@@ -214,10 +214,26 @@ def test_excluded_robots_are_recruited_or_found_subgroups() -> None:
     events = Counter(e.split()[0] for r in res.logs if r["topic"] == "rdpso" for e in r["events"])
     assert events["punished"] + events["dismantled"] > 0
     assert events["joined"] > 0  # CALL/SPAWN answered, or a founder's subgroup joined
-    joined = [(r["k"], r["sid"]) for r in res.logs if r["topic"] == "rdpso" and any(
+    joined = [r["sid"] for r in res.logs if r["topic"] == "rdpso" and any(
         e.startswith("joined") for e in r["events"])]
-    for k, sid in joined:
-        assert sid != 0
+    assert joined and 0 not in joined
+
+
+@pytest.mark.parametrize("seed", [8, 9, 10])
+def test_a_call_recruits_one_robot_and_a_founder_at_most_n_i_minus_one(seed: int) -> None:
+    """Everyone hears everyone here (one excluded cluster): candidates rank themselves against the candidates
+    they hear, so a CALL takes the best one and a founder's subgroup the best N_I - 1 (section 4.5.2)."""
+    res = arena_run(n=12, iterations=150, seed=seed, sc_max=8)
+    joins: dict[tuple[int, int, str], int] = Counter()
+    for r in res.logs:
+        if r["topic"] == "rdpso":
+            how = [e for e in r["events"] if e.startswith("by ")]
+            if how:
+                joins[(r["k"], r["sid"], how[0])] += 1
+    assert joins
+    n_init = 12 // 2
+    for (_, _, how), count in joins.items():
+        assert count <= {"by call": 1, "by founder": n_init - 1, "by spawn": n_init}[how], joins
 
 
 def test_the_controller_cannot_tell_the_runners_apart() -> None:

@@ -26,6 +26,7 @@ COUNT_COLOURS = ((255, 0, 0), (255, 96, 0), (255, 200, 0), (0, 255, 0), (0, 64, 
 
 
 class RssiKeeper(RandomWalk):
+    needs_radio = True
     defaults: ClassVar[dict[str, float]] = {
         **RandomWalk.defaults,
         "hello_s": 1.0,

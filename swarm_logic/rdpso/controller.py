@@ -80,6 +80,8 @@ _HALF = struct.Struct("<e")
 class Rdpso(Controller):
     """One robot of the RDPSO swarm. Parameters (``defaults``) follow the digest's master table (4.1)."""
 
+    needs_radio = True  # a config must give its robots an XBee
+
     defaults: ClassVar[dict[str, Any]] = {
         "iteration_s": 1.0,  # RDPSO iteration period (A13)
         "comm_window_s": 0.25,  # phase A -> phase B: time for the hellos of an iteration to arrive
@@ -98,7 +100,6 @@ class Rdpso(Controller):
         "link_mode": "distance",  # distance (d_max) | rssi (q_min)
         "d_max_m": 0.5,
         "q_min_dbm": -75.0,
-        "sensitivity_dbm": -94.0,  # the link value of a pair that cannot hear each other (A10)
         "k_q": 1.0,  # m per dB in the q_min problem (A8)
         "k_conn": 1,  # k-connectivity: neighbours chosen for chi_4
         "n_total": 12,  # N_T, known to every robot
@@ -153,8 +154,13 @@ class Rdpso(Controller):
         if g_init > p["n_total"]:
             raise ValueError(f"subgroups_init: {g_init} subgroups for {p['n_total']} robots (more subgroups than "
                              "robots)")
-        if g_max > 15 and g_init > 15:
-            raise ValueError("subgroups_init: at most 15 initial subgroups")
+        if g_init > 15:
+            raise ValueError(f"subgroups_init: at most 15 initial subgroups, got {g_init}")
+        for name, lo in (("payload_max", 42), ("min_move_m", 0), ("n_init", 0), ("n_min", 0), ("n_max", 0),
+                         ("log_every", 0)):
+            if not p[name] >= lo:
+                raise ValueError(f"{name}: must be >= {lo}, got {p[name]!r}")
+        motion.memory_weights(p["alpha"], p["fractional_form"], int(p["truncation_r"]))  # form and r must fit
         n_i = p["n_init"] or (p["n_total"] // g_init if g_init else max(2, p["n_total"] // max(1, g_max)))
         p["n_init"] = n_i
         p["n_min"] = p["n_min"] or max(2, n_i // 2)
@@ -434,9 +440,12 @@ class Rdpso(Controller):
                         self._leave()
                     else:
                         self.events.append("punish")
-                else:
+                elif self._subgroups_known() > p["subgroups_min"]:
                     self.events.append("dismantled")
                     self._leave()
+                else:  # dismantling would leave fewer subgroups than N_s^min (as far as this robot knows)
+                    self.sc = int(p["sc_max"] * (1 - 1 / (self.n_kill + 1)))
+                    self.events.append("spared")
 
     def _subgroups_known(self) -> int:
         return len({h.sid for h in self.heard.values() if h.sid} | ({self.sid} if self.sid else set()))
@@ -469,7 +478,7 @@ class Rdpso(Controller):
         n_x = 1 + len(self._group())
         self.worst = rid
         # a candidacy placed last iteration is decided now, among the candidates for the same offer
-        if self.candidate is not None and self.candidate[2] == self.k - 1:
+        if self.candidate is not None and self.candidate[2] == self.k:  # candidates flagged in this iteration's hellos
             target, kind, _, offer = self.candidate
             rivals = [(-self.hbest, rid)] + [(-h.hbest, h.robot) for h in self.heard.values()
                                               if h.sid == 0 and h.flags & F_CANDIDATE and h.target == target]
@@ -484,6 +493,7 @@ class Rdpso(Controller):
             self.candidate = None
             if len(rivals) >= needed and rank < slots:
                 self._join(target, offer, spawn=not kind & F_CALL)
+                self.events.append("by call" if kind & F_CALL else "by founder" if kind & F_FOUNDER else "by spawn")
                 return
         # offers heard this iteration: a CALL (to the caller's subgroup), a SPAWN from an active subgroup, or a
         # founder's SPAWN; a CALL is preferred, then the offer of the best ledger

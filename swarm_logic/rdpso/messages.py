@@ -6,7 +6,7 @@ iteration whatever happens:
 
 - who and where: robot id, subgroup id (0 = socially excluded), iteration number, position, personal best;
 - the subgroup's ledger as the sender holds it (best value and where it was sensed, stagnancy counter SC_s,
-  punish counter N_kill, the member whose ledger it copied), so subgroup state spreads one hop per iteration;
+  punish counter N_kill), so subgroup state spreads one hop per iteration;
 - the neighbours the sender chose for its connectivity term last iteration (Algorithm 5.2's send_choice);
 - flags: improved (the thesis' header bit 1), CALL, SPAWN, founder of a new subgroup, candidate for a call;
 - the members the sender knows of its subgroup (or excluded cluster): id, the iteration of that member's
@@ -15,7 +15,7 @@ iteration whatever happens:
 
 Layout (little-endian): ``<BBHHffffffBBBHB`` header (36 bytes), ``k`` chosen ids (1 byte each), then per member
 ``<BBBe`` (id, iteration mod 256, relays, personal best as a half float). A ZigBee broadcast carries at most 92
-bytes: 36 + k + 5 m, so 11 members with k = 1; when more are known the freshest are sent (``encode``'s
+bytes: 36 + k + 5 m, so 11 members with k = 1; when more are known, those over the fewest relays are sent (``encode``'s
 ``limit``; the numerical runner, with no radio payload limit, raises it). Robot ids must be below 256.
 """
 
