@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.sparse.csgraph import connected_components
 
-from bridge.objectives import Field, obstacle_distance, segment_hits
+from bridge.objectives import Field, obstacle_distance, segment_entry
 from swarm_logic.behaviours import load_behaviour
 from swarm_logic.controller import Controller
 from swarm_logic.llc_client import LlcState
@@ -346,10 +346,13 @@ def _apply_moves(world: NumericalWorld) -> None:
     x1 = np.clip(x0 + dist * np.cos(th), 0.0, w)
     y1 = np.clip(y0 + dist * np.sin(th), 0.0, h)
     if len(world.obstacles):
-        hit = segment_hits(x0, y0, x1, y1, world.obstacles)
+        t = segment_entry(x0, y0, x1, y1, world.obstacles)
+        hit = np.isfinite(t)
         world.collisions += int(hit.sum())
-        x1 = np.where(hit, x0, x1)  # a point robot that would run into an obstacle does not move (a collision)
-        y1 = np.where(hit, y0, y1)
+        # a point robot that runs into an obstacle stops just short of it (a collision)
+        length = np.maximum(np.hypot(x1 - x0, y1 - y0), 1e-12)
+        f = np.where(hit, np.maximum(0.0, t - 1e-3 / length), 1.0)
+        x1, y1 = x0 + f * (x1 - x0), y0 + f * (y1 - y0)
     world.pos[idx, 0], world.pos[idx, 1] = x1, y1
     world.theta[idx] = th
 

@@ -250,3 +250,23 @@ def test_the_controller_cannot_tell_the_runners_apart() -> None:
             and n.value.attr in ("llc", "xbee")}
     assert used <= {"state", "move", "set_led", "stop", "set_odometry", "send_nowait", "recv"}
     assert math.isfinite(arena_run(n=4, iterations=10).best[-1])
+
+
+def test_rssi_link_mode_spaces_the_robots_by_q_min() -> None:
+    """The q_min problem (eq. 5.12 with RSSI): a weaker threshold lets neighbours drift further apart."""
+    size = (20.0, 20.0)
+    spot = LightField([(10.0, 10.0, 1.0, 8.0)], size)
+    link = numerical.LinkModel(mode="rssi")  # log-distance, -75 dBm at about 3.2 m
+    spacing = {}
+    for q_min in (-65.0, -75.0):
+        p = {**SETS["ch4"], "link_mode": "rssi", "q_min_dbm": q_min, "dx_max_m": 0.2,
+             "subgroups_init": 1, "subgroups_max": 1, "sc_max": 10000, "n_min": 1, "send_jitter_s": 0.0}
+        start = np.array([[9.0, 9.0], [9.5, 9.0], [9.0, 9.5], [9.5, 9.5]])
+        res = numerical.run(Rdpso, p, 4, 150, spot, size, link=link, seed=2, start=start)
+        d = np.hypot(*(res.final_positions[:, None, :] - res.final_positions[None, :, :]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        spacing[q_min] = float(np.median(d.min(axis=1)))
+    for q_min, d in spacing.items():  # the distance at which the link model gives q_min
+        target = 10 ** ((link.tx_dbm - link.pl0_db - q_min) / (10 * link.exponent))
+        assert 0.7 * target < d < 1.1 * target, (q_min, d, target)  # the bests pull the robots a little closer
+    assert spacing[-75.0] > spacing[-65.0] * 1.3, spacing
