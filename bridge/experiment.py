@@ -181,8 +181,12 @@ def _instance(ref: _Ref) -> Experiment:
 
 
 def _worker_init() -> None:
-    # the parent owns Ctrl-C: it cancels what is pending and terminates the workers
+    # the parent owns Ctrl-C: it cancels what is pending and terminates the workers; and should the parent die
+    # without that (SIGKILL), the kernel stops the worker, whose session then stops its own processes
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from bridge.participant import die_with_parent
+
+    die_with_parent(signal.SIGTERM)
 
 
 def _error_text(e: BaseException, frames: int = 3, skip: int = 0) -> str:
@@ -282,8 +286,9 @@ class _Progress:
 
 
 def _start_method() -> str:
-    # pybullet and zenoh do not survive fork()
-    return "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    # pybullet and zenoh do not survive fork(); spawn (not forkserver) makes the workers children of this process,
+    # so they can be told to die with it
+    return "spawn"
 
 
 @contextlib.contextmanager
@@ -315,6 +320,10 @@ def _abort(pool: ProcessPoolExecutor, grace_s: float = 5.0) -> None:
                 p.kill()
                 p.join()
         pool.shutdown(wait=True)
+
+
+def _terminate_as_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
 
 
 def _from_future(f: Future) -> _Done:
@@ -580,10 +589,15 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     ref = _ref(cls)
     _INSTANCES.setdefault(ref, exp)
     bar = _Progress(name, len(plan), progress)
+    old_term = None
+    if threading.current_thread() is threading.main_thread():  # SIGTERM ends a run as Ctrl-C does: no orphans
+        old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
     try:
         done, interrupted = _execute(ref, plan, jobs, bar)
     finally:
         bar.close()
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
             d.rmdir()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import tomllib
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -556,19 +557,27 @@ class E2Arena(Experiment):
     THESIS_T: ClassVar[dict[int, float]] = {4: 77.0, 8: 106.0, 12: 112.0}
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
-        return [{"n": 4}] if smoke else [{"n": n} for n in self.SIZES]
+        if smoke:
+            return [{"n": 4, "crashes": 0}]
+        return [{"n": n, "crashes": 0} for n in self.SIZES] + [{"n": 12, "crashes": 2}]
 
     def run(self, trial: Trial) -> TrialResult:
         from bridge.launcher import run_session
 
         n = trial.cell["n"]
         duration = 40.0 if trial.smoke else 180.0
-        cfg = arena_variant(Path(trial.workdir) / "arena.toml", n, trial.seed, duration)
+        rng = np.random.default_rng(trial.seed)
+        crashed = sorted(int(r) for r in rng.choice(n, size=trial.cell["crashes"], replace=False))
+        cfg = arena_variant(Path(trial.workdir) / "arena.toml", n, trial.seed, duration,
+                            faults=[{"robot": r, "at_s": CRASH_AT_S} for r in crashed])
         out = Path(trial.workdir) / "session"
         res = run_session(str(cfg), None, str(out), progress=None, plot=False)
         if res.code != 0:
             raise RuntimeError(f"session failed ({res.code}): {res.summary.get('error')}")
-        return score_arena(out, cfg, n, duration)
+        res = score_arena(out, cfg, n, duration)
+        res.metrics |= crash_figures(out, crashed, float(tomllib.loads(cfg.read_text())["robots"][0]["params"][
+            "iteration_s"])) if crashed else {}
+        return res
 
     def targets(self) -> list[Target]:
         return [
@@ -578,12 +587,25 @@ class E2Arena(Experiment):
                    "N_T", self._times),
             Target("R2", "personal-best improvements per robot-iteration", "about 15 % with 12 robots, slightly "
                    "lower with 4 and 8", "10-20 % with 12 robots", self._improve),
+            Target("F1", f"two of 12 robots' firmware crashes at {CRASH_AT_S:g} s (battery deaths in the thesis)",
+                   "the subgroup notices by missing hellos (3-hello link break) and carries on", "every mate "
+                   "notices within 3 iterations; the trials are scored (success rate reported)", self._crashes),
         ]
+
+    def _crashes(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
+        rs = ok(outcomes, n=12, crashes=2)
+        if not rs:
+            return "no trials", None, ""
+        worst = values(rs, "notice_max_iterations")
+        rate = float(np.mean(values(rs, "converged")))
+        ours = (f"slowest mate noticed after {worst.max():.0f} iterations (median {np.median(worst):.0f}); "
+                f"converged in {rate:.0%} of {len(rs)} trials")
+        return ours, bool(worst.max() <= 3), "counted from the first hello the crashed robots missed"
 
     def _success(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
         parts, good = [], True
         for n in self.SIZES:
-            rs = ok(outcomes, n=n)
+            rs = ok(outcomes, n=n, crashes=0)
             if rs:
                 rate = float(np.mean(values(rs, "converged")))
                 good &= rate >= 0.8
@@ -593,7 +615,7 @@ class E2Arena(Experiment):
     def _times(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
         parts, good, means = [], True, []
         for n in self.SIZES:
-            rs = [r for r in ok(outcomes, n=n) if r.metrics.get("converged")]
+            rs = [r for r in ok(outcomes, n=n, crashes=0) if r.metrics.get("converged")]
             if rs:
                 m = float(np.mean(values(rs, "t_converge")))
                 means.append(m)
@@ -605,26 +627,56 @@ class E2Arena(Experiment):
             "mean over converged trials"
 
     def _improve(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
-        parts = {n: median(ok(outcomes, n=n), "improvement_rate") for n in self.SIZES if ok(outcomes, n=n)}
+        parts = {n: median(ok(outcomes, n=n, crashes=0), "improvement_rate") for n in self.SIZES
+                 if ok(outcomes, n=n, crashes=0)}
         if not parts:
             return "no trials", None, ""
         ours = "; ".join(f"{n}: {v:.1%}" for n, v in parts.items())
         return ours, (0.10 <= parts[12] <= 0.20) if 12 in parts else None, "median over trials"
 
 
-def arena_variant(path: Path, n: int, seed: int, duration: float, **params: Any) -> Path:
-    """hil_configs/rdpso_arena.toml with ``n`` robots (N_T in their parameters too), a seed and a duration."""
-    import tomllib
+CRASH_AT_S = 60.2  # injected firmware crashes: mid-iteration, a minute into the run
 
+
+def arena_variant(path: Path, n: int, seed: int, duration: float, faults: list[dict[str, Any]] | None = None,
+                  **params: Any) -> Path:
+    """hil_configs/rdpso_arena.toml with ``n`` robots (N_T in their parameters too), a seed, a duration, and
+    injected faults."""
     from bridge.config import to_toml
 
     raw = tomllib.loads((CONFIGS / "rdpso_arena.toml").read_text())
     raw["session"] |= {"seed": seed, "duration_s": duration}
+    if faults:
+        raw["faults"] = faults
     group = raw["robots"][0]
     group["count"] = n
     group["params"] |= {"n_total": n, "swarm_seed": seed % (1 << 31), **params}
     path.write_text(to_toml(raw))
     return path
+
+
+def crash_figures(out: Path, crashed: list[int], iteration_s: float) -> dict[str, Any]:
+    """How many iterations each surviving mate of a crashed robot took to drop it (3-hello link break)."""
+    logs, *_ = read_rdpso_session(out)
+    k_missed = int(CRASH_AT_S // iteration_s) + 1  # the first iteration whose hello the crashed robots miss
+    by_k: dict[int, dict[int, dict[str, Any]]] = {}
+    for robot, recs in logs.items():
+        for rec in recs:
+            by_k.setdefault(rec["k"], {})[robot] = rec
+    dead_sids = {logs[d][-1]["sid"] for d in crashed if d in logs} - {0}
+    before = by_k.get(k_missed - 1, {})
+    delays = []
+    for r, rec in before.items():
+        if r in crashed or rec["sid"] not in dead_sids:
+            continue
+        alive = sum(1 for q, x in before.items() if q not in crashed and x["sid"] == rec["sid"])
+        for k in sorted(kk for kk in by_k if kk >= k_missed):
+            now = by_k[k].get(r)
+            if now is not None and (now["sid"] != rec["sid"] or now["n_s"] <= alive):
+                delays.append(k - k_missed + 1)
+                break
+    return {"crashed": " ".join(map(str, crashed)), "mates_of_crashed": len(delays),
+            "notice_max_iterations": max(delays) if delays else None}
 
 
 def score_arena(out: Path, cfg: Path, n: int, duration: float) -> TrialResult:
