@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from swarm_logic.behaviours import load_behaviour
-from swarm_logic.clock import Clock, WallClock
+from swarm_logic.clock import Clock, RealtimeClock, WallClock
 from swarm_logic.robot import Robot
 from swarm_logic.runner import run_controller
 
@@ -28,7 +28,13 @@ def load_hal(path: str) -> dict[str, Any]:
         raise SystemExit(f"{p}: not valid TOML: {e}") from None
     if not isinstance(hal.get("llc_can"), dict) or "interface" not in hal["llc_can"]:
         raise SystemExit(f"{p}: llc_can.interface: missing (a python-can interface, e.g. 'socketcan' or 'slcan')")
+    if hal.get("clock", "monotonic") not in CLOCKS:
+        raise SystemExit(f"{p}: clock: {hal['clock']!r} is not one of {', '.join(CLOCKS)}")
     return hal
+
+
+# monotonic: this computer's own time; realtime: synchronised wall time, for swarms that number their steps by it
+CLOCKS = {"monotonic": WallClock, "realtime": RealtimeClock}
 
 
 def main(argv: list[str] | None = None, clock: Clock | None = None) -> int:
@@ -44,7 +50,7 @@ def main(argv: list[str] | None = None, clock: Clock | None = None) -> int:
     behaviour = a.behaviour or hal.get("behaviour", "random_walk")
     seed = a.seed if a.seed is not None else int(hal.get("seed", robot_id))
     cls = load_behaviour(behaviour)
-    robot = Robot.open(robot_id, hal, clock or WallClock(), seed, hal.get("params", {}))
+    robot = Robot.open(robot_id, hal, clock or CLOCKS[hal.get("clock", "monotonic")](), seed, hal.get("params", {}))
     try:
         run_controller(cls(), robot, a.duration)
     except KeyboardInterrupt:

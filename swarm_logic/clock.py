@@ -29,3 +29,14 @@ class WallClock:
 
     def sleep_until(self, t: float) -> None:
         self.sleep(t - time.monotonic())
+
+
+class RealtimeClock(WallClock):
+    """Wall time since the Unix epoch, for controllers that must agree on time across robots (RDPSO numbers its
+    iterations from the clock): keep the robots' clocks synchronised (NTP, chrony, PTP)."""
+
+    def now(self) -> float:
+        return time.time()
+
+    def sleep_until(self, t: float) -> None:
+        self.sleep(t - time.time())

@@ -52,3 +52,18 @@ def test_hal_errors_name_the_field(tmp_path: Path) -> None:
 def test_shipped_real_robot_config_is_valid() -> None:
     hal = load_hal(str(Path(__file__).resolve().parent.parent / "hil_configs" / "eswarbot_real.toml"))
     assert hal["llc_can"]["interface"] == "slcan"
+
+
+def test_shipped_rdpso_robot_config_is_valid() -> None:
+    from swarm_logic.rdpso.controller import Rdpso
+
+    hal = load_hal(str(Path(__file__).resolve().parent.parent / "hil_configs" / "eswarbot_rdpso_real.toml"))
+    assert hal["clock"] == "realtime" and hal["xbee"]["port"] and len(hal["start_pose"]) == 3
+    Rdpso.resolve(hal["params"])  # the parameters mean something
+
+
+def test_an_unknown_clock_is_refused(tmp_path: Path) -> None:
+    bad = tmp_path / "hal.toml"
+    bad.write_text("clock = 'sundial'\n[llc_can]\ninterface = 'virtual'\n")
+    with pytest.raises(SystemExit, match=r"clock: 'sundial' is not one of monotonic, realtime"):
+        load_hal(str(bad))
