@@ -142,14 +142,19 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
         blocks = len(pl.centres)
         for b, centre in enumerate(pl.centres):
             n_b = sum(1 for i in range(g.count) if i * blocks // g.count == b)
-            phi0 = float(rng.uniform(-math.pi, math.pi))
-            sigma = 1 if rng.random() < 0.5 else -1
-            for j, (x, y) in enumerate(theodorus_spiral(n_b, pl.spacing_m, centre, phi0, sigma)):
-                if _blocked(cfg, x, y, clearance, occ):
-                    raise ConfigError(f"{path}: robots[{gi}].placement: spiral {b}, robot {j} at ({x:.2f}, {y:.2f}) "
-                                      "is outside the arena or inside an obstacle (move the centre or shorten "
-                                      "spacing_m)")
-                out.append((x, y, yaw()))
+            # a random orientation and turning sense per spiral (as the thesis' placements varied), redrawn
+            # while a robot would land outside the arena or in an obstacle
+            for _attempt in range(200):
+                phi0 = float(rng.uniform(-math.pi, math.pi))
+                sigma = 1 if rng.random() < 0.5 else -1
+                pts = theodorus_spiral(n_b, pl.spacing_m, centre, phi0, sigma)
+                if not any(_blocked(cfg, x, y, clearance, occ) for x, y in pts):
+                    break
+            else:
+                raise ConfigError(f"{path}: robots[{gi}].placement: spiral {b} of {n_b} robots around {tuple(centre)} "
+                                  f"does not fit in the free space in any orientation (move the centre or shorten "
+                                  "spacing_m)")
+            out.extend((x, y, yaw()) for x, y in pts)
         return out
     if pl.kind == "grid":
         for i in range(g.count):
