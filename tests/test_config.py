@@ -171,13 +171,14 @@ spacing_m = 0.25
 
 
 def test_spiral_placement_puts_each_block_on_a_spiral_of_theodorus(tmp_path: Path) -> None:
+    import itertools
     import math
 
     for seed in range(5):
         cfg = load_config(write(tmp_path, SPIRAL.format(w=2.55)), {"session.seed": seed})
         poses = [r.pose for r in make_plan(cfg).robots]
         for block, centre in ((poses[:6], (0.9, 1.25)), (poses[6:], (1.55, 0.8))):
-            steps = [math.dist(a[:2], b[:2]) for a, b in zip(block, block[1:], strict=False)]
+            steps = [math.dist(a[:2], b[:2]) for a, b in itertools.pairwise(block)]
             assert steps == pytest.approx([0.25] * 5)  # eq. 5.1-5.2: consecutive robots one leg apart
             radii = [math.dist(p[:2], centre) for p in block]
             assert radii == pytest.approx([0.25 * math.sqrt(n + 1) for n in range(1, 7)])
