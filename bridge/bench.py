@@ -44,14 +44,7 @@ def numerical_cell(iterations: int = 500, n: int = 100, seed: int = 1) -> tuple[
     exp = E9Static()
     trial = Trial(exp.name, {"fn": "peaks", "n": n, "set": "S1"}, 0, seed, smoke=False, workdir=".")
     w0, c0 = time.perf_counter(), time.process_time()
-    if iterations == 500:
-        res = exp.run(trial)
-    else:
-        from bridge.rdpso_experiments import SETS, numeric_trial
-
-        params = {**SETS["S1"], "dx_max_m": 0.5, "d_max_m": 30.0, "subgroups_init": 5, "subgroups_max": 8,
-                  "r_w_m": 5.0}
-        res = numeric_trial(trial, "peaks", 300.0, n, iterations, params, 30.0)
+    res = exp.run(trial, iterations)
     return time.perf_counter() - w0, time.process_time() - c0, float(res.metrics["final"])
 
 

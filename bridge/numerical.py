@@ -255,8 +255,7 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
         _deliver(world, robots, deaths, t)
         if world.pending:
             _apply_moves(world)
-            _sense(world, robots)
-            f = np.array([r.llc.state.light_raw for r in robots])
+            f = _sense(world, robots)
             k = round((t - it_s * k0) / it_s - 0.5) if it_s else 0
             if 0 <= k < iterations:
                 running_best = max(running_best, float(f.max()))
@@ -295,7 +294,8 @@ def _f_at(world: NumericalWorld) -> np.ndarray:
     return world.objective.value(world.pos[:, 0], world.pos[:, 1])
 
 
-def _sense(world: NumericalWorld, robots: list[Robot]) -> None:
+def _sense(world: NumericalWorld, robots: list[Robot]) -> np.ndarray:
+    """Put what each point robot senses at its position into its LLC state; returns the objective values."""
     f = _f_at(world)
     if len(world.obstacles):
         g = obstacle_distance(world.pos[:, 0], world.pos[:, 1], world.obstacles)
@@ -308,6 +308,7 @@ def _sense(world: NumericalWorld, robots: list[Robot]) -> None:
         st.light_raw = float(f[i])
         st.sonar_m = float(g[i])
         st.sonar_valid = math.isfinite(st.sonar_m)
+    return f
 
 
 def _deliver(world: NumericalWorld, robots: list[Robot], deaths: dict[int, float] | None, t: float) -> None:

@@ -37,28 +37,24 @@ NUMERIC = {"payload_max": 4096, "log_every": 1, "send_jitter_s": 0.0}
 
 
 class LightField:
-    """The co-simulation's light field (``[light]`` of a session config) as a numerical objective, normalised
-    to 1 at its brightest point; for the small-arena numerical studies (E8)."""
+    """A session config's light field (``LightCfg``: Gaussian spots on an ambient level) as a numerical objective,
+    normalised to 1 at its brightest spot's centre; for the small-arena numerical studies (E8)."""
 
     dynamic = False
 
     def __init__(self, spots: list[tuple[float, float, float, float]], size: tuple[float, float],
                  ambient: float = 0.0) -> None:
-        self.spots = spots  # (x, y, peak, sigma)
+        from bridge.config import LightCfg, LightSource
+
+        self.light = LightCfg(ambient_lux=ambient, sources=[
+            LightSource(x=x, y=y, peak_lux=peak, sigma_m=sigma) for x, y, peak, sigma in spots])  # (x, y, peak, sigma)
         self.bounds = (0.0, 0.0, *size)
-        self.ambient = ambient
         best = max(spots, key=lambda s: s[2])
         self._opt = (best[0], best[1])
-        self._max = float(self._raw(np.array([best[0]]), np.array([best[1]]))[0])
-
-    def _raw(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        out = np.full(np.broadcast(x, y).shape, self.ambient, float)
-        for sx, sy, peak, sigma in self.spots:
-            out += peak * np.exp(-((x - sx) ** 2 + (y - sy) ** 2) / (2 * sigma * sigma))
-        return out
+        self._max = float(self.light.illuminance(best[0], best[1]))
 
     def value(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return self._raw(np.asarray(x, float), np.asarray(y, float)) / self._max
+        return self.light.illuminance(np.asarray(x, float), np.asarray(y, float)) / self._max
 
     def optimum(self) -> tuple[float, float]:
         return self._opt
@@ -159,11 +155,15 @@ class E9Static(Experiment):
             return [{"fn": "peaks", "n": 25, "set": "S1"}, {"fn": "rosenbrock", "n": 25, "set": "S2"}]
         return [{"fn": f, "n": n, "set": s} for f in self.FUNCTIONS for n in self.SIZES for s in ("S1", "S2")]
 
-    def run(self, trial: Trial) -> TrialResult:
+    @staticmethod
+    def params(cell: dict[str, Any]) -> dict[str, Any]:
+        return {**SETS[cell["set"]], "dx_max_m": 0.5, "d_max_m": 30.0, "subgroups_min": 0, "subgroups_init": 5,
+                "subgroups_max": 8, "sc_max": 30, "r_w_m": 5.0}
+
+    def run(self, trial: Trial, iterations: int | None = None) -> TrialResult:
         c = trial.cell
-        params = {**SETS[c["set"]], "dx_max_m": 0.5, "d_max_m": 30.0, "subgroups_min": 0, "subgroups_init": 5,
-                  "subgroups_max": 8, "sc_max": 30, "r_w_m": 5.0}
-        return numeric_trial(trial, c["fn"], 300.0, c["n"], 100 if trial.smoke else 500, params, 30.0)
+        its = iterations or (100 if trial.smoke else 500)
+        return numeric_trial(trial, c["fn"], 300.0, c["n"], its, self.params(c), 30.0)
 
     def targets(self) -> list[Target]:
         return [
@@ -506,13 +506,16 @@ def arena_peaks(cfg_path: Path) -> tuple[tuple[float, float], float, float]:
     from bridge.config import load_config
     from firmware_sim import sensors
     from firmware_sim.arduino import Board
+    from firmware_sim.llc import PIN_LDR
 
     cfg = load_config(cfg_path)
     spots = sorted(cfg.light.sources, key=lambda s: -s.peak_lux)
 
-    def counts(x: float, y: float) -> float:
-        volts = sensors.ldr_volts(float(cfg.light.illuminance(x, y)))
-        return min(Board.ADC_MAX, int(volts / Board.VREF * (Board.ADC_MAX + 1)))
+    board = Board()
+
+    def counts(x: float, y: float) -> int:  # what the robot's LLC reads there (no sensor noise)
+        board.analog_volts[PIN_LDR] = sensors.ldr_volts(float(cfg.light.illuminance(x, y)))
+        return board.analog_read(PIN_LDR)
 
     best = spots[0]
     return (best.x, best.y), counts(best.x, best.y), counts(spots[1].x, spots[1].y) if len(spots) > 1 else 0.0
@@ -520,21 +523,17 @@ def arena_peaks(cfg_path: Path) -> tuple[tuple[float, float], float, float]:
 
 def read_rdpso_session(out: Path) -> tuple[dict[int, list[dict[str, Any]]], np.ndarray, np.ndarray, np.ndarray]:
     """The robots' "rdpso" log records and the ground-truth poses (t, x, y) of a session's recording."""
+    from bridge.plot import read_poses
     from bridge.recorder import iter_messages
 
     logs: dict[int, list[dict[str, Any]]] = {}
-    ts, xs, ys = [], [], []
     for topic, t_ns, data in iter_messages(out / "session.mcap"):
         if topic.endswith("/log/rdpso"):
             rec = json.loads(data)
             rec["t"] = t_ns * 1e-9
             logs.setdefault(int(topic[2:5]), []).append(rec)
-        elif topic == "/world/poses":
-            m = json.loads(data)
-            ts.append(t_ns * 1e-9)
-            xs.append(m["x"])
-            ys.append(m["y"])
-    return logs, np.array(ts), np.array(xs), np.array(ys)
+    ts, xs, ys, _ = read_poses(out / "session.mcap")
+    return logs, ts, xs, ys
 
 
 @register
@@ -660,10 +659,11 @@ def arena_variant(path: Path, n: int, seed: int, duration: float, faults: list[d
     return path
 
 
-def crash_figures(out: Path, crashed: list[int], iteration_s: float) -> dict[str, Any]:
-    """How many iterations each surviving mate of a crashed robot took to drop it (3-hello link break)."""
+def crash_figures(out: Path, crashed: list[int], iteration_s: float, crash_s: float = CRASH_AT_S) -> dict[str, Any]:
+    """How many iterations each surviving mate of a crashed robot took to drop it (3-hello link break), counted from
+    the first hello the crashed robots missed; a mate that never drops it counts as the rest of the run plus one."""
     logs, *_ = read_rdpso_session(out)
-    k_missed = int(CRASH_AT_S // iteration_s) + 1  # the first iteration whose hello the crashed robots miss
+    k_missed = int(crash_s // iteration_s) + 1  # the first iteration whose hello the crashed robots miss
     by_k: dict[int, dict[int, dict[str, Any]]] = {}
     for robot, recs in logs.items():
         for rec in recs:
@@ -675,11 +675,14 @@ def crash_figures(out: Path, crashed: list[int], iteration_s: float) -> dict[str
         if r in crashed or rec["sid"] not in dead_sids:
             continue
         alive = sum(1 for q, x in before.items() if q not in crashed and x["sid"] == rec["sid"])
-        for k in sorted(kk for kk in by_k if kk >= k_missed):
+        later = sorted(kk for kk in by_k if kk >= k_missed)
+        for k in later:
             now = by_k[k].get(r)
             if now is not None and (now["sid"] != rec["sid"] or now["n_s"] <= alive):
                 delays.append(k - k_missed + 1)
                 break
+        else:
+            delays.append(later[-1] - k_missed + 2 if later else 1)
     return {"crashed": " ".join(map(str, crashed)), "mates_of_crashed": len(delays),
             "notice_max_iterations": max(delays) if delays else None}
 

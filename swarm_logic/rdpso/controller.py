@@ -233,9 +233,6 @@ class Rdpso(Controller):
         self.last_centre: tuple[float, float] | None = None
         self.led: tuple[int, int, int] | None = None
         self.events: list[str] = []
-        self.late = 0
-        self.stats = {"iterations": 0, "improvements": 0, "hellos_sent": 0, "hellos_heard": 0, "late_hellos": 0,
-                      "moves": 0}
 
     def destroy(self) -> None:
         self.robot.llc.stop()
@@ -291,7 +288,6 @@ class Rdpso(Controller):
         if self.improved:
             self.hbest = self.h
             self.chi1 = (self.x, self.y)
-            self.stats["improvements"] += 1
         if self.g >= self.g_best:
             self.g_best = self.g
             self.chi3 = (self.x, self.y)
@@ -311,7 +307,6 @@ class Rdpso(Controller):
 
     def _send(self) -> None:
         self.robot.xbee.send_nowait(None, self.outgoing)
-        self.stats["hellos_sent"] += 1
 
     # -- phase B: listen, decide, move ---------------------------------------------------------------------------
     def _phase_b(self) -> None:
@@ -324,7 +319,6 @@ class Rdpso(Controller):
         vx, vy = self._velocity()
         self._move(vx, vy)
         self._show()
-        self.stats["iterations"] += 1
         every = int(self.p["log_every"])
         if every and (self.k % every == 0 or self.events):
             self.robot.log("rdpso", k=self.k, sid=self.sid, x=self.x, y=self.y, h=_f(self.h), hbest=_f(self.hbest),
@@ -341,13 +335,11 @@ class Rdpso(Controller):
             msg = decode(pkt.data)
             if msg is None or msg.robot == r.id:
                 continue
-            if msg.k != k16:
-                self.stats["late_hellos"] += 1
+            if msg.k != k16:  # late, or from a robot whose clock disagrees: not this iteration's
                 continue
             heard[msg.robot] = msg
             if pkt.rssi_dbm is not None:
                 self.rssi[msg.robot] = float(pkt.rssi_dbm)
-        self.stats["hellos_heard"] += len(heard)
         self.heard = heard
         table = self.table
         k = self.k
@@ -377,9 +369,6 @@ class Rdpso(Controller):
         for m in [m for m, v in table.items() if v[0] + v[1] <= limit]:
             del table[m]
 
-    def _group(self) -> list[int]:
-        return list(self.table)  # pruned to the fresh members by _listen
-
     def _group_size(self) -> int:
         return 1 + len(self.table)
 
@@ -407,10 +396,9 @@ class Rdpso(Controller):
                 best, where = h.hbest, (h.x, h.y)
         # the worst personal best in the group (ties: the higher id), from the member table, which holds each
         # member's value as of its newest hello heard of
-        group = self.table
-        worst = min([(half(self.hbest), -self.robot.id)] + [(v[2], -m) for m, v in group.items()])
+        worst = min([(half(self.hbest), -self.robot.id)] + [(v[2], -m) for m, v in self.table.items()])
         self.worst = -worst[1]
-        n_s = 1 + len(group)
+        n_s = self._group_size()
         if best > prev_best:
             self.ledger_h, self.chi2 = best, where
             if p["stagnation_on_improve"] == "reset":
@@ -475,7 +463,7 @@ class Rdpso(Controller):
         p = self.p
         rid = self.robot.id
         cluster = self._mates()
-        n_x = 1 + len(self._group())
+        n_x = self._group_size()
         self.worst = rid
         # a candidacy placed last iteration is decided now, among the candidates for the same offer
         if self.candidate is not None and self.candidate[2] == self.k:  # candidates flagged in this iteration's hellos
@@ -528,7 +516,7 @@ class Rdpso(Controller):
             return self._wander()
         chi4 = self._connectivity()
         if self.adapter is not None:
-            self._adapt(chi4)
+            self._adapt()
         mx, my = motion.memory_term(self.weights, self.history)
         vx, vy = mx, my
         for rho, (cx, cy) in zip(self.rho, (self.chi1, self.chi2, self.chi3, chi4), strict=True):
@@ -585,7 +573,7 @@ class Rdpso(Controller):
                                            p["k_q"])
         return (self.x + qx, self.y + qy)
 
-    def _adapt(self, chi4: tuple[float, float]) -> None:
+    def _adapt(self) -> None:
         """Chapter 7: context metrics of this robot and its subgroup -> fuzzy -> alpha, rho (A17)."""
         p = self.p
         mates = self._mates()
@@ -616,14 +604,9 @@ class Rdpso(Controller):
         """C_s = lambda_2 / N_s (eq. 7.24) of the mates this robot hears, linked within d_max."""
         import numpy as np
 
-        n = len(pts)
-        if n < 2:
-            return 0.0
         a = np.asarray(pts)
         d = np.hypot(a[:, None, 0] - a[None, :, 0], a[:, None, 1] - a[None, :, 1])
-        adj = (d <= self.p["d_max_m"]).astype(float)
-        np.fill_diagonal(adj, 0.0)
-        return graph.connectivity_metric(adj)
+        return graph.connectivity_metric(graph.adjacency(d, "distance", self.p["d_max_m"]))
 
     def _move(self, vx: float, vy: float) -> None:
         dist = math.hypot(vx, vy)
@@ -632,7 +615,6 @@ class Rdpso(Controller):
         rot = math.atan2(vy, vx) - self.theta
         rot = math.atan2(math.sin(rot), math.cos(rot))
         self.robot.llc.move(rot, dist, self.p["speed_mps"])
-        self.stats["moves"] += 1
 
     def _show(self) -> None:
         rgb = colour(self.sid)
