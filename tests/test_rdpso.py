@@ -270,3 +270,21 @@ def test_rssi_link_mode_spaces_the_robots_by_q_min() -> None:
         target = 10 ** ((link.tx_dbm - link.pl0_db - q_min) / (10 * link.exponent))
         assert 0.7 * target < d < 1.1 * target, (q_min, d, target)  # the bests pull the robots a little closer
     assert spacing[-75.0] > spacing[-65.0] * 1.3, spacing
+
+
+class NoisyRdpso(Rdpso):
+    """An RDPSO robot whose radio also carries another application's frames."""
+
+    def _send(self) -> None:
+        super()._send()
+        self.robot.xbee.send_nowait(None, b"not a hello")
+
+
+def test_frames_that_are_not_hellos_are_counted_and_dropped() -> None:
+    p = {**SETS["ch4"], "dx_max_m": 0.1, "d_max_m": 0.5, "subgroups_init": 1, "subgroups_max": 1,
+         "send_jitter_s": 0.0}
+    res = numerical.run(NoisyRdpso, p, 3, 20, SPOTS, ARENA, link=numerical.LinkModel(range_m=10.0), seed=1,
+                        keep_logs=True)
+    last = [r for r in res.logs if r["topic"] == "rdpso" and r["k"] == max(q["k"] for q in res.logs)]
+    assert all(r["dropped"]["foreign"] >= 2 * 19 for r in last)  # two neighbours' junk every iteration
+    assert all(r["heard"] == 2 for r in last)  # the hellos still get through

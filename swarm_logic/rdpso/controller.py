@@ -233,6 +233,7 @@ class Rdpso(Controller):
         self.last_centre: tuple[float, float] | None = None
         self.led: tuple[int, int, int] | None = None
         self.events: list[str] = []
+        self.dropped = {"late": 0, "foreign": 0}  # received frames not used, by cause (logged)
 
     def destroy(self) -> None:
         self.robot.llc.stop()
@@ -324,7 +325,8 @@ class Rdpso(Controller):
             self.robot.log("rdpso", k=self.k, sid=self.sid, x=self.x, y=self.y, h=_f(self.h), hbest=_f(self.hbest),
                            improved=self.improved, ledger_h=_f(self.ledger_h), chi2=self.chi2, sc=self.sc,
                            n_kill=self.n_kill, n_s=self._group_size(), heard=len(self.heard), chosen=self.chosen,
-                           alpha=self.alpha, rho=self.rho, events=self.events, worst=self.worst)
+                           alpha=self.alpha, rho=self.rho, events=self.events, worst=self.worst,
+                           dropped=self.dropped)
 
     def _listen(self) -> None:
         """Drain the radio; keep this iteration's hellos, refresh the group table (direct and relayed)."""
@@ -333,9 +335,13 @@ class Rdpso(Controller):
         heard: dict[int, Hello] = {}
         while (pkt := r.xbee.recv(timeout=0)) is not None:
             msg = decode(pkt.data)
-            if msg is None or msg.robot == r.id:
+            if msg is None:  # another application's frame, or a damaged one
+                self.dropped["foreign"] += 1
+                continue
+            if msg.robot == r.id:
                 continue
             if msg.k != k16:  # late, or from a robot whose clock disagrees: not this iteration's
+                self.dropped["late"] += 1
                 continue
             heard[msg.robot] = msg
             if pkt.rssi_dbm is not None:
