@@ -170,6 +170,16 @@ class XBeeCfg(_Model):
         return v
 
 
+class RobotCanCfg(_Model):
+    """Outside access to a robot's simulated CAN bus."""
+
+    slcan_pty: str | None = Field(
+        None, description="expose the robot's CAN bus on a pseudo-terminal as a LAWICEL (slcan) USB-CAN adapter, "
+                          "linked at this path (relative to the session's output directory; '{id}' is replaced by the "
+                          "robot id): python-can's slcan interface, candump-style tools and a real robot's logic "
+                          "open it")
+
+
 class RobotGroup(_Model):
     profile: str = "eswarbot"
     count: int = Field(1, ge=1, le=10000)
@@ -184,11 +194,34 @@ class RobotGroup(_Model):
                                 "as if a motion-capture system fed it; an idealisation for algorithm tests, "
                                 "flagged in STATUS and summary.json")
 
+    logic: Literal["session", "external"] = Field(
+        "session", description="session: the session runs the robot's swarm logic (in simulated time); external: "
+                               "a program outside the session (a real robot's companion computer, a test) runs it in "
+                               "wall time and reaches the robot's devices only through their ports (xbee.pty, "
+                               "can.slcan_pty)")
+    can: RobotCanCfg = RobotCanCfg()
+
     @model_validator(mode="after")
     def _pty_per_robot(self) -> RobotGroup:
-        if self.xbee is not None and self.xbee.pty and self.count > 1 and "{id}" not in self.xbee.pty:
-            raise ValueError("xbee.pty: a group of several robots needs '{id}' in the link path")
+        for what, link in (("xbee.pty", self.xbee.pty if self.xbee else None), ("can.slcan_pty", self.can.slcan_pty)):
+            if link and self.count > 1 and "{id}" not in link:
+                raise ValueError(f"{what}: a group of several robots needs '{{id}}' in the link path")
+        if self.logic == "external":
+            if not self.can.slcan_pty:
+                raise ValueError("can.slcan_pty: an external logic reaches the robot's LLC through its CAN bus: "
+                                 "expose it, e.g. can = { slcan_pty = \"r{id}-can\" }")
+            if self.xbee is not None and not self.xbee.pty:
+                raise ValueError("xbee.pty: an external logic reaches the robot's XBee through a pseudo-terminal: give "
+                                 "it one, e.g. xbee = { pty = \"r{id}-xbee\" }")
+            if self.uwb:
+                raise ValueError("uwb: a UWB module cannot be reached from an external logic (it has no port); "
+                                 "drop it")
         return self
+
+    def real_ports(self) -> list[str]:
+        """The fields that open this group to the outside world (wall time): what makes a session real-time."""
+        return [f for f, on in (("xbee.pty", bool(self.xbee and self.xbee.pty)),
+                                ("can.slcan_pty", bool(self.can.slcan_pty)), ("logic", self.logic == "external")) if on]
 
     @field_validator("profile")
     @classmethod
@@ -199,12 +232,65 @@ class RobotGroup(_Model):
 
 
 class FaultCfg(_Model):
-    """An injected fault: at ``at_s`` the robot's firmware crashes, and the robot is dead from then on (as a
-    battery death in the thesis: motors stop, its radio goes silent, its logic stops)."""
+    """An injected fault, from ``at_s`` on.
+
+    ``firmware_crash``: the robot's firmware crashes and the robot is dead from then on (as a battery death in the
+    thesis: motors stop, its radio goes silent, its logic stops). ``can_bus_off``: every frame the robot's CAN node
+    ``node`` transmits is destroyed (a failing transceiver, a loose CAN_H/CAN_L wire at its connector), so its
+    error counter climbs to bus-off within a few milliseconds and again after each recovery, for ``duration_s``.
+    ``can_noise``: every frame on the robot's bus is destroyed with ``probability`` (EMI), for ``duration_s``.
+    """
 
     robot: int = Field(ge=0, description="robot id")
-    at_s: float = Field(gt=0, description="simulated time of the crash")
-    kind: Literal["firmware_crash"] = "firmware_crash"
+    at_s: float = Field(gt=0, description="simulated time the fault starts")
+    kind: Literal["firmware_crash", "can_bus_off", "can_noise"] = "firmware_crash"
+    node: Literal["host", "llc", "slcan"] = Field(
+        "host", description="can_bus_off: whose transmissions fail: host (the companion computer's CAN adapter), llc "
+                            "or slcan")
+    duration_s: float | None = Field(None, gt=0, description="can faults: how long it lasts (none: to the end)")
+    probability: float = Field(0.01, gt=0, le=1, description="can_noise: share of frames destroyed")
+
+    @model_validator(mode="after")
+    def _fields_fit_kind(self) -> FaultCfg:
+        applies = {"firmware_crash": set(), "can_bus_off": {"node", "duration_s"},
+                   "can_noise": {"duration_s", "probability"}}[self.kind]
+        stray = sorted(self.model_fields_set - applies - {"robot", "at_s", "kind"})
+        if stray:
+            raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {self.kind!r}")
+        return self
+
+
+class CanCfg(_Model):
+    """Every robot's CAN bus: the LLC's controller (MCP2515) and the companion computer's adapter (docs/models.md)."""
+
+    bitrate: Literal[125_000, 250_000, 500_000, 1_000_000] = Field(500_000, description="bit/s, as the nodes are "
+                                                                                        "set up")
+    host_restart_ms: float | None = Field(100.0, ge=0, description="after bus-off, the companion computer's adapter "
+                                                                   "restarts this long after the bus allows it "
+                                                                   "(socketcan restart-ms); none: it stays bus-off")
+
+
+class MavlinkCfg(_Model):
+    """Every robot's MAVLink face behind one UDP endpoint for ground stations (docs/hil.md)."""
+
+    endpoint: str | None = Field(None, description="udpout:HOST:PORT (send to a ground station listening there, e.g. "
+                                                   "udpout:127.0.0.1:14550) or udpin:HOST:PORT (listen there; port 0: "
+                                                   "any free port); none: the robots have no MAVLink face")
+    per_robot: bool = Field(False, description="one endpoint per robot, at the endpoint's port + robot id")
+    system_id_base: int = Field(1, ge=1, le=255, description="robot r is MAVLink system system_id_base + r")
+    boot: Literal["auto", "hold", "disarmed"] = Field(
+        "auto", description="auto: armed, the swarm behaviour runs from the start (as without a ground station); "
+                            "hold: armed, waiting in HOLD; disarmed: waiting to be armed and set to AUTO or GUIDED")
+    rates: dict[str, float] = Field({}, description="telemetry rates in Hz by message name, e.g. { ATTITUDE = 5 }")
+
+    @field_validator("endpoint")
+    @classmethod
+    def _endpoint(cls, v: str | None) -> str | None:
+        if v is not None:
+            from bridge.mavlink_gateway import parse_endpoint
+
+            parse_endpoint(v)
+        return v
 
 
 class Config(_Model):
@@ -216,7 +302,9 @@ class Config(_Model):
     radio: RadioCfg = Field(RadioCfg(), description="the 2.4 GHz channel the XBees share (docs/radio.md)")
     uwb: UwbCfg = Field(UwbCfg(), description="UWB ranging noise and TDMA budget (docs/uwb.md)")
     robots: list[RobotGroup] = Field(min_length=1)
-    faults: list[FaultCfg] = Field([], description="injected faults (a robot's firmware crashing mid-run)")
+    faults: list[FaultCfg] = Field([], description="injected faults (a firmware crash, CAN bus-off or noise)")
+    can: CanCfg = Field(CanCfg(), description="the robots' CAN buses")
+    mavlink: MavlinkCfg = Field(MavlinkCfg(), description="the robots' MAVLink faces and the ground-station endpoint")
 
     @model_validator(mode="after")
     def _quantum_fits_physics(self) -> Config:
@@ -226,6 +314,14 @@ class Config(_Model):
                 f"session.quantum_ms = {self.session.quantum_ms} is shorter than one physics step "
                 f"(world.physics_hz = {self.world.physics_hz})"
             )
+        m = self.mavlink
+        if m.endpoint is not None and m.system_id_base + self.robot_count - 1 > 255:
+            raise ValueError(f"mavlink.system_id_base = {m.system_id_base}: {self.robot_count} robots need system "
+                             f"ids up to {m.system_id_base + self.robot_count - 1}, beyond MAVLink's 255")
+        real = [f"robots[{i}].{f}" for i, g in enumerate(self.robots) for f in g.real_ports()]
+        if real and self.session.speed != 1:
+            raise ValueError(f"session.speed = {self.session.speed!r}: a session with ports to the outside world "
+                             f"({', '.join(real)}) runs paced to wall time: set speed = 1 (or --speed 1)")
         for g in self.robots:
             period_ms = 1000.0 / PROFILES[g.profile].llc_loop_hz
             if self.session.quantum_ms > period_ms + 1e-9:
@@ -341,6 +437,11 @@ def config_warnings(cfg: Config) -> list[str]:
     from swarm_logic.behaviours import load_behaviour
 
     out = []
+    if cfg.mavlink.endpoint is not None:
+        from bridge.mavlink_gateway import is_loopback, parse_endpoint
+
+        if not is_loopback(parse_endpoint(cfg.mavlink.endpoint).host):
+            out.append(f"mavlink.endpoint: {cfg.mavlink.endpoint} is not on this machine: MAVLink traffic leaves it")
     for i, g in enumerate(cfg.robots):
         warn = getattr(load_behaviour(g.behaviour), "warnings", None)
         if warn is not None:
@@ -353,9 +454,12 @@ def _check_geometry(path: str, cfg: Config) -> None:
     for i, ob in enumerate(cfg.obstacles):
         if not (0 <= ob.x <= w and 0 <= ob.y <= length):
             raise ConfigError(f"{path}: obstacles[{i}]: centre ({ob.x}, {ob.y}) is outside the {w} x {length} m arena")
+    groups = [g for g in cfg.robots for _ in range(g.count)]
     for i, f in enumerate(cfg.faults):
         if f.robot >= cfg.robot_count:
             raise ConfigError(f"{path}: faults[{i}].robot: no robot {f.robot} (the session has {cfg.robot_count})")
+        if f.kind == "can_bus_off" and f.node == "slcan" and not groups[f.robot].can.slcan_pty:
+            raise ConfigError(f"{path}: faults[{i}].node: robot {f.robot} has no slcan adapter (can.slcan_pty)")
     for i, light in enumerate(cfg.light.sources):
         if not (math.isfinite(light.x) and math.isfinite(light.y)):
             raise ConfigError(f"{path}: light.sources[{i}]: position must be finite")

@@ -35,6 +35,7 @@ from firmware_sim.llc import (
     LlcParams,
     LowLevelController,
 )
+from firmware_sim.slcan import SlcanAdapter
 from firmware_sim.uwb import UwbModule
 from firmware_sim.xbee import XBeeModule
 
@@ -58,13 +59,14 @@ def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
 
 
 class PtyLink:
-    """A module's UART on a pseudo-terminal, so outside tools (XCTU, digi-xbee, minicom) can open it.
+    """A module's UART on a pseudo-terminal, so outside tools (XCTU, digi-xbee, minicom, python-can's slcan) can
+    open it.
 
     The slave side is linked at ``link`` and kept open here, so a tool may close and reopen it. Bytes cross
     in raw mode, as on a USB-serial adapter; what the outside sends is read once per quantum.
     """
 
-    def __init__(self, link: str) -> None:
+    def __init__(self, link: str, what: str = "xbee.pty") -> None:
         self.master, self.slave = pty.openpty()
         tty.setraw(self.slave)
         os.set_blocking(self.master, False)
@@ -73,7 +75,7 @@ class PtyLink:
         if self.link.is_symlink():
             self.link.unlink()  # a stale link of an earlier session
         elif self.link.exists():
-            raise FileExistsError(f"xbee.pty: {link} exists and is not a link; it is left alone")
+            raise FileExistsError(f"{what}: {link} exists and is not a link; it is left alone")
         self.link.symlink_to(os.ttyname(self.slave))
         self.dropped = 0
 
@@ -118,6 +120,7 @@ class FirmwareHost:
         self.xbee_baud: dict[int, int] = {}
         self.ptys: dict[int, PtyLink] = {}
         self.uwbs: dict[int, UwbModule] = {}
+        self.slcans: dict[int, tuple[SlcanAdapter, PtyLink]] = {}
         self.crash_ns = {f.robot: round(f.at_s * 1e9) for f in cfg.faults if f.kind == "firmware_crash"}
         uwb_team = [r.id for r in plan.robots if r.uwb]
         self.uwb_baud = cfg.uwb.uart_baud
@@ -134,6 +137,9 @@ class FirmwareHost:
                     power_level=x["power_level"])
                 if x.get("pty"):
                     self.ptys[r] = PtyLink(x["pty"])
+            if rp.slcan_pty:
+                self.slcans[r] = (SlcanAdapter(cfg.can.bitrate, serial_number=f"{r % 10000:04d}"),
+                                  PtyLink(rp.slcan_pty, "can.slcan_pty"))
             if rp.uwb:
                 self.uwbs[r] = UwbModule(
                     addr16=uwb_addr16(r), robot=r, peers=[(p, uwb_addr16(p)) for p in uwb_team if p != r],
@@ -149,6 +155,8 @@ class FirmwareHost:
             return self._llc(r, t_ns, inputs)
         if role == "xbee":
             return self._xbee(r, t_ns, inputs)
+        if role == "slcan":
+            return self._slcan(r, t_ns, inputs)
         return self._uwb(r, t_ns, inputs)
 
     def _llc(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
@@ -162,8 +170,12 @@ class FirmwareHost:
         b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
         pose = s.get("pose")  # a ground-truth robot's motion-capture receiver: the world pose (x, y, yaw)
         b.external_pose = (float(pose[0]), float(pose[1]), float(pose[2])) if pose is not None else None
-        for _bus, arb_id, data, ext, ts in inputs["in"]:
-            b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
+        for item in inputs["in"]:
+            if item[0] == "can0_state":  # the bus changed this node's fault-confinement state (its EFLG register)
+                b.can.set_error_state(item[1], item[2], item[3])
+            elif len(item) == 5:  # a frame from another node (error frames only move the counters above)
+                _bus, arb_id, data, ext, ts = item
+                b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
         if r not in self.nominal_ns:  # first tick: power-up
             self.nominal_ns[r] = t_ns
             llc.setup()
@@ -215,6 +227,22 @@ class FirmwareHost:
             wake = t_ns + 1 if wake is None else min(wake, t_ns + 1)
         return {"out": out, "wake": wake, "wom": True}
 
+    def _slcan(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        """The USB-CAN adapter on the robot's bus: frames from the bus to its serial line, the host's commands
+        and frames from the line to the bus. Its pseudo-terminal is polled every quantum."""
+        adapter, link = self.slcans[r]
+        for item in inputs["in"]:
+            if item[0] == "can0_state":
+                adapter.set_bus_state(item[1], item[2], item[3])
+            elif len(item) == 5:  # a frame from another node, at the time its last bit left the wire
+                _bus, arb_id, data, ext, wire_end = item
+                adapter.on_bus_frame(wire_end, arb_id, data, ext)
+        adapter.feed(link.read())
+        if out := adapter.take_output():
+            link.write(out)
+        frames = [["can0", f.arbitration_id, f.data, f.extended] for f in adapter.take_tx()]
+        return {"out": frames, "wake": t_ns + 1, "wom": True}
+
     def _uwb(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         m = self.uwbs[r]
         uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
@@ -236,8 +264,10 @@ class FirmwareHost:
                 out[entity(r, "xbee")]["pty_dropped_bytes"] = self.ptys[r].dropped
         for r, m in self.uwbs.items():
             out[entity(r, "uwb")] = dict(m.counters)
+        for r, (adapter, link) in self.slcans.items():
+            out[entity(r, "slcan")] = {**adapter.counters, "pty_dropped_bytes": link.dropped}
         return out
 
     def stop(self) -> None:
-        for link in self.ptys.values():
+        for link in [*self.ptys.values(), *(link for _, link in self.slcans.values())]:
             link.close()

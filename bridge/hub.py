@@ -35,6 +35,7 @@ import numpy as np
 from bridge import transport
 from bridge.can_medium import CanMedium, frame_fault
 from bridge.config import Config
+from bridge.mavlink_gateway import MavlinkGateway
 from bridge.plan import Plan, entity, robot_of, uwb_addr16
 from bridge.profiles import PROFILES
 from bridge.radio_medium import RadioMedium
@@ -76,13 +77,14 @@ class Hub:
             boot = (r * self.q_ns) % max(period, self.q_ns) // self.q_ns * self.q_ns
             for role in rp.modules():
                 self.next_wake[entity(r, role)] = boot
-            self.next_wake[entity(r, "logic")] = (r * self.q_ns) % max(LOGIC_BOOT_SPREAD_NS, self.q_ns)
+            if rp.logic == "session":
+                self.next_wake[entity(r, "logic")] = (r * self.q_ns) % max(LOGIC_BOOT_SPREAD_NS, self.q_ns)
         # wake on message: False, True (any input), or the input kinds that wake it (item[0] of inbox items)
         self.wom: dict[str, Any] = dict.fromkeys(self.ents, False)
         self.inbox: dict[str, list] = {e: [] for e in self.ents}
         self.seq: dict[str, int] = dict.fromkeys(self.ents, 0)
         self.can = [CanMedium(f"r{r:03d}/can0") for r in range(self.n)]
-        self.can_nodes = [(entity(r, "llc"), entity(r, "logic")) for r in range(self.n)]
+        self.can_nodes = [tuple(entity(r, role) for role in rp.can_nodes()) for r, rp in enumerate(plan.robots)]
         self.deliveries: dict[int, list[tuple]] = defaultdict(list)
         self._dead_detail: dict[str, str] = {}
         self.dead: set[int] = set()
@@ -95,6 +97,7 @@ class Hub:
         self.parent_pid = os.getppid()
         self.counts: dict[str, int] = defaultdict(int)
         self.barrier_us: list[float] = []
+        self.lag_s: list[float] = []  # paced sessions: how far the simulated clock is behind wall time, per quantum
         self.wakeups: dict[str, int] = defaultdict(int)  # entity runs by role (llc, xbee, uwb, logic)
         self.ticks = 0
         self.proc_ticks = 0  # tick messages sent (one per due process per quantum)
@@ -107,7 +110,8 @@ class Hub:
         # radios: the 2.4 GHz medium of the XBees, the UWB ranging medium, and each robot's serial lines
         robots = plan.robots
         geometry = _Geometry(self.world)
-        self.roles = {r: rp.modules() for r, rp in enumerate(robots)}
+        # every entity of a robot: its firmware's, and its logic when the session runs it
+        self.roles = {r: rp.modules() + (("logic",) if rp.logic == "session" else ()) for r, rp in enumerate(robots)}
         self.radio = RadioMedium(cfg.radio, self.n, cfg.session.seed, geometry) if any(
             rp.xbee for rp in robots) else None
         self.uwb = UwbMedium(cfg.uwb, self.n, cfg.session.seed, geometry) if any(rp.uwb for rp in robots) else None
@@ -130,6 +134,9 @@ class Hub:
         self.tx_dst: dict[tuple[int, int], tuple] = {}  # (robot, frame handle) -> (addressed robot, MAC seq)
         self.node_sens: dict[int, float] = {}  # each module's receiver sensitivity, as it reported it
         self.node_net: dict[int, tuple[int, int]] = {}  # each module's (channel, PAN id)
+        m = cfg.mavlink
+        self.mavlink = MavlinkGateway(m.endpoint, {r: m.system_id_base + r for r, rp in enumerate(robots)
+                                                   if rp.logic == "session"}, m.per_robot) if m.endpoint else None
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def open(self) -> None:
@@ -179,7 +186,8 @@ class Hub:
                 if msg.get("op") == "stop":
                     raise KeyboardInterrupt
         self.startup_wall_s = time.monotonic() - t0
-        self.status(op="started", startup_s=self.startup_wall_s)
+        self.status(op="started", startup_s=self.startup_wall_s,
+                    mavlink=self.mavlink.endpoints if self.mavlink is not None else None)
 
     # -- failures ------------------------------------------------------------------------------------
     def robot_failed(self, r: int, t_ns: int, kind: str, detail: str, proc: str | None = None) -> None:
@@ -187,7 +195,7 @@ class Hub:
             return
         self.dead.add(r)
         self.world.kill(r)
-        for role in (*self.roles[r], "logic"):
+        for role in self.roles[r]:
             e = entity(r, role)
             self.next_wake[e] = None
             self.wom[e] = False
@@ -255,6 +263,16 @@ class Hub:
                 data = line.arrived(t)
                 if data:
                     self.inbox[entity(r, dev)].append(["uart", data])
+
+    def _ground_station(self, t: int) -> None:
+        """What ground stations sent since the last quantum: to the robots' faces now, and to the recording (it
+        comes from outside the session, in wall time)."""
+        for r, data, kind in self.mavlink.poll():
+            if r in self.dead:
+                continue
+            self.inbox[entity(r, "logic")].append(["uart:mavlink", data])
+            self.rec.write(t, "/mavlink/from_gcs", "swarm_sitl.MavlinkIn",
+                           {"robot": r, "type": kind, "data": data.hex()})
 
     def _due(self, t: int) -> dict[str, list[str]]:
         due: dict[str, list[str]] = defaultdict(list)
@@ -421,7 +439,12 @@ class Hub:
         kind = item[0]
         role = e[e.index("/") + 1:]
         try:
-            if kind == "baud" and role == "logic":  # the host set its port's rate
+            if kind in ("uart", "baud") and role == "logic" and item[1] == "mavlink":  # a network link, no line
+                if kind == "uart" and self.mavlink is not None and isinstance(item[2], bytes):
+                    self.mavlink.from_robot(r, item[2])
+                elif kind == "uart":
+                    self.counts["uart_unrouted_writes"] += 1
+            elif kind == "baud" and role == "logic":  # the host set its port's rate
                 _, dev, baud = item
                 if (r, dev) not in self.host_baud or type(baud) is not int or baud <= 0:
                     raise ValueError
@@ -439,6 +462,9 @@ class Hub:
                 _, dev, data, baud = item
                 if not isinstance(data, bytes) or dev != role:
                     raise ValueError
+                if "logic" not in self.roles[r]:  # nobody in the session listens on that line
+                    self.counts["uart_unrouted_writes"] += 1
+                    return
                 if baud != self.host_baud.get((r, dev), baud):  # the host listens at another rate: garbage
                     self.counts["uart_garbled_bytes"] += len(data)
                     data = garble(data)
@@ -545,6 +571,8 @@ class Hub:
                 break
             self._deliver(t)
             self._lines(t)
+            if self.mavlink is not None:
+                self._ground_station(t)
             due = self._due(t)
             for p in list(due):
                 if p not in self.live_procs:
@@ -587,13 +615,16 @@ class Hub:
                 self._drain_control(t)
             self._media(t)
             self.k += 1
-            if t >= next_status:
-                next_status += 1_000_000_000
-                self.status(op="progress", t=(t + q) / 1e9, alive=self.n - len(self.dead), ticks=self.k)
+            lag = None
             if speed != "max":
                 ahead = (t + q) / 1e9 / float(speed) - (time.monotonic() - wall0)
-                if ahead > 0:
-                    time.sleep(ahead)
+                lag = max(0.0, -ahead)
+                self.lag_s.append(lag)
+            if t >= next_status:
+                next_status += 1_000_000_000
+                self.status(op="progress", t=(t + q) / 1e9, alive=self.n - len(self.dead), ticks=self.k, lag_s=lag)
+            if lag == 0.0:
+                time.sleep(ahead)
         self.sim_end_ns = self.k * q
         self.wall_s = time.monotonic() - wall0
         return self.result()
@@ -646,6 +677,9 @@ class Hub:
                 if "xbee" in self.roles[r]:
                     out["per_robot"].setdefault(r, {})["radio"] = stats["robots"][r]
                     out["per_robot"][r]["xbee_module"] = self.module_stats.get(entity(r, "xbee"))
+        for r in range(self.n):
+            if "slcan" in self.roles[r]:  # the USB-CAN adapter's own counters (lines, malformed, frames)
+                out["per_robot"].setdefault(r, {})["slcan"] = self.module_stats.get(entity(r, "slcan"))
         if self.uwb is not None:
             ustats = self.uwb.stats()
             out["uwb_medium"] = ustats.get("all", {})
@@ -679,6 +713,8 @@ class Hub:
             "digest": self.rec.digest,
             "barrier_us_median": statistics.median(lat) if lat else None,
             "barrier_us_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
+            "wall_lag": _lag_summary(self.lag_s),
+            "mavlink": self.mavlink.stats() if self.mavlink is not None else None,
             "startup_s": getattr(self, "startup_wall_s", None),
             "failures": self.failures,
             "stop_reason": self.stop_reason,
@@ -710,6 +746,16 @@ class _Geometry:
 
     def walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
         return self.world.walls(src, dsts)
+
+
+def _lag_summary(lag_s: list[float]) -> dict[str, Any] | None:
+    """How far a paced session's simulated clock fell behind wall time: quanta that ended late, and by how much."""
+    if not lag_s:
+        return None
+    a = np.asarray(lag_s)
+    return {"quanta": len(a), "late_share": round(float(np.mean(a > 0)), 4), "max_ms": round(float(a.max()) * 1e3, 2),
+            "p99_ms": round(float(np.quantile(a, 0.99)) * 1e3, 2), "mean_ms": round(float(a.mean()) * 1e3, 3),
+            "final_ms": round(float(a[-1]) * 1e3, 2)}
 
 
 def _rms_summary(errors: list[float]) -> dict[str, Any]:

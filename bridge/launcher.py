@@ -9,6 +9,7 @@ launcher (PR_SET_PDEATHSIG), so no process of a session outlives it.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import queue
@@ -60,11 +61,13 @@ class _Progress:
         self.name, self.duration, self.robots = name, duration, robots
         self.last_line_t = -1e9
 
-    def update(self, sim_t: float, rtf: float, alive: int) -> None:
+    def update(self, sim_t: float, rtf: float, alive: int, lag_s: float | None = None) -> None:
         if not self.stream:
             return
         line = (f"[{self.name}] sim {sim_t:7.1f} / {self.duration:.1f} s   rtf {rtf:6.2f}x   "
                 f"robots alive {alive}/{self.robots}")
+        if lag_s is not None:  # a paced session: how far the simulated clock is behind wall time
+            line += f"   lag {lag_s * 1e3:5.1f} ms"
         if self.tty:
             self.stream.write("\r" + line)
             self.stream.flush()
@@ -93,9 +96,15 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     logs = out / "logs"
     shutil.rmtree(logs, ignore_errors=True)
     logs.mkdir()
-    for rp in plan.robots:  # a pseudo-terminal link is a path the user chose, relative to the output directory
+    ports: list[str] = []  # a pseudo-terminal link is a path the user chose, relative to the output directory
+    for i, rp in enumerate(plan.robots):
         if rp.xbee and rp.xbee.get("pty"):
             rp.xbee["pty"] = str((out / rp.xbee["pty"].replace("{id}", str(rp.id))).absolute())
+            ports.append(f"{rp.name} XBee (API {rp.xbee['api_mode']}, {rp.xbee['baud']} baud): {rp.xbee['pty']}")
+        if rp.slcan_pty:
+            plan.robots[i] = rp = dataclasses.replace(
+                rp, slcan_pty=str((out / rp.slcan_pty.replace("{id}", str(rp.id))).absolute()))
+            ports.append(f"{rp.name} CAN bus (slcan, {cfg.can.bitrate} bit/s): {rp.slcan_pty}")
     plan_path = out / "plan.json"
     plan_path.write_text(json.dumps(plan.to_json(), indent=1))
     session_dir = tempfile.mkdtemp(prefix="swarm-sitl-")
@@ -162,9 +171,15 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
                     t_started = time.monotonic()
                     prog.note(f"[{cfg.session.name}] started: {len(children)} processes joined in "
                               f"{t_started - t_launch:.1f} s")
+                    for line in ports:
+                        prog.note(f"[{cfg.session.name}] port: {line}")
+                    if msg.get("mavlink"):
+                        prog.note(f"[{cfg.session.name}] MAVLink: " + ", ".join(
+                            f"{who} {ep}" for who, ep in msg["mavlink"].items()))
                 elif op == "progress" and t_started is not None and msg["t"] >= 1.0:
                     last_sim = msg["t"]
-                    prog.update(msg["t"], msg["t"] / max(time.monotonic() - t_started, 1e-9), msg["alive"])
+                    prog.update(msg["t"], msg["t"] / max(time.monotonic() - t_started, 1e-9), msg["alive"],
+                                msg.get("lag_s"))
                 elif op == "event":
                     prog.note(f"robot {msg['robot']} failed at sim t={msg['t_s']:.2f} s: {msg['kind']} "
                               f"({msg['detail'].strip().splitlines()[-1] if msg['detail'].strip() else ''})")
@@ -270,6 +285,8 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "digest": world_res.get("digest"),
         "barrier_us_median": world_res.get("barrier_us_median"),
         "barrier_us_p99": world_res.get("barrier_us_p99"),
+        "wall_lag": world_res.get("wall_lag"),
+        "mavlink": world_res.get("mavlink"),
         "cpu_s_total": round(cpu_total, 3),
         "cpu_s_per_robot_per_sim_s": round(cpu_total / n / sim_t, 5) if sim_t and n else None,
         "rss_mb_per_robot": round(sum(c.maxrss_kb for c in children) / 1024 / n, 1) if n else None,
@@ -316,6 +333,11 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
     files = "".join(f"\n  {label:<10} {path}" for label, path in (
         ("recording", out / "session.mcap"), ("summary", out / "summary.json"), ("plot", out / "trajectories.png"),
         ("logs", out / "logs")) if path.exists())
+    if summary["wall_lag"]:
+        lag = summary["wall_lag"]
+        prog.note(f"[{cfg.session.name}] paced at speed {cfg.session.speed}: the simulated clock was behind wall time "
+                  f"in {lag['late_share']:.1%} of quanta, by {lag['p99_ms']} ms at the 99th percentile, "
+                  f"{lag['max_ms']} ms at most")
     prog.note(
         f"[{cfg.session.name}] {how}{why}: {sim_t:.1f} s simulated in "
         f"{wall:.1f} s wall (rtf {summary['rtf']}x), {summary['messages']} messages, digest "

@@ -31,6 +31,11 @@ def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
                        "rssi_from_db": rp.xbee["series"] == 2}
     if rp.uwb:
         hal["uwb"] = {"port": "sitl://uwb", "baudrate": cfg.uwb.uart_baud}
+    m = cfg.mavlink
+    if m.endpoint is not None:  # its MAVLink face, behind the world's ground-station endpoint
+        hal["mavlink"] = {"port": "sitl://mavlink", "system_id": m.system_id_base + rp.id, "boot": m.boot}
+        if m.rates:
+            hal["mavlink"]["rates"] = dict(m.rates)
     hal["start_pose"] = list(rp.pose)  # where the robot was put down, as an operator would tell it
     return hal
 
@@ -71,14 +76,21 @@ class LogicHost:
     def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         r = robot_of(ent)
         rt = self.rts[r]
+        arrived: set[str] = set()
         for item in inputs["in"]:
-            if item[0] == "can0":
-                _, arb_id, data, ext, ts = item
-                rt.deliver("can0", (arb_id, data, ext, ts))
+            kind = item[0]
+            if kind == "can0":  # a frame: [bus, id, data, extended, wire end, (own echo | error frame)]
+                rt.deliver(kind, tuple(item[1:]))
+            elif kind == "can0_state":  # this node's fault-confinement state changed: [bus, state, TEC, REC]
+                rt.bus_state["can0"] = (item[1], item[2], item[3])
+                continue
             else:  # ["uart:DEVICE", bytes]
-                rt.deliver(item[0], item[1])
-        rt.resume(t_ns)
-        out: dict[str, Any] = {"out": rt.outbox, "wake": rt.wake_ns, "wom": rt.wom}
+                rt.deliver(kind, item[1])
+            arrived.add(kind)
+        rt.run_timers(t_ns)  # cyclic CAN sends due by now leave whether or not the thread runs
+        if rt.due(t_ns, arrived):
+            rt.resume(t_ns)
+        out: dict[str, Any] = {"out": rt.outbox, "wake": rt.next_wake(), "wom": rt.wom}
         rt.outbox = []
         if rt.finished and r not in self.reported:
             self.reported.add(r)

@@ -28,10 +28,24 @@ class RobotPlan:
     xbee: dict | None = None  # the group's XBeeCfg as a dict, or None without a radio
     uwb: bool = False
     pose_source: str = "odometry"  # "ground_truth": the LLC is fed the true pose (RobotGroup.pose_source)
+    logic: str = "session"  # "external": its swarm logic runs outside the session (RobotGroup.logic)
+    slcan_pty: str | None = None  # its CAN bus on a pseudo-terminal as an slcan adapter (RobotCanCfg.slcan_pty)
 
     def modules(self) -> tuple[str, ...]:
-        """The firmware entities' roles of this robot: its LLC and the radio modules it carries."""
-        return ("llc",) + (("xbee",) if self.xbee else ()) + (("uwb",) if self.uwb else ())
+        """The firmware entities' roles of this robot: its LLC, the radio modules it carries, and the slcan
+        adapter on its CAN bus when it is exposed."""
+        return (("llc",) + (("xbee",) if self.xbee else ()) + (("uwb",) if self.uwb else ())
+                + (("slcan",) if self.slcan_pty else ()))
+
+    def can_nodes(self) -> tuple[str, ...]:
+        """The roles of the nodes on this robot's CAN bus."""
+        return ("llc",) + (("logic",) if self.logic == "session" else ()) + (("slcan",) if self.slcan_pty else ())
+
+    @property
+    def host_node(self) -> str:
+        """The role of the companion computer's CAN node: its session logic, or the slcan adapter an external
+        logic uses."""
+        return "logic" if self.logic == "session" else "slcan"
 
 
 @dataclass(frozen=True)
@@ -91,11 +105,14 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
         for pose in poses:
             rid = len(robots)
             robots.append(RobotPlan(rid, f"r{rid:03d}", group.profile, group.behaviour, dict(group.params), pose,
-                                    group.xbee.model_dump() if group.xbee else None, group.uwb, group.pose_source))
+                                    group.xbee.model_dump() if group.xbee else None, group.uwb, group.pose_source,
+                                    group.logic, group.can.slcan_pty))
     k = cfg.session.robots_per_process
     ids = [r.id for r in robots]
     chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
     procs = [ProcPlan(f"fw{j}", "firmware", c) for j, c in enumerate(chunks)]
+    ids = [r.id for r in robots if r.logic == "session"]  # an external logic is nobody's process here
+    chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
     procs += [ProcPlan(f"lg{j}", "logic", c) for j, c in enumerate(chunks)]
     return Plan(cfg.model_dump(mode="json"), robots, procs)
 

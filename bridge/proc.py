@@ -55,6 +55,8 @@ def _world(args: argparse.Namespace, plan) -> int:
         finally:
             hub.rec.finish()
             hub.world.close()
+            if hub.mavlink is not None:
+                hub.mavlink.close()
     result["digest"] = hub.rec.digest
     result["messages"] = hub.rec.count
     tmp = Path(args.out) / "world_result.json.tmp"

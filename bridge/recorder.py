@@ -26,7 +26,22 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "src": {"type": "string", "description": "sending node (entity)"},
             "name": {"type": "string", "description": "message name in the robot's DBC, if known"},
             "wire_end_ns": {"type": "integer", "description": "sim time the last bit left the wire"},
+            "error": {"type": "boolean", "description": "an error frame: the frame of this id and src was destroyed "
+                                                         "on the wire (it is retransmitted); data is empty"},
         },
+    },
+    "swarm_sitl.CanState": {
+        "type": "object",
+        "description": "A CAN node's fault-confinement state changed (ISO 11898-1): error-active, error-passive "
+                       "(a counter above 127) or bus-off (TEC above 255)",
+        "properties": {"node": {"type": "string"}, "state": {"enum": ["active", "passive", "bus_off"]},
+                       "tec": {"type": "integer"}, "rec": {"type": "integer"}, "wire_ns": {"type": "integer"}},
+    },
+    "swarm_sitl.MavlinkIn": {
+        "type": "object",
+        "description": "A MAVLink packet a ground station sent to a robot's face (from outside the session, in wall "
+                       "time)",
+        "properties": {"robot": {"type": "integer"}, "type": {"type": "string"}, "data": {"type": "string"}},
     },
     "swarm_sitl.LlcPins": {
         "type": "object",

@@ -12,7 +12,7 @@ import threading
 import traceback
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 _local = threading.local()
 RX_QUEUE_FRAMES = 4096  # frames a device queue holds before it drops (a socket receive buffer)
@@ -48,6 +48,8 @@ class RobotRuntime:
         self.unrouted = 0
         self.rx_dropped = 0
         self.outbox: list[list[Any]] = []
+        self.bus_state: dict[str, tuple[str, int, int]] = {}  # bus -> (state, TEC, REC) of this robot's node on it
+        self.timers: list[Timer] = []  # what the robot's devices do by themselves (a CAN adapter's cyclic sends)
         self.error: str | None = None
         self.finished = False
         self.stopping = False
@@ -84,6 +86,27 @@ class RobotRuntime:
         else:
             q.append(item)
 
+    def due(self, t_ns: int, arrived: set[str]) -> bool:
+        """Whether the robot thread wants to run at ``t_ns``: its wake time has come, or a delivery (``arrived``: the
+        buses something was delivered to) is one it waits on."""
+        if self.finished:
+            return False
+        if self.wake_ns is not None and self.wake_ns <= t_ns:
+            return True
+        return bool(arrived) and (self.wom is True or (isinstance(self.wom, list) and not arrived.isdisjoint(self.wom)))
+
+    def run_timers(self, t_ns: int) -> None:
+        """Let the devices' own timers fire up to ``t_ns`` (outside the robot thread, as hardware would)."""
+        for timer in list(self.timers):
+            timer.fire(t_ns)
+
+    def next_wake(self) -> int | None:
+        """When the robot next needs the host: its thread's wake time or a device timer's, whichever is first."""
+        if self.finished:
+            return None
+        times = [w for w in (self.wake_ns, *(tm.next_ns for tm in self.timers)) if w is not None]
+        return min(times) if times else None
+
     def resume(self, t_ns: int) -> None:
         """Run the robot thread at ``t_ns`` until it blocks again (or ends)."""
         if self.finished:
@@ -119,6 +142,14 @@ class RobotRuntime:
 
     def close_bus(self, name: str) -> None:
         self.rx.pop(name, None)
+
+
+class Timer(Protocol):
+    """A device's own periodic activity (``RobotRuntime.timers``)."""
+
+    next_ns: int | None
+
+    def fire(self, t_ns: int) -> None: ...
 
 
 class SessionClock:

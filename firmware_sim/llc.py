@@ -1,7 +1,8 @@
 """The eSwarBot's Arduino low-level controller (LLC), as a sketch: ``setup()`` and a fixed-rate ``loop()``.
 
 Each loop: read CAN commands, read the quantised encoder counts, update odometry, run one wheel-speed PID
-step per wheel, apply the command watchdog (motors stop 0.5 s after the last DRIVE_CMD), sample the
+step per wheel, apply the command watchdog (motors stop 0.5 s after the last DRIVE_CMD, and at once while the
+CAN controller is bus-off; a running MOVE_CMD is aborted then), sample the
 sonar, light sensor and battery through the 10-bit ADC, set the LED strip and send telemetry on the
 robot's CAN bus at fixed rates. The CAN interface is described by ``eswarbot_llc.dbc``.
 
@@ -164,6 +165,7 @@ class LowLevelController:
         self.fault_stall = False
         self.fault_battery_low = False
         self.fault_bad_frame = False
+        self.fault_bus_off = False  # latched until a STATUS carries it (a bus-off node cannot send one)
         self.stall_since_ms: list[int | None] = [None, None]
         self.stalled = [False, False]
         self.last_loop_us: int | None = None
@@ -196,6 +198,10 @@ class LowLevelController:
         if dt <= 0:
             dt = self.loop_period_us * 1e-6
         self._read_can(now)
+        if b.can.bus_off:  # cut off from the host: nothing it sends can arrive, so stop now rather than at the watchdog
+            self.fault_bus_off = True
+            self._abort_move(now)
+            self.v_cmd = self.w_cmd = 0.0
         counts = (b.encoder(0), b.encoder(1))
         prev = self.last_counts
         dl = (counts[0] - prev[0]) * self.m_per_pulse
@@ -282,11 +288,14 @@ class LowLevelController:
                 fault_can_overflow=int(can.rx_overflows > self.overflows_reported),
                 fault_bad_frame=int(self.fault_bad_frame),
                 pose_ideal=int(b.external_pose is not None),
+                fault_bus_off=int(self.fault_bus_off),
                 rx_bad_frames=min(255, self.rx_bad + can.rx_errors),
                 rx_overflows=min(255, can.rx_overflows),
                 uptime_s=min(65535, now // 1000),
             )
             self.overflows_reported = can.rx_overflows
+            if not can.bus_off:  # sent: the host has been told
+                self.fault_bus_off = False
         b.led_strip(*self.led)
 
     # -- helpers ------------------------------------------------------------------------------------

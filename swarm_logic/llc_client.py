@@ -57,6 +57,7 @@ class LlcClient:
         self.rx_frames = 0
         self.rx_unknown = 0
         self.rx_bad_length = 0
+        self.tx_failed = 0
         self._seq = 0
         self._move_seq = 0
 
@@ -118,8 +119,14 @@ class LlcClient:
         return True
 
     def _send(self, name: str, **signals: float) -> None:
+        """Encode and send a command. A frame the adapter cannot send (bus-off, a full queue) is counted in
+        ``tx_failed`` and lost: the LLC's watchdog stops the motors when commands stop arriving, which is the
+        safe outcome, so the robot program goes on rather than crash."""
         spec = self.db.get_message_by_name(name)
-        self.bus.send(can.Message(arbitration_id=spec.frame_id, data=spec.encode(signals), is_extended_id=False))
+        try:
+            self.bus.send(can.Message(arbitration_id=spec.frame_id, data=spec.encode(signals), is_extended_id=False))
+        except can.CanOperationError:
+            self.tx_failed += 1
 
     def drive(self, v: float, w: float) -> None:
         """Forward speed ``v`` (m/s) and turn rate ``w`` (rad/s); repeat within 0.5 s or the LLC stops."""

@@ -1,4 +1,6 @@
-"""``sitl://DEVICE``: a robot's simulated serial line to one of its modules (``sitl://xbee``, ``sitl://uwb``).
+"""``sitl://DEVICE``: a robot's simulated serial line to one of its modules (``sitl://xbee``, ``sitl://uwb``), or
+its MAVLink link to the ground stations (``sitl://mavlink``: the robot's face writes there; it is a network link,
+so it has no baud rate: bytes leave at the end of the quantum).
 
 A pyserial port like any other, so the swarm logic opens ``sitl://xbee`` in a session and
 ``/dev/ttyUSB0`` on the robot with the same code. Bytes written leave at the end of the current quantum and
@@ -18,7 +20,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_
 
 from bridge import sim_context
 
-DEVICES = ("xbee", "uwb")
+DEVICES = ("xbee", "uwb", "mavlink")
 
 
 class Serial(SerialBase):
