@@ -1,16 +1,42 @@
-"""A CAN bus as a shared medium: frames contend by arbitration ID and take their bit time on the wire.
+"""A CAN bus as a shared medium: arbitration by ID, exact bit time on the wire, and fault confinement.
 
-Frames offered during quantum k start contending at the end of k (they are delivered at k+1 at the
-earliest, like every message in a session). The lowest ID wins arbitration; each frame occupies the bus
-for its worst-case stuffed length at the bus bit rate; a frame is delivered at the first quantum
-boundary at or after the end of its transmission. The order of delivery is the order on the wire, so it
-does not depend on which process sent first.
+One robot's bus segment in simulated time, advanced one quantum at a time by the world. Frames offered
+during quantum k start contending at the end of k (they are delivered at k+1 at the earliest, like every
+message in a session). The lowest ID wins arbitration; a frame occupies the bus for its exact length,
+bit stuffing included, at the bus bit rate, and is delivered at the first quantum boundary at or after its
+last bit. The order of delivery is the order on the wire, so it does not depend on which process sent first.
+
+Faults follow ISO 11898-1 fault confinement so that fault-injection runs see what real nodes see: a
+destroyed frame costs the bus its bits up to the error plus an error frame, delivers nothing and is
+retransmitted automatically; each node keeps a transmit and a receive error counter, turns error-passive
+(and then waits 8 "suspend transmission" bits after each frame it sends) and then bus-off, and recovers
+after 128 x 11 recessive bits plus its host's restart delay. Simplifications: every error is a CRC error
+detected at the CRC delimiter; every receiver counts REC += 1 per error (ISO gives +8 to the receiver that
+detects it first: here no receiver is singled out) and REC saturates at 255 like an 8-bit register; the
+128 x 11 recessive bits are taken as 1408 bit times, ending at the first moment the bus is idle; a frame is
+always acknowledged (an unregistered listener, like the recorder, acks it), so a lone node sees no ACK errors.
 """
 
 from __future__ import annotations
 
 import heapq
+import random
 from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any, Literal
+
+State = Literal["active", "passive", "bus_off"]
+FaultKind = Literal["tx_error", "noise"]
+
+CRC15_POLY = 0x4599
+TAIL_BITS = 13  # never stuffed: CRC delimiter, ACK slot, ACK delimiter, 7 EOF, 3 intermission
+ERROR_BITS = 6 + 8 + 3  # error flag, error delimiter, intermission after the CRC delimiter
+SUSPEND_BITS = 8  # an error-passive transmitter waits this long after its frame before it may start again
+RECOVERY_BITS = 128 * 11  # bus-off recovery: 128 sequences of 11 recessive bits, taken as bit times
+PASSIVE_ABOVE = 127  # TEC or REC above this: error-passive
+BUS_OFF_ABOVE = 255  # TEC above this: bus-off
+REC_AFTER_PASSIVE = 119  # ISO allows 119..127 after a good reception with REC > 127
+REC_MAX = 255  # REC is an 8-bit register (MCP2515, SJA1000); only "> 127" matters to the state
 
 
 def frame_bits(dlc: int, extended: bool = False) -> int:
@@ -20,6 +46,90 @@ def frame_bits(dlc: int, extended: bool = False) -> int:
     if extended:
         return 67 + 8 * dlc + (54 + 8 * dlc - 1) // 4
     return 47 + 8 * dlc + (34 + 8 * dlc - 1) // 4
+
+
+def _crc_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte << 7
+        for _ in range(8):
+            crc = (crc << 1) ^ CRC15_POLY if crc & 0x4000 else crc << 1
+        table.append(crc & 0x7FFF)
+    return tuple(table)
+
+
+def _stuff_step(state: int, bit: int) -> tuple[int, int]:
+    """One bit through the stuffing rule. ``state`` = 5 * last bit + length of its run (0: nothing sent yet);
+    returns (stuff bits inserted, new state). The stuff bit is the first bit of the next run."""
+    last, run = divmod(state, 5)
+    run = run + 1 if bit == last else 1
+    if run == 5:
+        return 1, 5 * (1 - bit) + 1
+    return 0, 5 * bit + run
+
+
+def _stuff_tables() -> tuple[tuple[tuple[int, int], ...], ...]:
+    tables = []
+    for state in range(10):
+        row = []
+        for byte in range(256):
+            n, s = 0, state
+            for i in range(7, -1, -1):
+                k, s = _stuff_step(s, byte >> i & 1)
+                n += k
+            row.append((n, s))
+        tables.append(tuple(row))
+    return tuple(tables)
+
+
+_CRC_TABLE = _crc_table()
+_STUFF_TABLE = _stuff_tables()  # [state][byte] -> (stuff bits, new state)
+
+
+def crc15(bits: int, n: int) -> int:
+    """CRC-15/CAN (polynomial 0x4599, initial value 0) of the ``n``-bit stream ``bits``, first bit = MSB.
+
+    With a zero initial value leading zero bits do not change the CRC, so the stream is padded at the
+    front to whole bytes and run through a byte table."""
+    crc = 0
+    for byte in bits.to_bytes((n + 7) // 8, "big"):
+        crc = ((crc << 8) ^ _CRC_TABLE[((crc >> 7) ^ byte) & 0xFF]) & 0x7FFF
+    return crc
+
+
+def stuff_count(bits: int, n: int) -> int:
+    """Stuff bits a transmitter inserts into the ``n``-bit stream ``bits`` (first bit = MSB): one after
+    every 5 equal bits in a row, and the stuff bit (the complement) counts as the first bit of the next run.
+
+    The stream is padded at the front to whole bytes with alternating bits that end opposite to its first
+    bit: they never stuff, and leave the rule in the state it starts in for that first bit."""
+    pad = -n % 8
+    if pad:
+        bits |= ((0xAA if bits >> (n - 1) & 1 else 0x55) & ((1 << pad) - 1)) << n
+        n += pad
+    stuffed, state = 0, 0
+    for byte in bits.to_bytes(n // 8, "big"):
+        k, state = _STUFF_TABLE[state][byte]
+        stuffed += k
+    return stuffed
+
+
+def _crc_covered_bits(arbitration_id: int, data: bytes, extended: bool) -> tuple[int, int]:
+    """SOF to the end of the data field (the bits the CRC covers) as (value, length), dominant = 0."""
+    if extended:  # SOF, base ID, SRR, IDE (both recessive), ID extension, RTR, r1, r0, DLC
+        bits = ((arbitration_id >> 18) << 20 | 0b11 << 18 | arbitration_id & 0x3FFFF) << 7 | len(data)
+        n = 39
+    else:  # SOF, ID, RTR, IDE, r0, DLC
+        bits, n = arbitration_id << 7 | len(data), 19
+    return bits << 8 * len(data) | int.from_bytes(data, "big"), n + 8 * len(data)
+
+
+@lru_cache(maxsize=1 << 16)
+def wire_bits(arbitration_id: int, data: bytes, extended: bool = False) -> int:
+    """Exact bit times a classic CAN 2.0 data frame occupies, including stuff bits (SOF to the end of
+    the CRC sequence) and the 3-bit intermission."""
+    bits, n = _crc_covered_bits(arbitration_id, data, extended)
+    return n + 15 + stuff_count(bits << 15 | crc15(bits, n), n + 15) + TAIL_BITS
 
 
 def frame_fault(arbitration_id: int, data: bytes, extended: bool) -> str | None:
@@ -40,14 +150,23 @@ def arbitration_key(arbitration_id: int, extended: bool) -> tuple[int, int, int]
     return (arbitration_id, 0, 0)
 
 
-@dataclass(order=True)
+def _state_of(tec: int, rec: int) -> State:
+    if tec > BUS_OFF_ABOVE:
+        return "bus_off"
+    if tec > PASSIVE_ABOVE or rec > PASSIVE_ABOVE:
+        return "passive"
+    return "active"
+
+
+@dataclass(order=True, slots=True)
 class _Pending:
     key: tuple[int, int, int]
     src: str
     seq: int
     arbitration_id: int = field(compare=False)
     data: bytes = field(compare=False)
-    extended: bool = field(compare=False, default=False)
+    extended: bool = field(compare=False)
+    bits: int = field(compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,41 +177,319 @@ class Delivery:
     data: bytes
     src: str
     extended: bool
+    receivers: tuple[str, ...] = ()  # registered nodes other than the sender, none of them bus-off during it
+
+
+@dataclass(frozen=True, slots=True)
+class CanEvent:
+    """An error frame (``node`` is the transmitter) or a node's change of state, with its counters after it."""
+
+    t_ns: int  # quantum boundary at or after wire_ns (and after the transmit() call's start): when to report it
+    wire_ns: int  # error detected (end of the CRC delimiter) or state changed
+    kind: Literal["error_frame", "state"]
+    node: str
+    state: State
+    tec: int
+    rec: int
+    arbitration_id: int | None  # the frame that caused it; None for a recovery
+
+
+@dataclass(slots=True)
+class _Node:
+    name: str
+    restart_ns: int | None  # host's delay before restarting after bus-off; None: only recover() does
+    tec: int = 0
+    rec: int = 0
+    state: State = "active"
+    recover_at: int | None = None  # bus-off until then (None: until recover())
+    tx_errors: int = 0
+    rx_errors: int = 0
+    bus_off_count: int = 0
+    dropped_bus_off: int = 0  # frames dropped because the node was bus-off: pending ones and new offers
+
+
+@dataclass(frozen=True, slots=True)
+class _Fault:
+    node: str  # the transmitter whose frames it destroys, or "*"
+    start_ns: int
+    end_ns: int | None
+    probability: float
 
 
 class CanMedium:
-    """One CAN bus segment (one robot's bus)."""
+    """One CAN bus segment (one robot's bus).
 
-    def __init__(self, name: str, bitrate: int = 500_000) -> None:
+    Each quantum [t, t+q) the world offers the frames its nodes sent, calls ``transmit(t, q)`` if
+    ``busy(t, q)`` and schedules the deliveries and ``drain_events()`` at their ``t_ns``."""
+
+    def __init__(self, name: str, bitrate: int = 500_000, seed: int = 0) -> None:
         self.name = name
         self.bitrate = bitrate
         self.pending: list[_Pending] = []
         self.busy_until_ns = 0
         self.frames = 0
-        self.bits = 0
+        self.bits = 0  # bus occupancy: frames delivered and destroyed ones with their error frames
+        self.error_frames = 0
+        self._nodes: dict[str, _Node] = {}
+        self._rng = random.Random(seed)
+        self._faults: list[_Fault] = []
+        self._events: list[CanEvent] = []
+        self._off: dict[str, _Node] = {}  # bus-off nodes
+        self._suspend: dict[str, int] = {}  # error-passive sender -> when it may start a frame again
+        self._receivers: dict[str, tuple[str, ...]] = {}  # sender -> receivers, cleared on any change
+        self._counting = False  # some TEC or REC is non-zero: good frames must count them down
+        self._q_ns = 1  # the quantum of the running transmit() call, for the events it reports
+        self._report_from = 0  # its end: no event is reported earlier (a recovery due at its start included)
 
-    def offer(self, src: str, seq: int, arbitration_id: int, data: bytes, extended: bool = False) -> None:
+    def _ns(self, bits: int) -> int:
+        return (bits * 1_000_000_000 + self.bitrate - 1) // self.bitrate
+
+    def add_node(self, name: str, restart_ns: int | None = 0) -> None:
+        """Register a node on the bus; registering again changes its restart delay (from its next bus-off).
+
+        ``restart_ns`` is how long its host waits after bus-off before restarting the controller (like
+        socketcan's restart-ms; 0 for an MCP2515's automatic recovery; None: stays bus-off until
+        :meth:`recover`)."""
+        if restart_ns is not None and restart_ns < 0:
+            raise ValueError(f"restart_ns must be >= 0 or None, got {restart_ns}")
+        node = self._nodes.get(name)
+        if node is None:
+            self._nodes[name] = _Node(name, restart_ns)
+            self._receivers.clear()
+        else:
+            node.restart_ns = restart_ns
+
+    def offer(self, src: str, seq: int, arbitration_id: int, data: bytes, extended: bool = False) -> bool:
+        """Queue a frame from ``src`` (registered with restart_ns=0 if new); False if dropped as ``src`` is bus-off."""
         if (fault := frame_fault(arbitration_id, data, extended)) is not None:
             raise ValueError(fault)
-        heapq.heappush(self.pending, _Pending(arbitration_key(arbitration_id, extended), src, seq,
-                                              arbitration_id, bytes(data), extended))
+        if src in self._off:
+            self._off[src].dropped_bus_off += 1
+            return False
+        if src not in self._nodes:
+            self.add_node(src)
+        data = bytes(data)
+        heapq.heappush(self.pending, _Pending(arbitration_key(arbitration_id, extended), src, seq, arbitration_id,
+                                              data, extended, wire_bits(arbitration_id, data, extended)))
+        return True
+
+    def inject(self, node: str, kind: FaultKind, start_ns: int, end_ns: int | None = None,
+               probability: float = 1.0) -> None:
+        """Destroy frames whose transmission starts in [start_ns, end_ns), each with ``probability``.
+
+        ``"tx_error"``: frames ``node`` transmits (a failing transceiver, a CAN_H/CAN_L fault at its
+        connector). ``"noise"``: frames of every node (``node="*"``) or of one, as EMI would do."""
+        if kind not in ("tx_error", "noise"):
+            raise ValueError(f"unknown CAN fault kind {kind!r}")
+        if node == "*" and kind != "noise":
+            raise ValueError("only noise applies to every node ('*')")
+        if end_ns is not None and end_ns <= start_ns:
+            raise ValueError(f"fault window [{start_ns}, {end_ns}) is empty")
+        if not 0.0 <= probability <= 1.0:
+            raise ValueError(f"probability must be in [0, 1], got {probability}")
+        self._faults.append(_Fault(node, start_ns, end_ns, probability))
+
+    def recover(self, name: str, t_ns: int) -> int | None:
+        """The host restarts a bus-off node at ``t_ns``; it is error-active again after 128 x 11 recessive
+        bits. Returns that time, or None if the node is not bus-off."""
+        node = self._nodes[name]
+        if node.state != "bus_off":
+            return None
+        at = t_ns + self._ns(RECOVERY_BITS)
+        node.recover_at = at if node.recover_at is None else min(node.recover_at, at)
+        return node.recover_at
+
+    def node_state(self, name: str) -> tuple[State, int, int]:
+        """(state, TEC, REC) of a node as of the last :meth:`transmit`."""
+        node = self._nodes[name]
+        return node.state, node.tec, node.rec
+
+    def busy(self, t_ns: int, q_ns: int) -> bool:
+        """Whether ``transmit(t_ns, q_ns)`` has anything to do: frames pending or a node recovering by the end
+        of that quantum. (A fault window opening or closing changes nothing until a frame starts.)"""
+        if self.pending:
+            return True
+        if not self._off:
+            return False
+        wake = self._next_recovery()
+        return wake is not None and wake < t_ns + q_ns
+
+    def drain_events(self) -> list[CanEvent]:
+        """Error frames and state changes since the last call, in time order."""
+        events, self._events = self._events, []
+        return events
+
+    def stats(self) -> dict[str, Any]:
+        """Counters for the session summary."""
+        return {"frames": self.frames, "bits": self.bits, "error_frames": self.error_frames,
+                "nodes": {n.name: {"state": n.state, "tec": n.tec, "rec": n.rec, "tx_errors": n.tx_errors,
+                                   "rx_errors": n.rx_errors, "bus_off_count": n.bus_off_count,
+                                   "dropped_bus_off": n.dropped_bus_off} for n in self._nodes.values()}}
 
     def transmit(self, t_start_ns: int, q_ns: int) -> list[Delivery]:
         """Put pending frames on the wire from ``t_start_ns`` for one quantum; return what completes.
 
-        Frames still contending at the end of the quantum stay pending for the next call.
+        Frames still contending at the end of the quantum stay pending for the next call, and a frame
+        crossing its end keeps the bus busy into the next one; recoveries due in the quantum happen in time
+        order with the frames, at the first moment the bus is idle. Error frames and changes of state go to
+        :meth:`drain_events`.
         """
         out: list[Delivery] = []
         t = max(self.busy_until_ns, t_start_ns)
-        horizon = t_start_ns + q_ns
-        while self.pending and t < horizon:
-            f = heapq.heappop(self.pending)
-            bits = frame_bits(len(f.data), f.extended)
-            end = t + (bits * 1_000_000_000 + self.bitrate - 1) // self.bitrate
-            deliver = -(-end // q_ns) * q_ns
-            out.append(Delivery(deliver, end, f.arbitration_id, f.data, f.src, f.extended))
+        horizon = self._report_from = t_start_ns + q_ns
+        self._q_ns = q_ns
+        while t < horizon:
+            if self._off and self._recover_due(t):
+                continue
+            f = self._next_frame(t) if self.pending else None
+            if f is None:
+                wake = self._next_wake(t)
+                if wake is None or wake >= horizon:
+                    break
+                t = wake
+                continue
+            if self._faults and self._destroyed(f, t):
+                t = self._error_frame(f, t)
+                continue
+            end = t + self._ns(f.bits)
+            recv = self._receivers.get(f.src)
+            if recv is None:
+                recv = self._receivers_of(f.src)
+            out.append(Delivery(-(-end // q_ns) * q_ns, end, f.arbitration_id, f.data, f.src, f.extended, recv))
             self.frames += 1
-            self.bits += bits
+            self.bits += f.bits
+            if self._counting:
+                self._good_frame(f, end, recv)
             t = end
         self.busy_until_ns = max(self.busy_until_ns, t)
         return out
+
+    def _receivers_of(self, src: str) -> tuple[str, ...]:
+        recv = tuple(n for n in self._nodes if n != src and n not in self._off)
+        self._receivers[src] = recv
+        return recv
+
+    def _next_recovery(self) -> int | None:
+        return min((n.recover_at for n in self._off.values() if n.recover_at is not None), default=None)
+
+    def _next_wake(self, t: int) -> int | None:
+        """When something may happen on an idle bus: a recovery, or a suspended sender's frame may start."""
+        wake = self._next_recovery()
+        if self.pending:
+            for until in self._suspend.values():
+                if until > t and (wake is None or until < wake):
+                    wake = until
+        return wake
+
+    def _next_frame(self, t: int) -> _Pending | None:
+        """Pop the arbitration winner among pending frames whose sender is not suspended at ``t``."""
+        if self._suspend:
+            for src in [s for s, until in self._suspend.items() if until <= t]:
+                del self._suspend[src]
+        if not self._suspend:
+            return heapq.heappop(self.pending)
+        held = []
+        winner = None
+        while self.pending:
+            f = heapq.heappop(self.pending)
+            if f.src not in self._suspend:
+                winner = f
+                break
+            held.append(f)
+        for f in held:
+            heapq.heappush(self.pending, f)
+        return winner
+
+    def _destroyed(self, f: _Pending, t: int) -> bool:
+        if any(x.end_ns is not None and x.end_ns <= t for x in self._faults):
+            self._faults = [x for x in self._faults if x.end_ns is None or x.end_ns > t]
+        return any(x.start_ns <= t and x.node in ("*", f.src)
+                   and (x.probability >= 1.0 or self._rng.random() < x.probability) for x in self._faults)
+
+    def _error_frame(self, f: _Pending, t: int) -> int:
+        """``f`` is destroyed: count the errors, keep it pending (unless its sender went bus-off), return when
+        the bus is free again."""
+        detect = t + self._ns(f.bits - TAIL_BITS + 1)  # its stuffed bits up to and including the CRC delimiter
+        end = t + self._ns(f.bits - TAIL_BITS + 1 + ERROR_BITS)
+        self.bits += f.bits - TAIL_BITS + 1 + ERROR_BITS
+        self.error_frames += 1
+        node = self._nodes[f.src]
+        node.tec += 8
+        node.tx_errors += 1
+        recv = self._receivers.get(f.src)
+        if recv is None:
+            recv = self._receivers_of(f.src)
+        for name in recv:
+            r = self._nodes[name]
+            r.rec = min(r.rec + 1, REC_MAX)
+            r.rx_errors += 1
+        self._counting = True
+        self._event(detect, "error_frame", node, _state_of(node.tec, node.rec), f.arbitration_id)
+        self._update(node, detect, f.arbitration_id)
+        for name in recv:
+            self._update(self._nodes[name], detect, f.arbitration_id)
+        if node.state == "bus_off":
+            node.dropped_bus_off += 1
+        else:
+            heapq.heappush(self.pending, f)
+            if node.state == "passive":
+                self._suspend[f.src] = end + self._ns(SUSPEND_BITS)
+        return end
+
+    def _good_frame(self, f: _Pending, end: int, recv: tuple[str, ...]) -> None:
+        node = self._nodes[f.src]
+        if node.tec:
+            node.tec -= 1
+        for name in recv:
+            r = self._nodes[name]
+            if r.rec > PASSIVE_ABOVE:
+                r.rec = REC_AFTER_PASSIVE
+            elif r.rec:
+                r.rec -= 1
+        self._update(node, end, f.arbitration_id)
+        for name in recv:
+            self._update(self._nodes[name], end, f.arbitration_id)
+        if node.state == "passive":
+            self._suspend[f.src] = end + self._ns(SUSPEND_BITS)
+        self._counting = any(n.tec or n.rec for n in self._nodes.values())
+
+    def _update(self, node: _Node, wire_ns: int, arbitration_id: int) -> None:
+        """Move ``node`` to the state its counters call for, reporting the change; bus-off drops its frames."""
+        state = _state_of(node.tec, node.rec)
+        if state == node.state:
+            return
+        node.state = state
+        self._event(wire_ns, "state", node, state, arbitration_id)
+        if state != "bus_off":
+            return
+        node.bus_off_count += 1
+        self._off[node.name] = node
+        self._receivers.clear()
+        self._suspend.pop(node.name, None)
+        if node.restart_ns is not None:
+            node.recover_at = wire_ns + self._ns(RECOVERY_BITS) + node.restart_ns
+        kept = [p for p in self.pending if p.src != node.name]
+        node.dropped_bus_off += len(self.pending) - len(kept)
+        self.pending[:] = kept
+        heapq.heapify(self.pending)
+
+    def _recover_due(self, t: int) -> bool:
+        """Bring back every bus-off node whose recovery is due by ``t`` (the bus is idle at ``t``)."""
+        due = sorted((n.recover_at, n.name) for n in self._off.values()
+                     if n.recover_at is not None and n.recover_at <= t)
+        for _, name in due:
+            node = self._off.pop(name)
+            node.tec = node.rec = 0
+            node.recover_at = None
+            node.state = "active"
+            self._event(t, "state", node, "active", None)
+        if due:
+            self._receivers.clear()
+            self._counting = any(n.tec or n.rec for n in self._nodes.values())
+        return bool(due)
+
+    def _event(self, wire_ns: int, kind: Literal["error_frame", "state"], node: _Node, state: State,
+               arbitration_id: int | None) -> None:
+        q = self._q_ns
+        t_ns = max(-(-wire_ns // q) * q, self._report_from)
+        self._events.append(CanEvent(t_ns, wire_ns, kind, node.name, state, node.tec, node.rec, arbitration_id))

@@ -155,6 +155,21 @@ def cmd_experiment(a: argparse.Namespace) -> int:
     return 130 if run.interrupted else 1 if run.failed else 0
 
 
+def cmd_canlog(a: argparse.Namespace) -> int:
+    from bridge.canlog import export
+
+    rec = Path(a.recording)
+    if rec.is_dir():
+        rec = rec / "session.mcap"
+    try:
+        n = export(rec, a.out, set(a.robot) if a.robot else None)
+    except ValueError as e:
+        print(f"swarm-sitl canlog: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {n} frames to {a.out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -223,6 +238,13 @@ def main(argv: list[str] | None = None) -> None:
     p = sub.add_parser("digest", help="recompute the digest of a recording")
     p.add_argument("recording")
     p.set_defaults(fn=cmd_digest)
+
+    p = sub.add_parser("canlog", help="a session's CAN traffic as a python-can log (ASC, BLF, candump .log, CSV, "
+                                      "TRC): for cantools, SavvyCAN, Vector tools")
+    p.add_argument("recording", help="session.mcap, or the session's output directory")
+    p.add_argument("out", help="log file; the format follows the suffix: .asc .blf .log .csv .trc")
+    p.add_argument("--robot", type=int, action="append", help="only this robot's bus (repeat for more; default all)")
+    p.set_defaults(fn=cmd_canlog)
 
     p = sub.add_parser("plot", help="draw trajectories.png from a recording (plan.json beside it)")
     p.add_argument("recording")

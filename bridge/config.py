@@ -161,6 +161,17 @@ class XBeeCfg(_Model):
     pty: str | None = Field(None, description="expose this XBee's UART on a pseudo-terminal, linked at this path "
                                               "(relative to the session's output directory; '{id}' is replaced by "
                                               "the robot id); the robot's own logic then cannot open sitl://xbee")
+    device: str | None = Field(None, description="a real XBee on this serial device (or pyserial URL) is the robot's "
+                                                 "radio: its logic talks to it at series/api_mode/baud as set here, it "
+                                                 "transmits on the real air, and the simulated radio channel does not "
+                                                 "include it")
+
+    @model_validator(mode="after")
+    def _one_way_out(self) -> XBeeCfg:
+        if self.pty and self.device:
+            raise ValueError("pty and device exclude each other: the module is either simulated (its UART on a pty) or "
+                             "real (on the device)")
+        return self
 
     @field_validator("baud")
     @classmethod
@@ -210,7 +221,7 @@ class RobotGroup(_Model):
             if not self.can.slcan_pty:
                 raise ValueError("can.slcan_pty: an external logic reaches the robot's LLC through its CAN bus: "
                                  "expose it, e.g. can = { slcan_pty = \"r{id}-can\" }")
-            if self.xbee is not None and not self.xbee.pty:
+            if self.xbee is not None and not (self.xbee.pty or self.xbee.device):
                 raise ValueError("xbee.pty: an external logic reaches the robot's XBee through a pseudo-terminal: give "
                                  "it one, e.g. xbee = { pty = \"r{id}-xbee\" }")
             if self.uwb:
@@ -221,6 +232,7 @@ class RobotGroup(_Model):
     def real_ports(self) -> list[str]:
         """The fields that open this group to the outside world (wall time): what makes a session real-time."""
         return [f for f, on in (("xbee.pty", bool(self.xbee and self.xbee.pty)),
+                                ("xbee.device", bool(self.xbee and self.xbee.device)),
                                 ("can.slcan_pty", bool(self.can.slcan_pty)), ("logic", self.logic == "external")) if on]
 
     @field_validator("profile")
@@ -254,7 +266,9 @@ class FaultCfg(_Model):
     def _fields_fit_kind(self) -> FaultCfg:
         applies = {"firmware_crash": set(), "can_bus_off": {"node", "duration_s"},
                    "can_noise": {"duration_s", "probability"}}[self.kind]
-        stray = sorted(self.model_fields_set - applies - {"robot", "at_s", "kind"})
+        fields = type(self).model_fields
+        stray = sorted(f for f in self.model_fields_set - applies - {"robot", "at_s", "kind"}
+                       if getattr(self, f) != fields[f].default)
         if stray:
             raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {self.kind!r}")
         return self

@@ -128,8 +128,8 @@ class FirmwareHost:
             rp = plan.robots[r]
             board = Board()
             self.boards[r] = board
-            self.llcs[r] = LowLevelController(board, llc_params(PROFILES[rp.profile], rp.xbee))
-            if rp.xbee:
+            self.llcs[r] = LowLevelController(board, llc_params(PROFILES[rp.profile], rp.xbee if rp.sim_xbee else None))
+            if rp.sim_xbee:
                 x = rp.xbee
                 self.xbees[r] = XBeeModule(
                     series=x["series"], serial64=xbee_serial64(r), node_id=rp.name, rng=stream(seed, "xbee", r),

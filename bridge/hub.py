@@ -40,6 +40,16 @@ from bridge.plan import Plan, entity, robot_of, uwb_addr16
 from bridge.profiles import PROFILES
 from bridge.radio_medium import RadioMedium
 from bridge.recorder import Recorder
+from bridge.rng import stream_seed
+from bridge.sitl_can import (
+    CAN_ERR_BUSOFF,
+    CAN_ERR_CNT,
+    CAN_ERR_CRTL,
+    CAN_ERR_PROT,
+    CAN_ERR_RESTARTED,
+    ERROR_FRAME,
+    OWN,
+)
 from bridge.uart import SerialLine, garble
 from bridge.uwb_medium import UwbMedium
 from bridge.world import World
@@ -83,8 +93,11 @@ class Hub:
         self.wom: dict[str, Any] = dict.fromkeys(self.ents, False)
         self.inbox: dict[str, list] = {e: [] for e in self.ents}
         self.seq: dict[str, int] = dict.fromkeys(self.ents, 0)
-        self.can = [CanMedium(f"r{r:03d}/can0") for r in range(self.n)]
+        self.can = [self._can_bus(r, rp) for r, rp in enumerate(plan.robots)]
         self.can_nodes = [tuple(entity(r, role) for role in rp.can_nodes()) for r, rp in enumerate(plan.robots)]
+        self.can_echo: set[str] = set()  # nodes whose own frames come back to them (receive_own_messages)
+        self.can_events: list[dict[str, Any]] = []  # bus-off and recovery of every node, for the summary
+        self.can_noticed: dict[str, tuple[int | None, int]] = {}  # node -> (last notice, events not told since)
         self.deliveries: dict[int, list[tuple]] = defaultdict(list)
         self._dead_detail: dict[str, str] = {}
         self.dead: set[int] = set()
@@ -113,13 +126,13 @@ class Hub:
         # every entity of a robot: its firmware's, and its logic when the session runs it
         self.roles = {r: rp.modules() + (("logic",) if rp.logic == "session" else ()) for r, rp in enumerate(robots)}
         self.radio = RadioMedium(cfg.radio, self.n, cfg.session.seed, geometry) if any(
-            rp.xbee for rp in robots) else None
+            rp.sim_xbee for rp in robots) else None
         self.uwb = UwbMedium(cfg.uwb, self.n, cfg.session.seed, geometry) if any(rp.uwb for rp in robots) else None
         self.uwb_robot = {uwb_addr16(r): r for r, rp in enumerate(robots) if rp.uwb}
         self.lines: dict[tuple[int, str], SerialLine] = {}  # host -> module, paced at the host's baud
         self.host_baud: dict[tuple[int, str], int] = {}  # what the host's port is set to (last write)
         for r, rp in enumerate(robots):
-            if rp.xbee and not rp.xbee.get("pty"):
+            if rp.sim_xbee and not rp.xbee.get("pty"):
                 self.lines[(r, "xbee")] = SerialLine(rp.xbee["baud"])
                 self.host_baud[(r, "xbee")] = rp.xbee["baud"]
             if rp.uwb:
@@ -137,6 +150,26 @@ class Hub:
         m = cfg.mavlink
         self.mavlink = MavlinkGateway(m.endpoint, {r: m.system_id_base + r for r, rp in enumerate(robots)
                                                    if rp.logic == "session"}, m.per_robot) if m.endpoint else None
+
+    def _can_bus(self, r: int, rp: Any) -> CanMedium:
+        """Robot ``r``'s CAN bus: its nodes (the LLC's MCP2515 recovers from bus-off by itself; the companion
+        computer's adapter restarts after ``can.host_restart_ms``), and the faults injected into it."""
+        cfg = self.cfg
+        bus = CanMedium(f"r{r:03d}/can0", cfg.can.bitrate, seed=stream_seed(cfg.session.seed, "can", r))
+        host_ms = cfg.can.host_restart_ms
+        for role in rp.can_nodes():
+            bus.add_node(entity(r, role), None if role == "logic" and host_ms is None
+                         else round(host_ms * 1e6) if role == "logic" else 0)
+        for f in cfg.faults:
+            if f.robot != r or f.kind == "firmware_crash":
+                continue
+            start = round(f.at_s * 1e9)
+            end = None if f.duration_s is None else start + round(f.duration_s * 1e9)
+            if f.kind == "can_bus_off":
+                bus.inject(entity(r, rp.host_node if f.node == "host" else f.node), "tx_error", start, end)
+            else:
+                bus.inject("*", "noise", start, end, f.probability)
+        return bus
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def open(self) -> None:
@@ -238,9 +271,13 @@ class Hub:
                 self.counts["can_frames"] += 1
                 if r in self.dead:
                     continue
-                for node in self.can_nodes[r]:
-                    if node != d.src:
-                        self.inbox[node].append(["can0", d.arbitration_id, d.data, d.extended, d.wire_end_ns])
+                for node in d.receivers:
+                    self.inbox[node].append(["can0", d.arbitration_id, d.data, d.extended, d.wire_end_ns])
+                if d.src in self.can_echo:
+                    self.inbox[d.src].append(["can0", d.arbitration_id, d.data, d.extended, d.wire_end_ns, OWN])
+            elif kind == "can_event":
+                _, r, ev = item
+                self._can_event(t, r, ev)
             elif kind == "ent":  # radio events, UART bytes: to one entity's inbox
                 _, e, msg = item
                 if robot_of(e) not in self.dead:
@@ -255,6 +292,53 @@ class Hub:
                     continue
                 world.set_pwm(r, *pins["pwm"])
                 world.set_led(r, tuple(pins["led"]))
+
+    def _can_event(self, t: int, r: int, ev: Any) -> None:
+        """An error frame or a node's change of fault-confinement state on robot ``r``'s bus: to the recording, to
+        the node (its controller's error register; socketcan-style error frames for a logic's python-can bus), and
+        a bus-off or recovery to the launcher and the summary."""
+        node = ev.node
+        if ev.kind == "error_frame":
+            name = self._names.get(ev.arbitration_id, "")
+            self.rec.write_json(t, self._topics[r][0], "swarm_sitl.CanFrame", (
+                f'{{"id":{ev.arbitration_id},"data":"","src":"{node}","name":"{name}",'
+                f'"wire_end_ns":{ev.wire_ns},"error":true}}').encode())
+            self.counts["can_error_frames"] += 1
+            if r not in self.dead:
+                for n in self.can_nodes[r]:
+                    if n.endswith("/logic") and self.can[r].node_state(n)[0] != "bus_off":
+                        _, tec, rec = self.can[r].node_state(n)
+                        self.inbox[n].append(["can0", CAN_ERR_PROT | CAN_ERR_CNT, bytes([0, 0, 0, 0, 0, 0,
+                                              min(tec, 255), min(rec, 255)]), False, ev.wire_ns, ERROR_FRAME])
+            return
+        self.rec.write(t, f"/r{r:03d}/can0/state", "swarm_sitl.CanState",
+                       {"node": node, "state": ev.state, "tec": ev.tec, "rec": ev.rec, "wire_ns": ev.wire_ns})
+        if r in self.dead:
+            return
+        self.inbox[node].append(["can0_state", ev.state, ev.tec, ev.rec])
+        if node.endswith("/logic"):  # socketcan reports its own controller's state changes as error frames
+            klass, d1 = {"bus_off": (CAN_ERR_BUSOFF, 0), "passive": (CAN_ERR_CRTL, 0x30),
+                         "active": (CAN_ERR_RESTARTED if ev.arbitration_id is None else CAN_ERR_CRTL, 0x40)}[ev.state]
+            self.inbox[node].append(["can0", klass | CAN_ERR_CNT, bytes([0, d1, 0, 0, 0, 0, min(ev.tec, 255),
+                                                                        min(ev.rec, 255)]), False, ev.wire_ns,
+                                     ERROR_FRAME])
+        if ev.state == "bus_off" or (ev.state == "active" and ev.arbitration_id is None):
+            what = "bus-off" if ev.state == "bus_off" else "recovered from bus-off"
+            rec = {"robot": r, "t_s": round(ev.wire_ns / 1e9, 6), "node": node[node.index("/") + 1:],
+                   "event": "bus_off" if ev.state == "bus_off" else "recovered", "tec": ev.tec}
+            self.can_events.append(rec)
+            if ev.state == "bus_off":
+                self.rec.write(t, "/session/events", "swarm_sitl.Event",
+                               {"kind": "can_bus_off", "robot": r, "detail": f"CAN node {node} is bus-off"})
+            # a node that keeps failing goes bus-off every restart: tell the user at once, then every 10 s at most
+            last, quiet = self.can_noticed.get(node, (None, 0))
+            if last is None or ev.wire_ns - last >= 10_000_000_000:
+                more = f"; {quiet} more bus-off/recovery events since the last notice" if quiet else ""
+                self.status(op="notice", text=f"robot {r}: CAN node {rec['node']} {what} at sim t={rec['t_s']:.3f} s "
+                                              f"(TEC {ev.tec}){more}")
+                self.can_noticed[node] = (ev.wire_ns, 0)
+            else:
+                self.can_noticed[node] = (last, quiet + 1)
 
     def _lines(self, t: int) -> None:
         """Bytes that finished crossing a host-to-module serial line by ``t`` go to the module."""
@@ -388,8 +472,12 @@ class Hub:
                         self.counts["malformed_frames"] += 1
                         continue
                     self.seq[e] += 1
-                    self.can[r].offer(e, self.seq[e], item[1], item[2], item[3])
-                    touched.add(r)
+                    if len(item) == 5 and item[4] is True:
+                        self.can_echo.add(e)
+                    if self.can[r].offer(e, self.seq[e], item[1], item[2], item[3]):
+                        touched.add(r)
+                    else:  # the node is bus-off: its controller cannot send
+                        self.counts["can_dropped_bus_off"] += 1
                 else:
                     self._route(e, r, t, item)
             if pins is not None:
@@ -398,9 +486,12 @@ class Hub:
                 else:
                     self.counts["malformed_pins"] += 1
         for r in range(self.n):
-            if r in touched or self.can[r].pending:
-                for d in self.can[r].transmit(t, q):
+            bus = self.can[r]
+            if r in touched or bus.busy(t, q):
+                for d in bus.transmit(t, q):
                     self.deliveries[d.t_ns].append(("can", r, d))
+                for ev in bus.drain_events():
+                    self.deliveries[ev.t_ns].append(("can_event", r, ev))
 
     def _media(self, t: int) -> None:
         """Let the radio resolve the air up to the earliest time a new frame could start (t+2q: this quantum's
@@ -714,6 +805,7 @@ class Hub:
             "barrier_us_median": statistics.median(lat) if lat else None,
             "barrier_us_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
             "wall_lag": _lag_summary(self.lag_s),
+            "can_events": self.can_events,
             "mavlink": self.mavlink.stats() if self.mavlink is not None else None,
             "startup_s": getattr(self, "startup_wall_s", None),
             "failures": self.failures,
@@ -726,7 +818,8 @@ class Hub:
                  "battery_v": round(float(self.world.battery_v[r]), 3),
                  "pose_source": self.plan.robots[r].pose_source,
                  "can_frames": self.can[r].frames,
-                 "can_bus_load": round(self.can[r].bits / self.can[r].bitrate / max(self.sim_end_ns / 1e9, 1e-9), 4)}
+                 "can_bus_load": round(self.can[r].bits / self.can[r].bitrate / max(self.sim_end_ns / 1e9, 1e-9), 4),
+                 "can": _can_summary(self.can[r])}
                 for r in range(self.n)
             ],
         }
@@ -746,6 +839,13 @@ class _Geometry:
 
     def walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
         return self.world.walls(src, dsts)
+
+
+def _can_summary(bus: CanMedium) -> dict[str, Any]:
+    """A robot's bus in the summary: error frames, and each node's final state and counters (by role)."""
+    st = bus.stats()
+    return {"error_frames": st["error_frames"],
+            "nodes": {name[name.index("/") + 1:]: v for name, v in st["nodes"].items()}}
 
 
 def _lag_summary(lag_s: list[float]) -> dict[str, Any] | None:
@@ -781,10 +881,12 @@ def _valid_reply(res: dict) -> bool:
 
 
 def _valid_can(item: Any) -> bool:
-    """[bus, arbitration id, data, extended] as the participants send it; anything else is dropped."""
-    if not (isinstance(item, list | tuple) and len(item) == 4 and item[0] == "can0"):
+    """[bus, arbitration id, data, extended] as the participants send it, optionally with a fifth element True to
+    have the frame echoed back (python-can's receive_own_messages); anything else is dropped."""
+    if not (isinstance(item, list | tuple) and len(item) in (4, 5) and item[0] == "can0"
+            and (len(item) == 4 or item[4] is True)):
         return False
-    _, arb, data, ext = item
+    arb, data, ext = item[1:4]
     return (isinstance(arb, int) and isinstance(data, bytes) and isinstance(ext, bool)
             and frame_fault(arb, data, ext) is None)
 

@@ -180,6 +180,8 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
                     last_sim = msg["t"]
                     prog.update(msg["t"], msg["t"] / max(time.monotonic() - t_started, 1e-9), msg["alive"],
                                 msg.get("lag_s"))
+                elif op == "notice":  # something the user should know that is not a failure (a CAN bus-off)
+                    prog.note(f"[{cfg.session.name}] {msg.get('text', '')}")
                 elif op == "event":
                     prog.note(f"robot {msg['robot']} failed at sim t={msg['t_s']:.2f} s: {msg['kind']} "
                               f"({msg['detail'].strip().splitlines()[-1] if msg['detail'].strip() else ''})")
@@ -286,6 +288,7 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "barrier_us_median": world_res.get("barrier_us_median"),
         "barrier_us_p99": world_res.get("barrier_us_p99"),
         "wall_lag": world_res.get("wall_lag"),
+        "can_events": world_res.get("can_events", []),
         "mavlink": world_res.get("mavlink"),
         "cpu_s_total": round(cpu_total, 3),
         "cpu_s_per_robot_per_sim_s": round(cpu_total / n / sim_t, 5) if sim_t and n else None,

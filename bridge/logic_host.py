@@ -6,6 +6,7 @@ config (``interface = "sitl"``, ``sitl://`` serial ports) and the clock differ.
 
 from __future__ import annotations
 
+import urllib.parse
 from typing import Any
 
 from bridge import urlhandler
@@ -27,7 +28,10 @@ def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
     hal: dict[str, Any] = {"llc_can": dict(SITL_CAN)}
     if rp.xbee and not rp.xbee.get("pty"):  # an XBee on a pseudo-terminal belongs to whoever opens the pty
         # Series 2 receive frames carry no RSSI: the host asks the module (ATDB) after each packet
-        hal["xbee"] = {"port": "sitl://xbee", "baudrate": rp.xbee["baud"], "api_mode": rp.xbee["api_mode"],
+        port = "sitl://xbee"
+        if rp.xbee.get("device"):  # a real module: reads wait in simulated time, polling the device
+            port += "?" + urllib.parse.urlencode({"device": rp.xbee["device"]})
+        hal["xbee"] = {"port": port, "baudrate": rp.xbee["baud"], "api_mode": rp.xbee["api_mode"],
                        "rssi_from_db": rp.xbee["series"] == 2}
     if rp.uwb:
         hal["uwb"] = {"port": "sitl://uwb", "baudrate": cfg.uwb.uart_baud}

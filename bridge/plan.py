@@ -34,8 +34,13 @@ class RobotPlan:
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC, the radio modules it carries, and the slcan
         adapter on its CAN bus when it is exposed."""
-        return (("llc",) + (("xbee",) if self.xbee else ()) + (("uwb",) if self.uwb else ())
+        return (("llc",) + (("xbee",) if self.sim_xbee else ()) + (("uwb",) if self.uwb else ())
                 + (("slcan",) if self.slcan_pty else ()))
+
+    @property
+    def sim_xbee(self) -> bool:
+        """It carries an XBee the session simulates (not a real one on a device)."""
+        return bool(self.xbee) and not self.xbee.get("device")
 
     def can_nodes(self) -> tuple[str, ...]:
         """The roles of the nodes on this robot's CAN bus."""

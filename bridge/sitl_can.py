@@ -37,6 +37,9 @@ from bridge.can_medium import frame_fault
 
 # what a delivered CAN item is (its optional sixth field), besides a frame from another node
 OWN, ERROR_FRAME = 1, 2
+# socketcan's error frame classes (linux/can/error.h), the arbitration id of an error frame; bytes 6 and 7 carry
+# the node's TEC and REC (CAN_ERR_CNT), byte 1 the controller status for CAN_ERR_CRTL
+CAN_ERR_CRTL, CAN_ERR_PROT, CAN_ERR_BUSOFF, CAN_ERR_RESTARTED, CAN_ERR_CNT = 0x04, 0x08, 0x40, 0x100, 0x200
 STATES = {"active": BusState.ACTIVE, "passive": BusState.PASSIVE, "bus_off": BusState.ERROR}
 
 

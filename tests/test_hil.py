@@ -128,3 +128,48 @@ q_min_dbm = {hal["params"]["q_min_dbm"]}
     assert rssi and min(rssi) >= -94 and max(rssi) <= -30
     # the session was paced to wall time and says how far it lagged
     assert s["wall_lag"]["quanta"] == s["quanta"]
+
+
+@pytest.mark.session
+def test_a_robot_with_a_real_xbee_on_a_serial_device(tmp_path: Path) -> None:
+    """A simulated robot whose XBee is a real module on a serial port (here a pseudo-terminal whose far side runs the
+    XBee firmware in wall time, with a neighbour heard over its air): its logic identifies the module, hears the
+    neighbour with RSSI and transmits through it; the simulated radio channel does not include it."""
+    from tests.test_devices import NEIGHBOUR64, SERIAL64, EmulatedXBee
+
+    with EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5) as radio:
+        cfg = tmp_path / "real_xbee.toml"
+        cfg.write_text(f"""
+[session]
+name = "real-xbee"
+duration_s = 6
+speed = 1
+[arena]
+width_m = 4
+length_m = 4
+[[robots]]
+count = 1
+behaviour = "tests.xbee_probe:RealRadio"
+xbee = {{ series = 1, api_mode = 1, baud = 115200, device = "{radio.path}" }}
+[robots.placement]
+kind = "explicit"
+poses = [[2.0, 2.0, 0.0]]
+""")
+        plan = make_plan(load_config(cfg), str(cfg))
+        assert plan.robots[0].modules() == ("llc",)  # no simulated module
+        out = tmp_path / "run"
+        r = subprocess.run(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, capture_output=True, text=True,
+                           timeout=120)
+        assert r.returncode == 0, r.stderr[-3000:]
+        c = radio.module.counters  # the stand-in has no air to send on: its transmit buffer fills, then overflows
+        tx = c["tx_requests"] + c["serial_rx_overflow"]
+    logs: dict[str, list[dict]] = {}
+    for topic, _t, payload in iter_messages(out / "session.mcap"):
+        if topic.startswith("/r000/log/"):
+            logs.setdefault(topic.rsplit("/", 1)[1], []).append(json.loads(payload))
+    assert logs["identity"] == [{"serial64": SERIAL64, "series": 1}]
+    heard = logs["heard"]
+    assert len(heard) >= 8 and all(h["src64"] == NEIGHBOUR64 and h["rssi_dbm"] == -60 for h in heard)
+    assert tx >= 10  # the logic's hellos went to the real module
+    s = json.loads((out / "summary.json").read_text())
+    assert "xbee_module" not in s["per_robot"][0] and s["wall_lag"] is not None

@@ -82,3 +82,23 @@ class Idle(Controller):
 
     def step(self) -> None:
         pass
+
+
+class RealRadio(Controller):
+    """For a robot whose XBee is a real module: identify it once, then broadcast a hello each step and log what it
+    heard (source, RSSI), as any radio behaviour would."""
+
+    period_s = 0.5
+
+    def init(self, robot) -> None:
+        super().init(robot)
+        info = robot.xbee.identify()
+        robot.log("identity", serial64=info.serial64, series=info.series)
+        self.heard = 0
+
+    def step(self) -> None:
+        xb = self.robot.xbee
+        xb.send_nowait(None, b"hello from the session")
+        while (pkt := xb.recv(timeout=0)) is not None:
+            self.heard += 1
+            self.robot.log("heard", src64=pkt.src64, rssi_dbm=pkt.rssi_dbm, data=pkt.data.decode(errors="replace"))

@@ -1,0 +1,234 @@
+"""Probing the real devices a session config names, before the session starts.
+
+A hardware-in-the-loop session must not start against a device that is missing, held by another program or
+answering garbage: each probe opens its device the way the session will, asks it to identify itself, and
+returns a ``DeviceReport`` whose ``detail`` names the device and says what is wrong (or what answered).
+
+- XBee: ``serial_for_url(..., exclusive=True)`` (an exclusive lock, so a port another program holds with one
+  reports busy), then the project's own driver (``swarm_logic.xbee.XBee``) runs ``identify``; when nothing
+  sensible comes back, the driver's counters tell silence from garbage (wrong baud rate, other API mode).
+- CAN: ``can.Bus(**kwargs)`` for any python-can interface, then it listens for traffic and names the ids
+  with the robots' DBC.
+- MAVLink: a pymavlink connection string; it waits for a HEARTBEAT (sending a GCS heartbeat once a second,
+  as a ground station does, so endpoints that only talk to a known peer answer) and counts the packets that
+  failed their CRC or were not MAVLink meanwhile.
+
+Every probe closes what it opened, also when it fails, and never raises for a device problem.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+import serial
+
+os.environ["MAVLINK20"] = "1"  # parse and send MAVLink 2 (it also accepts MAVLink 1 packets)
+from pymavlink import mavutil
+
+from swarm_logic.clock import WallClock
+from swarm_logic.interfaces import eswarbot_llc_db
+from swarm_logic.xbee import XBee, XBeeError, XBeeTimeout
+
+LISTEN_S = 0.5  # how long a CAN probe keeps listening after the first frame, to see what is on the bus
+GCS_HEARTBEAT_S = 1.0
+NETWORK_SCHEMES = ("udpin:", "udpout:", "udpbcast:", "udp:", "tcp:", "tcpin:")
+# the driver's counters of bytes and frames that were not a good answer
+_GARBAGE_FRAMES = ("checksum_errors", "bad_length", "truncated", "stalled", "malformed")
+
+
+@dataclass
+class DeviceReport:
+    """The outcome of one probe: ``detail`` is one line for a person, ``info`` what the device said."""
+
+    kind: str  # "xbee", "can" or "mavlink"
+    name: str  # the device as the config names it
+    ok: bool
+    detail: str
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def _os_error_detail(e: OSError | serial.SerialException) -> str:
+    """What an open failure means, from its errno."""
+    code = getattr(e, "errno", None)
+    if code in (errno.ENOENT, errno.ENODEV, errno.ENXIO):
+        return "no such device"
+    if code in (errno.EACCES, errno.EPERM):
+        return "permission denied (is the user in the group owning the device, e.g. dialout?)"
+    if code in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK):
+        return "busy: another program has it open"
+    return str(e)
+
+
+def _open_serial(port: str, baudrate: int) -> serial.SerialBase | str:
+    """The port opened exclusively (non-blocking reads), or why it cannot be."""
+    if "://" not in port:  # a device path, not one of pyserial's URL handlers
+        try:
+            mode = os.stat(port).st_mode
+        except OSError as e:
+            return _os_error_detail(e)
+        if not stat.S_ISCHR(mode):
+            return "not a serial device (not a character device)"
+    try:
+        return serial.serial_for_url(port, baudrate=baudrate, timeout=0, exclusive=True)
+    except serial.SerialException as e:
+        if "exclusively lock" in str(e):  # pyserial's flock failed: someone else holds the lock
+            return "busy: locked by another process"
+        return _os_error_detail(e)
+    except ValueError as e:  # an unsupported baud rate or URL
+        return str(e)
+
+
+def probe_xbee(port: str, baudrate: int = 9600, api_mode: int = 1, timeout_s: float = 2.0) -> DeviceReport:
+    """Open ``port`` and ask the XBee on it to identify itself (SH, SL, MY, NI, HV, VR) in API mode ``api_mode``."""
+    if api_mode not in (1, 2):
+        raise ValueError(f"api_mode must be 1 or 2, got {api_mode!r}")
+    setup = {"baudrate": baudrate, "api_mode": api_mode}
+    ser = _open_serial(port, baudrate)
+    if isinstance(ser, str):
+        return DeviceReport("xbee", port, False, f"{port}: {ser}", setup)
+    try:
+        xb = XBee(ser, WallClock(), api_mode=api_mode)
+        try:
+            m = xb.identify(timeout=timeout_s)
+        except XBeeTimeout as e:
+            c = xb.counters
+            noise = c["rx_bytes"] - c["frame_bytes"]  # bytes that were no part of a good frame
+            info = {**setup, "counters": {k: v for k, v in c.items() if v}}
+            if noise > 0:
+                bad = sum(c[k] for k in _GARBAGE_FRAMES)
+                return DeviceReport("xbee", port, False, (
+                    f"{port}: answers garbage: {bad} malformed frames, {noise} noise bytes - "
+                    f"wrong baud rate (tried {baudrate}) or not in API mode AP={api_mode}?"), info)
+            heard = f" ({c['frames']} frames, none answering AT{e.command})" if c["frames"] else ""
+            return DeviceReport("xbee", port, False, (
+                f"{port}: no answer within {timeout_s:g} s{heard} - is the module powered and connected, "
+                f"at {baudrate} baud in API mode AP={api_mode}?"), info)
+        except XBeeError as e:
+            return DeviceReport("xbee", port, False, f"{port}: refuses AT{e.command}: status {e.status}", setup)
+        except serial.SerialException as e:  # unplugged while probing
+            return DeviceReport("xbee", port, False, f"{port}: {e}", setup)
+    finally:
+        ser.close()
+    info = {**setup, "serial": f"{m.serial64:016X}", "addr16": m.addr16, "node_id": m.node_id,
+            "hw_version": m.hw_version, "fw_version": m.fw_version, "series": m.series,
+            "modem_status": [s.name for s in xb.modem_status]}
+    series = "Series 1 (802.15.4)" if m.series == 1 else "Series 2 (ZigBee)"
+    return DeviceReport("xbee", port, True, (
+        f"{port}: XBee {series}, serial {m.serial64:016X}, firmware {m.fw_version:04X}, "
+        f"hardware {m.hw_version:04X}, NI {m.node_id!r}"), info)
+
+
+def _can_name(kwargs: dict[str, Any]) -> str:
+    iface = kwargs.get("interface", kwargs.get("bustype", "default"))
+    channel = kwargs.get("channel")
+    return f"{iface}:{channel}" if channel is not None else str(iface)
+
+
+def probe_can(kwargs: dict[str, Any], timeout_s: float = 2.0) -> DeviceReport:
+    """Open ``can.Bus(**kwargs)`` and wait up to ``timeout_s`` for traffic; once a frame came, listen
+    ``LISTEN_S`` more and report the frames, their ids and DBC names. The bus is always shut down."""
+    name = _can_name(kwargs)
+    setup = {k: v for k, v in kwargs.items() if isinstance(v, str | int | float | bool)}
+    try:
+        bus = can.Bus(**kwargs)
+    except can.CanInterfaceNotImplementedError as e:
+        known = ", ".join(sorted(can.interfaces.VALID_INTERFACES))
+        return DeviceReport("can", name, False, f"{name}: interface not available here: {e} (python-can knows "
+                                                f"{known})", setup)
+    except can.CanInitializationError as e:
+        return DeviceReport("can", name, False, f"{name}: cannot open: {e}", setup)
+    except OSError as e:
+        return DeviceReport("can", name, False, f"{name}: cannot open: {_os_error_detail(e)}", setup)
+    except Exception as e:  # interfaces raise what their vendor libraries raise (ValueError, TypeError, NameError)
+        return DeviceReport("can", name, False, f"{name}: cannot open: {type(e).__name__}: {e}", setup)
+    frames = errors = 0
+    ids: dict[int, str] = {}
+    names = {m.frame_id: m.name for m in eswarbot_llc_db().messages}
+    try:
+        end = time.monotonic() + timeout_s
+        while (left := end - time.monotonic()) > 0:
+            msg = bus.recv(timeout=left)
+            if msg is None:
+                continue
+            if msg.is_error_frame:
+                errors += 1
+                continue
+            if not frames:
+                end = min(end, time.monotonic() + LISTEN_S)
+            frames += 1
+            ids.setdefault(msg.arbitration_id, names.get(msg.arbitration_id, ""))
+    except can.CanError as e:
+        return DeviceReport("can", name, False, f"{name}: receive failed: {e}", setup)
+    finally:
+        bus.shutdown()
+    info = {**setup, "frames": frames, "error_frames": errors, "ids": dict(sorted(ids.items()))}
+    if not frames:
+        why = f"only {errors} error frames" if errors else "no traffic"
+        return DeviceReport("can", name, False, (
+            f"{name}: {why} within {timeout_s:g} s - is the board powered and the bitrate right?"), info)
+    seen = ", ".join(f"{n} (0x{i:03X})" if n else f"0x{i:03X}" for i, n in sorted(ids.items()))
+    return DeviceReport("can", name, True, f"{name}: {frames} frames, {len(ids)} ids: {seen}", info)
+
+
+def _enum_name(enum: str, value: int) -> str:
+    entry = mavutil.mavlink.enums.get(enum, {}).get(value)
+    return entry.name if entry is not None else str(value)
+
+
+def probe_mavlink(url: str, timeout_s: float = 3.0, source_system: int = 255, baudrate: int = 115200) -> DeviceReport:
+    """Connect to ``url`` (``udpin:HOST:PORT``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``, ... or a serial device
+    at ``baudrate``) and wait up to ``timeout_s`` for a HEARTBEAT from another system or component."""
+    setup: dict[str, Any] = {"url": url}
+    if not url.startswith(NETWORK_SCHEMES):
+        ser = _open_serial(url, baudrate)  # pymavlink opens without a lock: check it is free first
+        if isinstance(ser, str):
+            return DeviceReport("mavlink", url, False, f"{url}: {ser}", setup)
+        ser.close()
+    try:
+        conn = mavutil.mavlink_connection(url, baud=baudrate, source_system=source_system, dialect="common",
+                                          retries=0, autoreconnect=False)
+    except (OSError, serial.SerialException) as e:
+        return DeviceReport("mavlink", url, False, f"{url}: cannot open: {_os_error_detail(e)}", setup)
+    except ValueError as e:
+        return DeviceReport("mavlink", url, False, f"{url}: bad connection string: {e}", setup)
+    bad_crc = bad_data = 0
+    hb = None
+    try:
+        end = time.monotonic() + timeout_s
+        next_hb = 0.0
+        while (now := time.monotonic()) < end:
+            if now >= next_hb:
+                conn.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                next_hb = now + GCS_HEARTBEAT_S
+            msg = conn.recv_msg()
+            if msg is None:
+                conn.select(min(0.05, end - now))
+            elif msg.get_type() == "BAD_DATA":
+                if "CRC" in str(msg.reason):
+                    bad_crc += 1
+                else:
+                    bad_data += 1
+            elif msg.get_type() == "HEARTBEAT" and (msg.get_srcSystem(), msg.get_srcComponent()) != (
+                    source_system, conn.source_component):
+                hb = msg
+                break
+    except OSError as e:
+        return DeviceReport("mavlink", url, False, f"{url}: receive failed: {_os_error_detail(e)}", setup)
+    finally:
+        conn.close()
+    info = {**setup, "bad_crc": bad_crc, "bad_data": bad_data}
+    garbage = f" ({bad_crc} packets with a bad CRC, {bad_data} bad data)" if bad_crc or bad_data else ""
+    if hb is None:
+        return DeviceReport("mavlink", url, False, f"{url}: no heartbeat within {timeout_s:g} s{garbage}", info)
+    mav_type, autopilot = _enum_name("MAV_TYPE", hb.type), _enum_name("MAV_AUTOPILOT", hb.autopilot)
+    info |= {"sysid": hb.get_srcSystem(), "compid": hb.get_srcComponent(), "type": mav_type, "autopilot": autopilot,
+             "mavlink": 2 if hb.get_msgbuf()[0] == 0xFD else 1}
+    return DeviceReport("mavlink", url, True, (
+        f"{url}: system {hb.get_srcSystem()} component {hb.get_srcComponent()}, {mav_type}, {autopilot}{garbage}"),
+        info)
