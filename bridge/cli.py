@@ -155,6 +155,25 @@ def cmd_experiment(a: argparse.Namespace) -> int:
     return 130 if run.interrupted else 1 if run.failed else 0
 
 
+def cmd_devices(a: argparse.Namespace) -> int:
+    from bridge.devices import session_devices
+
+    cfg = load_config(a.config)
+    out = a.out or f"runs/{Path(a.config).stem}"
+    found = session_devices(cfg, out)
+    if not found:
+        print(f"{a.config}: opens nothing to the outside world: a fully simulated session")
+        return 0
+    bad = 0
+    for d in found:
+        print(f"{d.field}: {d.target}\n    {d.note}")
+        if d.real and not a.no_check:
+            rep = d.check()
+            bad += not rep.ok
+            print(f"    {'answers' if rep.ok else 'FAILED'}: {rep.detail}")
+    return 1 if bad else 0
+
+
 def cmd_canlog(a: argparse.Namespace) -> int:
     from bridge.canlog import export
 
@@ -238,6 +257,13 @@ def main(argv: list[str] | None = None) -> None:
     p = sub.add_parser("digest", help="recompute the digest of a recording")
     p.add_argument("recording")
     p.set_defaults(fn=cmd_digest)
+
+    p = sub.add_parser("devices", help="what a config would open to the outside world (pseudo-terminals, real "
+                                       "devices, the MAVLink endpoint); checks that each real device answers")
+    p.add_argument("config")
+    p.add_argument("--out", help="the session's output directory, where its pseudo-terminal links go")
+    p.add_argument("--no-check", action="store_true", help="only list; do not open the real devices")
+    p.set_defaults(fn=cmd_devices)
 
     p = sub.add_parser("canlog", help="a session's CAN traffic as a python-can log (ASC, BLF, candump .log, CSV, "
                                       "TRC): for cantools, SavvyCAN, Vector tools")

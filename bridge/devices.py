@@ -28,7 +28,7 @@ from typing import Any
 import can
 import serial
 
-os.environ["MAVLINK20"] = "1"  # parse and send MAVLink 2 (it also accepts MAVLink 1 packets)
+os.environ.setdefault("MAVLINK20", "1")  # parse and send MAVLink 2 (it also accepts MAVLink 1 packets)
 from pymavlink import mavutil
 
 from swarm_logic.clock import WallClock
@@ -232,3 +232,60 @@ def probe_mavlink(url: str, timeout_s: float = 3.0, source_system: int = 255, ba
     return DeviceReport("mavlink", url, True, (
         f"{url}: system {hb.get_srcSystem()} component {hb.get_srcComponent()}, {mav_type}, {autopilot}{garbage}"),
         info)
+
+
+@dataclass
+class SessionDevice:
+    """Something a session config opens to the outside world: a port it creates for outside programs, or a real
+    device it uses (``real``: it must answer before the session starts)."""
+
+    field: str  # the config field, e.g. "robots[1].xbee.device (r005)"
+    kind: str  # "xbee", "can", "mavlink"
+    target: str  # a path, a device or an endpoint
+    real: bool
+    note: str
+    probe: Any = None  # () -> DeviceReport, for a real device
+
+    def check(self) -> DeviceReport | None:
+        return self.probe() if self.probe is not None else None
+
+
+def session_devices(cfg: Any, out_dir: str = "runs/<config name>") -> list[SessionDevice]:
+    """What a session of ``cfg`` (a ``bridge.config.Config``) would open, in robot order, then the MAVLink
+    endpoint. Pseudo-terminal links are relative to the session's output directory ``out_dir``."""
+    from bridge.mavlink_gateway import parse_endpoint
+
+    found: list[SessionDevice] = []
+    r = 0
+    for i, g in enumerate(cfg.robots):
+        for rid in range(r, r + g.count):
+            who = f"r{rid:03d}"
+            x = g.xbee
+            if x is not None and x.pty:
+                found.append(SessionDevice(f"robots[{i}].xbee.pty ({who})", "xbee",
+                                           f"{out_dir}/{x.pty.replace('{id}', str(rid))}", False,
+                                           f"simulated XBee Series {x.series}, API {x.api_mode}, {x.baud} baud: "
+                                           "a pseudo-terminal for XCTU, digi-xbee or a robot's logic"))
+            if x is not None and x.device:
+                found.append(SessionDevice(
+                    f"robots[{i}].xbee.device ({who})", "xbee", x.device, True,
+                    f"real XBee, expected Series {x.series}, API {x.api_mode}, {x.baud} baud",
+                    lambda x=x: probe_xbee(x.device, x.baud, x.api_mode)))
+            if g.can.slcan_pty:
+                found.append(SessionDevice(f"robots[{i}].can.slcan_pty ({who})", "can",
+                                           f"{out_dir}/{g.can.slcan_pty.replace('{id}', str(rid))}", False,
+                                           f"the robot's CAN bus ({cfg.can.bitrate} bit/s) as an slcan adapter: "
+                                           "python-can interface 'slcan'"))
+            if g.logic == "external":
+                found.append(SessionDevice(f"robots[{i}].logic ({who})", "logic", "(outside the session)", False,
+                                           f"the robot's {g.behaviour} logic runs outside, in wall time, through "
+                                           "the ports above"))
+        r += g.count
+    m = cfg.mavlink
+    if m.endpoint is not None:
+        ep = parse_endpoint(m.endpoint)
+        what = "listens there" if ep.mode == "udpin" else "sends to a ground station listening there"
+        found.append(SessionDevice("mavlink.endpoint", "mavlink", m.endpoint + (" + robot id" if m.per_robot else ""),
+                                   False, f"UDP: the swarm's MAVLink endpoint {what}; systems "
+                                          f"{m.system_id_base}..{m.system_id_base + cfg.robot_count - 1}"))
+    return found

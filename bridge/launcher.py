@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from bridge import transport
-from bridge.config import config_warnings, load_config
+from bridge.config import ConfigError, config_warnings, load_config
 from bridge.plan import make_plan
 
 # One worker thread per zenoh runtime: a session runs tens of processes on a few cores, and fewer
@@ -89,6 +89,11 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     if progress is not None:
         for w in config_warnings(cfg):
             print(f"{config_path}: warning: {w}", file=progress)
+    from bridge.devices import session_devices  # pymavlink and python-can: only when a session starts
+
+    for d in session_devices(cfg):  # a real device that does not answer stops the session before it starts
+        if d.real and not (rep := d.check()).ok:
+            raise ConfigError(f"{config_path}: {d.field}: {rep.detail}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("session.mcap", "summary.json", "world_result.json", "trajectories.png", "plan.json"):

@@ -173,3 +173,19 @@ poses = [[2.0, 2.0, 0.0]]
     assert tx >= 10  # the logic's hellos went to the real module
     s = json.loads((out / "summary.json").read_text())
     assert "xbee_module" not in s["per_robot"][0] and s["wall_lag"] is not None
+
+
+def test_devices_lists_ports_and_refuses_a_missing_device(tmp_path: Path) -> None:
+    r = subprocess.run(cli("devices", str(MIXED), "--out", "runs/x"), cwd=ROOT, capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0
+    assert "robots[1].xbee.pty (r005): runs/x/r5-xbee" in r.stdout and "robots[1].can.slcan_pty (r005)" in r.stdout
+    cfg = tmp_path / "gone.toml"
+    cfg.write_text(f'[session]\nspeed = 1\n[[robots]]\nxbee = {{ device = "{tmp_path / "ttyUSB9"}" }}\n')
+    r = subprocess.run(cli("devices", str(cfg)), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1 and "FAILED" in r.stdout and "no such device" in r.stdout
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert f"robots[0].xbee.device (r000): {tmp_path / 'ttyUSB9'}" in r.stderr and "no such device" in r.stderr
+    assert not (tmp_path / "run").exists()  # nothing started
