@@ -189,3 +189,54 @@ def test_devices_lists_ports_and_refuses_a_missing_device(tmp_path: Path) -> Non
     assert r.returncode == 2, r.stderr
     assert f"robots[0].xbee.device (r000): {tmp_path / 'ttyUSB9'}" in r.stderr and "no such device" in r.stderr
     assert not (tmp_path / "run").exists()  # nothing started
+
+
+@pytest.mark.session
+def test_a_real_xbee_that_disappears_fails_its_robot_only(tmp_path: Path) -> None:
+    """Unplugged mid-session: the robot with the real XBee fails (its logic's port raises), the others go on."""
+    import threading
+
+    from tests.test_devices import EmulatedXBee
+
+    radio = EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5).__enter__()
+    unplug = threading.Timer(4.0, radio.__exit__, (None, None, None))
+    cfg = tmp_path / "unplug.toml"
+    cfg.write_text(f"""
+[session]
+name = "unplug"
+duration_s = 8
+speed = 1
+[arena]
+width_m = 4
+length_m = 4
+[[robots]]
+count = 1
+behaviour = "tests.xbee_probe:RealRadio"
+xbee = {{ series = 1, api_mode = 1, baud = 115200, device = "{radio.path}" }}
+[robots.placement]
+kind = "explicit"
+poses = [[1.0, 1.0, 0.0]]
+[[robots]]
+count = 1
+behaviour = "random_walk"
+[robots.placement]
+kind = "explicit"
+poses = [[3.0, 3.0, 0.0]]
+""")
+    out = tmp_path / "run"
+    p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        wait_started(p)
+        unplug.start()
+        p.wait(timeout=60)
+    finally:
+        unplug.join()
+        if p.poll() is None:
+            p.kill()
+    s = json.loads((out / "summary.json").read_text())
+    assert s["exit_code"] == 0
+    (fail,) = s["failures"]
+    assert fail["robot"] == 0 and fail["kind"] == "raised", fail
+    assert "the device failed or disappeared" in fail["detail"]
+    assert s["per_robot"][1]["alive"] and not s["per_robot"][0]["alive"]

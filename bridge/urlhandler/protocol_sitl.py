@@ -104,9 +104,12 @@ class Serial(SerialBase):
 
     def _pull(self) -> None:
         if self._real is not None:
-            n = self._real.in_waiting
-            if n:
-                self._buf += self._real.read(n)
+            try:
+                n = self._real.in_waiting
+                if n:
+                    self._buf += self._real.read(n)
+            except (OSError, SerialException) as e:
+                raise SerialException(f"{self._real.port}: the device failed or disappeared: {e}") from e
             return
         rx = self._rx
         while rx:
@@ -139,7 +142,10 @@ class Serial(SerialBase):
         rt = self._check()
         data = to_bytes(data)
         if data and self._real is not None:
-            return self._real.write(data) or 0
+            try:
+                return self._real.write(data) or 0
+            except (OSError, SerialException) as e:
+                raise SerialException(f"{self._real.port}: the device failed or disappeared: {e}") from e
         if data:
             rt.outbox.append(["uart", self.device, bytes(data), int(self._baudrate)])
         return len(data)
