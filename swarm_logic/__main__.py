@@ -26,8 +26,12 @@ def load_hal(path: str) -> dict[str, Any]:
         raise SystemExit(f"{p}: no such file") from None
     except tomllib.TOMLDecodeError as e:
         raise SystemExit(f"{p}: not valid TOML: {e}") from None
-    if not isinstance(hal.get("llc_can"), dict) or "interface" not in hal["llc_can"]:
-        raise SystemExit(f"{p}: llc_can.interface: missing (a python-can interface, e.g. 'socketcan' or 'slcan')")
+    if isinstance(hal.get("llc_mavlink"), dict):  # a vehicle that only speaks MAVLink (swarm_logic.mavlink_llc)
+        if "llc_can" in hal:
+            raise SystemExit(f"{p}: llc_can and llc_mavlink: name one low level, not both")
+    elif not isinstance(hal.get("llc_can"), dict) or "interface" not in hal["llc_can"]:
+        raise SystemExit(f"{p}: llc_can.interface: missing (a python-can interface, e.g. 'socketcan' or 'slcan'; "
+                         "or llc_mavlink.url for a MAVLink vehicle)")
     if hal.get("clock", "monotonic") not in CLOCKS:
         raise SystemExit(f"{p}: clock: {hal['clock']!r} is not one of {', '.join(CLOCKS)}")
     return hal

@@ -2,6 +2,9 @@
 
 A controller sees only its ``Robot`` (devices, clock, parameters, random stream); it knows nothing of
 the simulator. The runner calls ``step()`` every ``period_s`` of the robot's clock.
+
+Two hooks serve a ground station (``swarm_logic.mavlink``): ``set_param`` changes a parameter while the robot
+runs, ``telemetry`` names a few numbers of the behaviour's state.
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ if TYPE_CHECKING:
 class Controller(ABC):
     period_s: float = 0.1
     defaults: ClassVar[dict[str, Any]] = {}  # parameters and their defaults: configs are checked against them
+    # parameters read only by ``init``: ``set_param`` stores them for the next start (a reboot) and no sooner
+    static_params: ClassVar[frozenset[str]] = frozenset()
 
     def init(self, robot: Robot) -> None:
         self.robot = robot
@@ -28,3 +33,18 @@ class Controller(ABC):
 
     def destroy(self) -> None:
         """Leave the robot safe (motors stopped)."""
+
+    def set_param(self, name: str, value: Any) -> None:
+        """Change parameter ``name`` at run time: stored in ``robot.params`` (a restart keeps it) and, unless it is
+        one of ``static_params``, in ``self.p`` where the controller keeps its parameters there. ValueError for an
+        unknown name or a value the controller refuses (overrides check theirs, then call this)."""
+        if name not in self.defaults:
+            raise ValueError(f"unknown parameter {name!r}")
+        self.robot.params[name] = value
+        p = getattr(self, "p", None)
+        if isinstance(p, dict) and name not in self.static_params:
+            p[name] = value
+
+    def telemetry(self) -> dict[str, float | int]:
+        """A few numbers of the behaviour's state for a ground station, by name (at most 10 characters)."""
+        return {}

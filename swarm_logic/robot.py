@@ -10,6 +10,12 @@ and on the robot ``{"llc_can": {"interface": "socketcan", "channel": "can0"}, "x
 "log": {"path": "robot.jsonl"}, "start_pose": [1.2, 0.4, 0.0]}``. The XBee and UWB modules are optional: a robot
 without them has ``xbee`` / ``uwb`` set to None. ``start_pose`` (x, y, yaw in the arena frame) is where the robot
 was put down, as the operator or the deploying robot tells it; a session fills it in from the placement.
+
+``mavlink`` (optional) gives the robot its MAVLink face (``swarm_logic.mavlink``; ``robot.mavlink``, else None):
+``{"port": "sitl://mavlink"}`` (any pyserial URL or device, ``baudrate``) or ``{"url": "udpout:127.0.0.1:14550"}``
+(a pymavlink connection), with ``system_id`` (default robot id + 1), ``boot`` ("auto", "hold" or "disarmed") and
+``rates`` (message name -> Hz). ``llc_mavlink`` instead of ``llc_can`` drives a vehicle that speaks only MAVLink
+(``swarm_logic.mavlink_llc``): ``{"url": "udpin:0.0.0.0:14551", "target_system": 1}``.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from swarm_logic.log import JsonlLog, Sink
 
 if TYPE_CHECKING:
     from swarm_logic.hal import LowLevel, Radio
+    from swarm_logic.mavlink import MavlinkFace
     from swarm_logic.uwb import Uwb
     from swarm_logic.xbee import XBee
 
@@ -45,6 +52,7 @@ class Robot:
     ports: list[serial.SerialBase] = field(default_factory=list)
     log_sink: Sink | None = None
     start_pose: tuple[float, float, float] | None = None
+    mavlink: MavlinkFace | None = None
     rng_py: random.Random = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -54,12 +62,22 @@ class Robot:
     @classmethod
     def open(cls, robot_id: int, hal: dict[str, Any], clock: Clock, seed: int,
              params: dict[str, Any] | None = None, log_sink: Sink | None = None) -> Robot:
-        llc_cfg = dict(hal.get("llc_can") or {})
-        if "interface" not in llc_cfg:
-            raise ValueError("HAL config needs llc_can.interface (a python-can interface name)")
-        bus = can.Bus(**llc_cfg)
+        if hal.get("llc_mavlink") is not None:
+            if hal.get("llc_can"):
+                raise ValueError("HAL config llc_mavlink: the robot has one low-level controller; give llc_can or "
+                                 "llc_mavlink, not both")
+            from swarm_logic.mavlink_llc import open_low_level
+
+            llc: LowLevel = open_low_level(hal["llc_mavlink"], clock)
+            buses: list[can.BusABC] = []
+        else:
+            llc_cfg = dict(hal.get("llc_can") or {})
+            if "interface" not in llc_cfg:
+                raise ValueError("HAL config needs llc_can.interface (a python-can interface name) or llc_mavlink")
+            bus = can.Bus(**llc_cfg)
+            llc, buses = LlcClient(bus), [bus]
         rng = np.random.Generator(np.random.PCG64(seed))
-        robot = cls(robot_id, clock, LlcClient(bus), rng, dict(params or {}), [bus])
+        robot = cls(robot_id, clock, llc, rng, dict(params or {}), buses)
         if hal.get("start_pose") is not None:
             pose = tuple(float(v) for v in hal["start_pose"])
             if len(pose) != 3:
@@ -81,6 +99,10 @@ class Robot:
                 port = _open_port(u, "uwb", 115200)
                 robot.ports.append(port)
                 robot.uwb = Uwb(port, clock)
+            if hal.get("mavlink") is not None:
+                from swarm_logic.mavlink import open_face
+
+                robot.mavlink = open_face(hal["mavlink"], robot_id, clock)
             if log_sink is None and (hal.get("log") or {}).get("path"):
                 log_sink = JsonlLog(hal["log"]["path"], clock)
             robot.log_sink = log_sink
@@ -101,6 +123,11 @@ class Robot:
             self.xbee.poll()
 
     def close(self) -> None:
+        if self.mavlink is not None:
+            self.mavlink.close()
+        close_llc = getattr(self.llc, "close", None)  # a MAVLink low level holds a connection
+        if close_llc is not None:
+            close_llc()
         for b in self.buses:
             b.shutdown()
         for p in self.ports:

@@ -332,6 +332,7 @@ class XBee:
         self._at_done: dict[int, tuple[int, bytes]] = {}
         self._tx_done: dict[int, TxStatus] = {}
         self._last_rx = clock.now()  # clock time of the last byte read
+        self.last_rssi_dbm: int | None = None  # RSSI of the newest packet ``recv`` handed out with one
 
     # -- public API ----------------------------------------------------------------------------------------
     @property
@@ -439,6 +440,8 @@ class XBee:
             if rssi is None:
                 self.counters["db_ambiguous"] += 1
             pkt = Received(pkt.src64, pkt.src16, pkt.data, rssi, pkt.broadcast, pkt.t)
+        if pkt.rssi_dbm is not None:
+            self.last_rssi_dbm = pkt.rssi_dbm
         return pkt
 
     def poll(self) -> None:

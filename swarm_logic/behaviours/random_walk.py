@@ -9,12 +9,14 @@ tumbling, red: avoiding.
 from __future__ import annotations
 
 import math
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from swarm_logic.controller import Controller
 from swarm_logic.robot import Robot
 
 GREEN, BLUE, RED = (0, 255, 0), (0, 0, 255), (255, 0, 0)
+STATES = ("run", "tumble", "avoid")  # telemetry: the state's number
+POSITIVE = ("turn_rate_rps", "mean_run_s", "period_s")  # a run-time change must keep these > 0, the others >= 0
 
 
 class RandomWalk(Controller):
@@ -74,6 +76,20 @@ class RandomWalk(Controller):
         else:
             r.llc.drive(0.0, self.turn_dir * self.p["turn_rate_rps"])
             self._show(RED if self.state == "avoid" else BLUE)
+
+    def set_param(self, name: str, value: Any) -> None:
+        if name in RandomWalk.defaults:
+            if name in POSITIVE and not value > 0:
+                raise ValueError(f"{name}: must be > 0, got {value!r}")
+            if not value >= 0:
+                raise ValueError(f"{name}: must be >= 0, got {value!r}")
+        super().set_param(name, value)
+        if name == "period_s":
+            self.period_s = float(value)
+
+    def telemetry(self) -> dict[str, float | int]:
+        """``state``: 0 run, 1 tumble, 2 avoid; ``left_s``: time to the state's planned end."""
+        return {"state": STATES.index(self.state), "left_s": max(0.0, self.until - self.robot.clock.now())}
 
     def _show(self, rgb: tuple[int, int, int]) -> None:
         if rgb != self.led:

@@ -118,6 +118,8 @@ class Rdpso(Controller):
         "log_every": 1,  # iterations between "rdpso" log records (0: none)
         "payload_max": 92,  # bytes per hello: a ZigBee broadcast's limit (more members than fit: nearest sent)
     }
+    # read only at init and reset: the iteration clock every robot shares, the swarm's size and its initial split
+    static_params = frozenset({"iteration_s", "n_total", "subgroups_init", "n_init", "n_min", "n_max", "fuzzy"})
 
     # -- parameters -----------------------------------------------------------------------------------------
     @classmethod
@@ -237,6 +239,22 @@ class Rdpso(Controller):
 
     def destroy(self) -> None:
         self.robot.llc.stop()
+
+    def set_param(self, name: str, value: Any) -> None:
+        """As ``Controller.set_param``; the fractional order and the rho coefficients take effect at once (unless
+        the fuzzy system sets them)."""
+        super().set_param(name, value)
+        if name in ("alpha", "rho1", "rho2", "rho3", "rho4", "truncation_r") and self.adapter is None:
+            p = self.p
+            self.alpha = float(p["alpha"])
+            self.rho = [float(p["rho1"]), float(p["rho2"]), float(p["rho3"]), float(p["rho4"])]
+            self.weights = motion.memory_weights(self.alpha, p["fractional_form"], int(p["truncation_r"]))
+
+    def telemetry(self) -> dict[str, float | int]:
+        """Iteration, subgroup (0: excluded), group size, stagnancy and punish counters, personal and group
+        bests (-3e38: none yet)."""
+        return {"k": self.k, "sid": self.sid, "excluded": int(self.sid == 0), "group_n": self._group_size(),
+                "sc": self.sc, "n_kill": self.n_kill, "hbest": _f(self.hbest), "ledger_h": _f(self.ledger_h)}
 
     def step(self) -> None:
         """Phase A at k * iteration_s, phase B comm_window_s later; ``period_s`` tells the runner when to call."""
