@@ -40,6 +40,7 @@ def _overrides(a: argparse.Namespace) -> dict[str, Any]:
         "session.seed": a.seed,
         "session.speed": a.speed,
         "session.robots_per_process": a.robots_per_process,
+        "mavlink.endpoint": a.mavlink,
     }
 
 
@@ -200,6 +201,9 @@ def main(argv: list[str] | None = None) -> None:
         p.add_argument("--seed", type=int)
         p.add_argument("--speed", type=_speed, help="real-time factor to pace to, or 'max'")
         p.add_argument("--robots-per-process", type=int, help="pack K robots into each firmware/logic process")
+        p.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="ENDPOINT",
+                       help="give every robot a MAVLink face behind one UDP endpoint (default udpout:127.0.0.1:14550, "
+                            "where MAVProxy and QGroundControl listen)")
 
     p = sub.add_parser("run", help="run one session")
     session_args(p)
