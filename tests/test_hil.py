@@ -130,6 +130,32 @@ q_min_dbm = {hal["params"]["q_min_dbm"]}
     assert s["wall_lag"]["quanta"] == s["quanta"]
 
 
+def real_xbee_config(tmp_path: Path, device: str, duration_s: float, others: int = 0) -> Path:
+    """Robot 0 with a real Series 1 XBee on ``device`` (probing it); ``others`` simulated random walkers."""
+    cfg = tmp_path / "real_xbee.toml"
+    text = f"""
+[session]
+name = "real-xbee"
+duration_s = {duration_s}
+speed = 1
+[arena]
+width_m = 4
+length_m = 4
+[[robots]]
+count = 1
+behaviour = "tests.xbee_probe:RealRadio"
+xbee = {{ series = 1, api_mode = 1, baud = 115200, device = "{device}" }}
+[robots.placement]
+kind = "explicit"
+poses = [[1.0, 1.0, 0.0]]
+"""
+    if others:
+        text += f'[[robots]]\ncount = {others}\nbehaviour = "random_walk"\n[robots.placement]\nkind = "explicit"\n'
+        text += f"poses = {[[3.0, 3.0 - 0.5 * i, 0.0] for i in range(others)]}\n"
+    cfg.write_text(text)
+    return cfg
+
+
 @pytest.mark.session
 def test_a_robot_with_a_real_xbee_on_a_serial_device(tmp_path: Path) -> None:
     """A simulated robot whose XBee is a real module on a serial port (here a pseudo-terminal whose far side runs the
@@ -138,23 +164,7 @@ def test_a_robot_with_a_real_xbee_on_a_serial_device(tmp_path: Path) -> None:
     from tests.test_devices import NEIGHBOUR64, SERIAL64, EmulatedXBee
 
     with EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5) as radio:
-        cfg = tmp_path / "real_xbee.toml"
-        cfg.write_text(f"""
-[session]
-name = "real-xbee"
-duration_s = 6
-speed = 1
-[arena]
-width_m = 4
-length_m = 4
-[[robots]]
-count = 1
-behaviour = "tests.xbee_probe:RealRadio"
-xbee = {{ series = 1, api_mode = 1, baud = 115200, device = "{radio.path}" }}
-[robots.placement]
-kind = "explicit"
-poses = [[2.0, 2.0, 0.0]]
-""")
+        cfg = real_xbee_config(tmp_path, radio.path, 6)
         plan = make_plan(load_config(cfg), str(cfg))
         assert plan.robots[0].modules() == ("llc",)  # no simulated module
         out = tmp_path / "run"
@@ -200,29 +210,7 @@ def test_a_real_xbee_that_disappears_fails_its_robot_only(tmp_path: Path) -> Non
 
     radio = EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5).__enter__()
     unplug = threading.Timer(4.0, radio.__exit__, (None, None, None))
-    cfg = tmp_path / "unplug.toml"
-    cfg.write_text(f"""
-[session]
-name = "unplug"
-duration_s = 8
-speed = 1
-[arena]
-width_m = 4
-length_m = 4
-[[robots]]
-count = 1
-behaviour = "tests.xbee_probe:RealRadio"
-xbee = {{ series = 1, api_mode = 1, baud = 115200, device = "{radio.path}" }}
-[robots.placement]
-kind = "explicit"
-poses = [[1.0, 1.0, 0.0]]
-[[robots]]
-count = 1
-behaviour = "random_walk"
-[robots.placement]
-kind = "explicit"
-poses = [[3.0, 3.0, 0.0]]
-""")
+    cfg = real_xbee_config(tmp_path, radio.path, 8, others=1)
     out = tmp_path / "run"
     p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True)
