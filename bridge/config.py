@@ -27,6 +27,13 @@ class ConfigError(Exception):
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=False)
 
+    def _only_for_kind(self, kind: str, applies: set[str], always: set[str]) -> None:
+        """Refuse fields set away from their defaults that ``kind`` does not use (a config meant for another kind)."""
+        fields = type(self).model_fields
+        stray = sorted(f for f in self.model_fields_set - applies - always if getattr(self, f) != fields[f].default)
+        if stray:
+            raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {kind!r}")
+
 
 class SessionCfg(_Model):
     name: str = "session"
@@ -135,11 +142,7 @@ class Placement(_Model):
                    "random": {"region", "min_separation_m", "yaw_deg"},
                    "explicit": {"poses"},
                    "spiral": {"centres", "spacing_m", "yaw_deg"}}[self.kind]
-        fields = type(self).model_fields
-        stray = sorted(f for f in self.model_fields_set - applies - {"kind"}
-                       if getattr(self, f) != fields[f].default)
-        if stray:
-            raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {self.kind!r}")
+        self._only_for_kind(self.kind, applies, {"kind"})
         if self.kind == "spiral" and not self.centres:
             raise ValueError("centres: a spiral placement needs at least one centre")
         return self
@@ -266,11 +269,7 @@ class FaultCfg(_Model):
     def _fields_fit_kind(self) -> FaultCfg:
         applies = {"firmware_crash": set(), "can_bus_off": {"node", "duration_s"},
                    "can_noise": {"duration_s", "probability"}}[self.kind]
-        fields = type(self).model_fields
-        stray = sorted(f for f in self.model_fields_set - applies - {"robot", "at_s", "kind"}
-                       if getattr(self, f) != fields[f].default)
-        if stray:
-            raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {self.kind!r}")
+        self._only_for_kind(self.kind, applies, {"robot", "at_s", "kind"})
         return self
 
 

@@ -41,15 +41,7 @@ from bridge.profiles import PROFILES
 from bridge.radio_medium import RadioMedium
 from bridge.recorder import Recorder
 from bridge.rng import stream_seed
-from bridge.sitl_can import (
-    CAN_ERR_BUSOFF,
-    CAN_ERR_CNT,
-    CAN_ERR_CRTL,
-    CAN_ERR_PROT,
-    CAN_ERR_RESTARTED,
-    ERROR_FRAME,
-    OWN,
-)
+from bridge.sitl_can import CAN_ERR_BUSOFF, CAN_ERR_CRTL, CAN_ERR_PROT, CAN_ERR_RESTARTED, OWN, error_frame
 from bridge.uart import SerialLine, garble
 from bridge.uwb_medium import UwbMedium
 from bridge.world import World
@@ -157,9 +149,9 @@ class Hub:
         cfg = self.cfg
         bus = CanMedium(f"r{r:03d}/can0", cfg.can.bitrate, seed=stream_seed(cfg.session.seed, "can", r))
         host_ms = cfg.can.host_restart_ms
+        host_restart = None if host_ms is None else round(host_ms * 1e6)
         for role in rp.can_nodes():
-            bus.add_node(entity(r, role), None if role == "logic" and host_ms is None
-                         else round(host_ms * 1e6) if role == "logic" else 0)
+            bus.add_node(entity(r, role), host_restart if role == "logic" else 0)
         for f in cfg.faults:
             if f.robot != r or f.kind == "firmware_crash":
                 continue
@@ -304,12 +296,11 @@ class Hub:
                 f'{{"id":{ev.arbitration_id},"data":"","src":"{node}","name":"{name}",'
                 f'"wire_end_ns":{ev.wire_ns},"error":true}}').encode())
             self.counts["can_error_frames"] += 1
-            if r not in self.dead:
-                for n in self.can_nodes[r]:
-                    if n.endswith("/logic") and self.can[r].node_state(n)[0] != "bus_off":
-                        _, tec, rec = self.can[r].node_state(n)
-                        self.inbox[n].append(["can0", CAN_ERR_PROT | CAN_ERR_CNT, bytes([0, 0, 0, 0, 0, 0,
-                                              min(tec, 255), min(rec, 255)]), False, ev.wire_ns, ERROR_FRAME])
+            logic = entity(r, "logic")  # the only node that shows error frames to its program (python-can)
+            if r not in self.dead and "logic" in self.roles[r]:
+                state, tec, rec = self.can[r].node_state(logic)
+                if state != "bus_off":
+                    self.inbox[logic].append(error_frame(CAN_ERR_PROT, 0, tec, rec, ev.wire_ns))
             return
         self.rec.write(t, f"/r{r:03d}/can0/state", "swarm_sitl.CanState",
                        {"node": node, "state": ev.state, "tec": ev.tec, "rec": ev.rec, "wire_ns": ev.wire_ns})
@@ -317,11 +308,9 @@ class Hub:
             return
         self.inbox[node].append(["can0_state", ev.state, ev.tec, ev.rec])
         if node.endswith("/logic"):  # socketcan reports its own controller's state changes as error frames
-            klass, d1 = {"bus_off": (CAN_ERR_BUSOFF, 0), "passive": (CAN_ERR_CRTL, 0x30),
-                         "active": (CAN_ERR_RESTARTED if ev.arbitration_id is None else CAN_ERR_CRTL, 0x40)}[ev.state]
-            self.inbox[node].append(["can0", klass | CAN_ERR_CNT, bytes([0, d1, 0, 0, 0, 0, min(ev.tec, 255),
-                                                                        min(ev.rec, 255)]), False, ev.wire_ns,
-                                     ERROR_FRAME])
+            klass, ctrl = {"bus_off": (CAN_ERR_BUSOFF, 0), "passive": (CAN_ERR_CRTL, 0x30),
+                           "active": (CAN_ERR_RESTARTED if ev.arbitration_id is None else CAN_ERR_CRTL, 0x40)}[ev.state]
+            self.inbox[node].append(error_frame(klass, ctrl, ev.tec, ev.rec, ev.wire_ns))
         if ev.state == "bus_off" or (ev.state == "active" and ev.arbitration_id is None):
             what = "bus-off" if ev.state == "bus_off" else "recovered from bus-off"
             rec = {"robot": r, "t_s": round(ev.wire_ns / 1e9, 6), "node": node[node.index("/") + 1:],
@@ -472,7 +461,7 @@ class Hub:
                         self.counts["malformed_frames"] += 1
                         continue
                     self.seq[e] += 1
-                    if len(item) == 5 and item[4] is True:
+                    if len(item) == 5:  # validated: it asks for its echo
                         self.can_echo.add(e)
                     if self.can[r].offer(e, self.seq[e], item[1], item[2], item[3]):
                         touched.add(r)

@@ -43,6 +43,13 @@ CAN_ERR_CRTL, CAN_ERR_PROT, CAN_ERR_BUSOFF, CAN_ERR_RESTARTED, CAN_ERR_CNT = 0x0
 STATES = {"active": BusState.ACTIVE, "passive": BusState.PASSIVE, "bus_off": BusState.ERROR}
 
 
+def error_frame(klass: int, ctrl: int, tec: int, rec: int, t_ns: int) -> list:
+    """A socketcan error frame as the world delivers it to a node: class bits (with the counters) in the id, the
+    controller status in byte 1, TEC and REC in bytes 6 and 7."""
+    return ["can0", klass | CAN_ERR_CNT, bytes([0, ctrl, 0, 0, 0, 0, min(tec, 255), min(rec, 255)]), False, t_ns,
+            ERROR_FRAME]
+
+
 class SitlBus(BusABC):
     def __init__(self, channel: Any = "can0", *, receive_own_messages: bool = False,
                  ignore_rx_error_frames: bool = False, **kwargs: Any) -> None:

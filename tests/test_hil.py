@@ -23,6 +23,7 @@ from tests.test_session import cli, wait_started
 
 MIXED = ROOT / "hil_configs" / "mixed_real_robot.toml"
 HAL = ROOT / "hil_configs" / "eswarbot_sitl_ports.toml"
+BUS_OFF_CFG = ROOT / "hil_configs" / "can_bus_off.toml"
 
 
 def test_external_logic_needs_ports_and_real_time(tmp_path: Path) -> None:
@@ -228,3 +229,14 @@ def test_a_real_xbee_that_disappears_fails_its_robot_only(tmp_path: Path) -> Non
     assert fail["robot"] == 0 and fail["kind"] == "raised", fail
     assert "the device failed or disappeared" in fail["detail"]
     assert s["per_robot"][1]["alive"] and not s["per_robot"][0]["alive"]
+
+
+def test_fault_fields_fit_their_kind(tmp_path: Path) -> None:
+    p = tmp_path / "f.toml"
+    p.write_text('[[robots]]\n[[faults]]\nrobot = 0\nat_s = 1\nkind = "can_bus_off"\nprobability = 0.5\n')
+    with pytest.raises(ConfigError, match=r"faults\[0\]: probability do\(es\) not apply to kind = 'can_bus_off'"):
+        load_config(p)
+    p.write_text('[[robots]]\n[[faults]]\nrobot = 0\nat_s = 1\nkind = "can_bus_off"\nnode = "slcan"\n')
+    with pytest.raises(ConfigError, match=r"faults\[0\].node: robot 0 has no slcan adapter"):
+        load_config(p)
+    assert load_config(BUS_OFF_CFG).faults[0].node == "host"
