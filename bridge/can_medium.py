@@ -39,6 +39,21 @@ REC_AFTER_PASSIVE = 119  # ISO allows 119..127 after a good reception with REC >
 REC_MAX = 255  # REC is an 8-bit register (MCP2515, SJA1000); only "> 127" matters to the state
 
 
+# What a CAN item the world delivers to a node is (its optional sixth field), besides a frame from another node: the
+# node's own frame echoed back (python-can's receive_own_messages), or an error frame.
+OWN, ERROR_FRAME = 1, 2
+# socketcan's error frame classes (linux/can/error.h), the arbitration id of an error frame; bytes 6 and 7 carry
+# the node's TEC and REC (CAN_ERR_CNT), byte 1 the controller status for CAN_ERR_CRTL
+CAN_ERR_CRTL, CAN_ERR_PROT, CAN_ERR_BUSOFF, CAN_ERR_RESTARTED, CAN_ERR_CNT = 0x04, 0x08, 0x40, 0x100, 0x200
+
+
+def error_frame(klass: int, ctrl: int, tec: int, rec: int, t_ns: int) -> list:
+    """A socketcan error frame as the world delivers it to a node: class bits (with the counters) in the id, the
+    controller status in byte 1, TEC and REC in bytes 6 and 7."""
+    return ["can0", klass | CAN_ERR_CNT, bytes([0, ctrl, 0, 0, 0, 0, min(tec, 255), min(rec, 255)]), False, t_ns,
+            ERROR_FRAME]
+
+
 def frame_bits(dlc: int, extended: bool = False) -> int:
     """Worst-case bits on the wire for a classic data frame: 47 (standard) or 67 (extended) bits of
     framing including the 3-bit interframe space, 8 per data byte, and the worst-case stuff bits over

@@ -13,7 +13,8 @@ returns a ``DeviceReport`` whose ``detail`` names the device and says what is wr
   as a ground station does, so endpoints that only talk to a known peer answer) and counts the packets that
   failed their CRC or were not MAVLink meanwhile.
 
-Every probe closes what it opened, also when it fails, and never raises for a device problem.
+Every probe closes what it opened, also when it fails, and never raises for a device problem. Each imports its
+libraries when it runs: the launcher imports this module for every session, and its children inherit its memory.
 """
 
 from __future__ import annotations
@@ -25,15 +26,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import can
 import serial
-
-os.environ.setdefault("MAVLINK20", "1")  # parse and send MAVLink 2 (it also accepts MAVLink 1 packets)
-from pymavlink import mavutil
-
-from swarm_logic.clock import WallClock
-from swarm_logic.interfaces import eswarbot_llc_db
-from swarm_logic.xbee import XBee, XBeeError, XBeeTimeout
 
 LISTEN_S = 0.5  # how long a CAN probe keeps listening after the first frame, to see what is on the bus
 GCS_HEARTBEAT_S = 1.0
@@ -86,6 +79,9 @@ def _open_serial(port: str, baudrate: int) -> serial.SerialBase | str:
 
 def probe_xbee(port: str, baudrate: int = 9600, api_mode: int = 1, timeout_s: float = 2.0) -> DeviceReport:
     """Open ``port`` and ask the XBee on it to identify itself (SH, SL, MY, NI, HV, VR) in API mode ``api_mode``."""
+    from swarm_logic.clock import WallClock
+    from swarm_logic.xbee import XBee, XBeeError, XBeeTimeout
+
     if api_mode not in (1, 2):
         raise ValueError(f"api_mode must be 1 or 2, got {api_mode!r}")
     setup = {"baudrate": baudrate, "api_mode": api_mode}
@@ -133,6 +129,10 @@ def _can_name(kwargs: dict[str, Any]) -> str:
 def probe_can(kwargs: dict[str, Any], timeout_s: float = 2.0) -> DeviceReport:
     """Open ``can.Bus(**kwargs)`` and wait up to ``timeout_s`` for traffic; once a frame came, listen
     ``LISTEN_S`` more and report the frames, their ids and DBC names. The bus is always shut down."""
+    import can  # here, not at the top: the launcher lists devices without loading every probe's library
+
+    from swarm_logic.interfaces import eswarbot_llc_db
+
     name = _can_name(kwargs)
     setup = {k: v for k, v in kwargs.items() if isinstance(v, str | int | float | bool)}
     try:
@@ -176,14 +176,24 @@ def probe_can(kwargs: dict[str, Any], timeout_s: float = 2.0) -> DeviceReport:
     return DeviceReport("can", name, True, f"{name}: {frames} frames, {len(ids)} ids: {seen}", info)
 
 
+def _mavutil() -> Any:
+    """pymavlink's mavutil, imported when a MAVLink probe runs (it costs tens of MB in every process that imports
+    it, and the launcher's children inherit its memory until they exec)."""
+    os.environ.setdefault("MAVLINK20", "1")  # parse and send MAVLink 2 (it also accepts MAVLink 1 packets)
+    from pymavlink import mavutil
+
+    return mavutil
+
+
 def _enum_name(enum: str, value: int) -> str:
-    entry = mavutil.mavlink.enums.get(enum, {}).get(value)
+    entry = _mavutil().mavlink.enums.get(enum, {}).get(value)
     return entry.name if entry is not None else str(value)
 
 
 def probe_mavlink(url: str, timeout_s: float = 3.0, source_system: int = 255, baudrate: int = 115200) -> DeviceReport:
     """Connect to ``url`` (``udpin:HOST:PORT``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``, ... or a serial device
     at ``baudrate``) and wait up to ``timeout_s`` for a HEARTBEAT from another system or component."""
+    mavutil = _mavutil()
     setup: dict[str, Any] = {"url": url}
     if not url.startswith(NETWORK_SCHEMES):
         ser = _open_serial(url, baudrate)  # pymavlink opens without a lock: check it is free first

@@ -33,15 +33,22 @@ from typing import Any
 import numpy as np
 
 from bridge import transport
-from bridge.can_medium import CanMedium, frame_fault
+from bridge.can_medium import (
+    CAN_ERR_BUSOFF,
+    CAN_ERR_CRTL,
+    CAN_ERR_PROT,
+    CAN_ERR_RESTARTED,
+    OWN,
+    CanMedium,
+    error_frame,
+    frame_fault,
+)
 from bridge.config import Config
-from bridge.mavlink_gateway import MavlinkGateway
 from bridge.plan import Plan, entity, robot_of, uwb_addr16
 from bridge.profiles import PROFILES
 from bridge.radio_medium import RadioMedium
 from bridge.recorder import Recorder
 from bridge.rng import stream_seed
-from bridge.sitl_can import CAN_ERR_BUSOFF, CAN_ERR_CRTL, CAN_ERR_PROT, CAN_ERR_RESTARTED, OWN, error_frame
 from bridge.uart import SerialLine, garble
 from bridge.uwb_medium import UwbMedium
 from bridge.world import World
@@ -140,8 +147,12 @@ class Hub:
         self.node_sens: dict[int, float] = {}  # each module's receiver sensitivity, as it reported it
         self.node_net: dict[int, tuple[int, int]] = {}  # each module's (channel, PAN id)
         m = cfg.mavlink
-        self.mavlink = MavlinkGateway(m.endpoint, {r: m.system_id_base + r for r, rp in enumerate(robots)
-                                                   if rp.logic == "session"}, m.per_robot) if m.endpoint else None
+        self.mavlink = None
+        if m.endpoint:  # pymavlink only for a session that has an endpoint
+            from bridge.mavlink_gateway import MavlinkGateway
+
+            self.mavlink = MavlinkGateway(m.endpoint, {r: m.system_id_base + r for r, rp in enumerate(robots)
+                                                       if rp.logic == "session"}, m.per_robot)
 
     def _can_bus(self, r: int, rp: Any) -> CanMedium:
         """Robot ``r``'s CAN bus: its nodes (the LLC's MCP2515 recovers from bus-off by itself; the companion

@@ -33,21 +33,9 @@ from can.broadcastmanager import (
 )
 
 from bridge import sim_context
-from bridge.can_medium import frame_fault
+from bridge.can_medium import ERROR_FRAME, OWN, frame_fault
 
-# what a delivered CAN item is (its optional sixth field), besides a frame from another node
-OWN, ERROR_FRAME = 1, 2
-# socketcan's error frame classes (linux/can/error.h), the arbitration id of an error frame; bytes 6 and 7 carry
-# the node's TEC and REC (CAN_ERR_CNT), byte 1 the controller status for CAN_ERR_CRTL
-CAN_ERR_CRTL, CAN_ERR_PROT, CAN_ERR_BUSOFF, CAN_ERR_RESTARTED, CAN_ERR_CNT = 0x04, 0x08, 0x40, 0x100, 0x200
 STATES = {"active": BusState.ACTIVE, "passive": BusState.PASSIVE, "bus_off": BusState.ERROR}
-
-
-def error_frame(klass: int, ctrl: int, tec: int, rec: int, t_ns: int) -> list:
-    """A socketcan error frame as the world delivers it to a node: class bits (with the counters) in the id, the
-    controller status in byte 1, TEC and REC in bytes 6 and 7."""
-    return ["can0", klass | CAN_ERR_CNT, bytes([0, ctrl, 0, 0, 0, 0, min(tec, 255), min(rec, 255)]), False, t_ns,
-            ERROR_FRAME]
 
 
 class SitlBus(BusABC):

@@ -40,7 +40,8 @@ from swarm_logic.mavlink import (
 from swarm_logic.mavlink_llc import MavlinkLowLevel, open_low_level
 from swarm_logic.rdpso.controller import Rdpso
 from swarm_logic.robot import Robot
-from swarm_logic.runner import Supervisor, run_controller
+from swarm_logic.runner import run_controller
+from swarm_logic.supervisor import Supervisor
 
 GCS_SYS, GCS_COMP = 255, mavlink.MAV_COMP_ID_MISSIONPLANNER
 # SET_POSITION_TARGET_LOCAL_NED type_mask, bits set for what to ignore: 1 x, 2 y, 4 z, 8 vx, 16 vy, 32 vz,
