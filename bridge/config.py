@@ -6,6 +6,7 @@ Every error names the file, the field and the reason, e.g.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import tomllib
@@ -13,7 +14,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from bridge.profiles import PROFILES, RobotProfile
 from bridge.radio_medium import RadioCfg
@@ -46,6 +47,20 @@ class SessionCfg(_Model):
     hang_timeout_s: float = Field(20.0, gt=0, description="wall seconds a process may take for one quantum")
     startup_timeout_s: float = Field(120.0, gt=0)
     poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
+    listen: str | None = Field(None, description="tcp/HOST:PORT: the world also listens here (besides its private "
+                                                 "unix socket), so the swarm logic of robots with logic = \"remote\" "
+                                                 "joins from another computer (swarm-sitl join); HOST is an address of "
+                                                 "this machine, 127.0.0.1 to stay on it")
+
+    @field_validator("listen")
+    @classmethod
+    def _tcp_endpoint(cls, v: str | None) -> str | None:
+        if v is not None:
+            host, _, port = v.removeprefix("tcp/").rpartition(":")
+            if not v.startswith("tcp/") or not host or not port.isdigit() or not 0 < int(port) < 65536:
+                raise ValueError(f"{v!r} is not tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447, or tcp/192.168.1.10:7447 "
+                                 "for a logic on another computer)")
+        return v
 
     @field_validator("speed")
     @classmethod
@@ -151,13 +166,22 @@ class Placement(_Model):
 XBEE_BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)  # the BD table of the XBee modules
 
 
+def _xbee_baud(v: int) -> int:
+    if v not in XBEE_BAUDS:
+        raise ValueError(f"{v} is not an XBee BD rate; one of {', '.join(map(str, XBEE_BAUDS))}")
+    return v
+
+
+XBeeBaud = Annotated[int, AfterValidator(_xbee_baud)]
+
+
 class XBeeCfg(_Model):
     """A robot's XBee module: which firmware it runs and how its UART is set up (as configured with XCTU)."""
 
     series: Literal[1, 2] = Field(2, description="1: 802.15.4 firmware (frames 0x00/0x01/0x80/0x81/0x89); "
                                                  "2: ZigBee firmware (0x10/0x8B/0x90), the eSwarBot's module")
     api_mode: Literal[1, 2] = Field(1, description="AP: 1 plain API frames, 2 API frames with escaped bytes")
-    baud: int = Field(9600, description="BD: UART rate in bit/s (the modules' default is 9600)")
+    baud: XBeeBaud = Field(9600, description="BD: UART rate in bit/s (the modules' default is 9600)")
     power_level: int = Field(4, ge=0, le=4, description="PL: transmit power level, 4 is the highest")
     pan_id: int = Field(0x3332, ge=0, le=0xFFFF, description="ID: PAN id; modules hear only their own PAN")
     channel: int = Field(0x0C, ge=0x0B, le=0x1A, description="CH: 802.15.4 channel 11-26")
@@ -176,22 +200,77 @@ class XBeeCfg(_Model):
                              "real (on the device)")
         return self
 
-    @field_validator("baud")
-    @classmethod
-    def _known_baud(cls, v: int) -> int:
-        if v not in XBEE_BAUDS:
-            raise ValueError(f"{v} is not an XBee BD rate; one of {', '.join(map(str, XBEE_BAUDS))}")
-        return v
+
+
+def _check_times(waypoints: list[tuple[float, ...]], field: str = "") -> None:
+    """A path's waypoints are in time order, from 0 on."""
+    times = [w[0] for w in waypoints]
+    if times and (times[0] < 0 or any(b <= a for a, b in itertools.pairwise(times))):
+        raise ValueError(f"{field}times must start at 0 or later and increase strictly")
+
+
+class MotionCfg(_Model):
+    """How a robot body moves that the session does not drive: its LLC is a real board (``can.device``) or it is a
+    MAVLink vehicle. The session cannot know where the real thing goes, so the config states it."""
+
+    kind: Literal["simulated", "fixed", "scripted"] = Field(
+        "simulated", description="simulated: the world drives the body from the LLC's motor outputs; fixed: the body "
+                                 "stays at its placement; scripted: it follows waypoints")
+    waypoints: list[tuple[float, float, float, float]] = Field(
+        [], description="scripted: [t_s, x, y, yaw_deg] in increasing time; the pose is interpolated linearly "
+                        "between them, the first holds before and the last after")
+
+    @model_validator(mode="after")
+    def _fields_fit_kind(self) -> MotionCfg:
+        self._only_for_kind(self.kind, {"waypoints"} if self.kind == "scripted" else set(), {"kind"})
+        if self.kind == "scripted":
+            if not self.waypoints:
+                raise ValueError("waypoints: a scripted motion needs at least one [t_s, x, y, yaw_deg]")
+            _check_times(self.waypoints, "waypoints: ")
+        return self
 
 
 class RobotCanCfg(_Model):
-    """Outside access to a robot's simulated CAN bus."""
+    """A robot's CAN bus: outside access to the simulated bus, or the real board the bus bridges to."""
 
     slcan_pty: str | None = Field(
         None, description="expose the robot's CAN bus on a pseudo-terminal as a LAWICEL (slcan) USB-CAN adapter, "
                           "linked at this path (relative to the session's output directory; '{id}' is replaced by the "
                           "robot id): python-can's slcan interface, candump-style tools and a real robot's logic "
                           "open it")
+    device: dict[str, Any] | None = Field(
+        None, description="the robot's real LLC board is on this CAN interface, given as python-can Bus arguments, "
+                          "e.g. { interface = \"socketcan\", channel = \"can0\" } or { interface = \"slcan\", "
+                          "channel = \"/dev/ttyACM0\", bitrate = 500000 }: the session bridges the robot's bus to it "
+                          "and does not simulate the LLC (state the body's motion)")
+
+    @field_validator("device")
+    @classmethod
+    def _python_can_args(cls, v: dict[str, Any] | None) -> dict[str, Any] | None:
+        if v is not None:
+            from can.interfaces import VALID_INTERFACES
+
+            if not isinstance(v.get("interface"), str) or "channel" not in v:
+                raise ValueError("needs interface and channel, e.g. { interface = \"socketcan\", channel = \"can0\" }")
+            if v["interface"] == "sitl":
+                raise ValueError("interface 'sitl' is the session's own simulated bus; name the interface of the "
+                                 "real board's adapter")
+            if v["interface"] not in VALID_INTERFACES:
+                raise ValueError(f"interface {v['interface']!r} is not a python-can interface; one of "
+                                 f"{', '.join(sorted(VALID_INTERFACES))}")
+        return v
+
+
+class VehicleCfg(_Model):
+    """A vehicle that speaks only MAVLink (an ArduPilot Rover, another swarm's robot) stands in the swarm for this
+    robot: the session's swarm logic drives it through ``swarm_logic.mavlink_llc`` instead of an LLC."""
+
+    url: str = Field(description="where the vehicle is: a pymavlink connection (udpin:0.0.0.0:14551, "
+                                 "udpout:192.168.4.1:14550, tcp:HOST:PORT) or a serial device (/dev/ttyUSB1)")
+    target_system: int = Field(1, ge=1, le=255, description="the vehicle's MAVLink system id")
+    target_component: int = Field(1, ge=0, le=255)
+    baudrate: int = Field(57600, gt=0, description="serial devices: the telemetry radio's rate")
+    timeout_s: float = Field(10.0, gt=0, description="how long the logic waits for the vehicle's first heartbeat")
 
 
 class RobotGroup(_Model):
@@ -208,12 +287,17 @@ class RobotGroup(_Model):
                                 "as if a motion-capture system fed it; an idealisation for algorithm tests, "
                                 "flagged in STATUS and summary.json")
 
-    logic: Literal["session", "external"] = Field(
+    logic: Literal["session", "external", "remote"] = Field(
         "session", description="session: the session runs the robot's swarm logic (in simulated time); external: "
                                "a program outside the session (a real robot's companion computer, a test) runs it in "
                                "wall time and reaches the robot's devices only through their ports (xbee.pty, "
-                               "can.slcan_pty)")
+                               "can.slcan_pty); remote: the session's own logic process for the robot runs on "
+                               "another computer, joining over zenoh (session.listen, swarm-sitl join), still in "
+                               "simulated time")
     can: RobotCanCfg = RobotCanCfg()
+    vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
+                                                         "over MAVLink (state the body's motion)")
+    motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
 
     @model_validator(mode="after")
     def _pty_per_robot(self) -> RobotGroup:
@@ -230,19 +314,76 @@ class RobotGroup(_Model):
             if self.uwb:
                 raise ValueError("uwb: a UWB module cannot be reached from an external logic (it has no port); "
                                  "drop it")
+        if self.vehicle is not None:
+            if self.can.device is not None:
+                raise ValueError("vehicle: a MAVLink vehicle has no LLC on a CAN bus: drop can.device")
+            if self.logic == "external":
+                raise ValueError("vehicle: the session's logic drives a MAVLink vehicle; an external program talks to "
+                                 "it directly, without the session")
+        simulated_llc = self.can.device is None and self.vehicle is None
+        if simulated_llc and self.motion.kind != "simulated":
+            raise ValueError(f"motion.kind = {self.motion.kind!r}: the session drives this robot's wheels through its "
+                             "simulated LLC; a stated motion is for a robot whose LLC is real (can.device) or that "
+                             "is a MAVLink vehicle (vehicle)")
+        if not simulated_llc:
+            what = "can.device" if self.vehicle is None else "vehicle"
+            if self.motion.kind == "simulated":
+                raise ValueError(f"motion: with {what} the robot moves in the real world, where the session cannot "
+                                 "see it: state where its body is, motion = { kind = \"fixed\" } (at its placement) "
+                                 "or { kind = \"scripted\", waypoints = [[t_s, x, y, yaw_deg], ...] }")
+            if self.pose_source == "ground_truth":
+                raise ValueError(f"pose_source: with {what} the LLC that would report the true pose is not simulated")
+        if self.motion.kind == "scripted" and self.count > 1:
+            raise ValueError("motion: scripted waypoints are one body's path: give the robot a group of its own "
+                             "(count = 1)")
         return self
 
     def real_ports(self) -> list[str]:
         """The fields that open this group to the outside world (wall time): what makes a session real-time."""
         return [f for f, on in (("xbee.pty", bool(self.xbee and self.xbee.pty)),
                                 ("xbee.device", bool(self.xbee and self.xbee.device)),
-                                ("can.slcan_pty", bool(self.can.slcan_pty)), ("logic", self.logic == "external")) if on]
+                                ("can.slcan_pty", bool(self.can.slcan_pty)),
+                                ("can.device", self.can.device is not None), ("vehicle", self.vehicle is not None),
+                                ("logic", self.logic == "external")) if on]
 
     @field_validator("profile")
     @classmethod
     def _known_profile(cls, v: str) -> str:
         if v not in PROFILES:
             raise ValueError(f"unknown robot profile {v!r}; known: {', '.join(sorted(PROFILES))}")
+        return v
+
+
+class XBeeGatewayCfg(_Model):
+    """A real XBee on this machine joined to the simulated radio channel: the gateway is a simulated module at a
+    stated pose, wired back to back to the real one (as two radios and a relay board would be). What the
+    simulated module hears it sends on the real air; what the real one hears it sends into the simulation."""
+
+    device: str = Field(description="the real XBee's serial device (or pyserial URL), e.g. /dev/ttyUSB0")
+    baud: XBeeBaud = Field(9600, description="BD of the real module, as configured with XCTU")
+    api_mode: Literal[1, 2] = Field(1, description="AP of the real module")
+    series: Literal[1, 2] = Field(2, description="firmware of both modules (the real one's and its simulated "
+                                                 "twin's): the desk radio's and the swarm's")
+    pose: tuple[float, float] = Field(description="x, y of the gateway's simulated antenna in the arena (m)")
+    waypoints: list[tuple[float, float, float]] = Field(
+        [], description="or a path: [t_s, x, y] in increasing time, interpolated linearly (pose is where it starts)")
+    pan_id: int = Field(0x3332, ge=0, le=0xFFFF, description="ID of the simulated twin: the swarm's PAN")
+    channel: int = Field(0x0C, ge=0x0B, le=0x1A, description="CH of the simulated twin: the swarm's channel")
+    power_level: int = Field(4, ge=0, le=4, description="PL of the simulated twin")
+    peer: str | None = Field(None, description="64-bit address (16 hex digits) of the desk radio: what the swarm "
+                                               "sends goes to it as a unicast; none: as a broadcast")
+
+    @field_validator("peer")
+    @classmethod
+    def _addr64(cls, v: str | None) -> str | None:
+        if v is not None and not (len(v) == 16 and all(c in "0123456789abcdefABCDEF" for c in v)):
+            raise ValueError(f"{v!r} is not a 64-bit address of 16 hex digits (e.g. 0013A20041A7B2C3)")
+        return v
+
+    @field_validator("waypoints")
+    @classmethod
+    def _increasing(cls, v: list[tuple[float, float, float]]) -> list[tuple[float, float, float]]:
+        _check_times(v)
         return v
 
 
@@ -318,6 +459,7 @@ class Config(_Model):
     faults: list[FaultCfg] = Field([], description="injected faults (a firmware crash, CAN bus-off or noise)")
     can: CanCfg = Field(CanCfg(), description="the robots' CAN buses")
     mavlink: MavlinkCfg = Field(MavlinkCfg(), description="the robots' MAVLink faces and the ground-station endpoint")
+    xbee_gateways: list[XBeeGatewayCfg] = Field([], description="real XBees joined to the simulated radio channel")
 
     @model_validator(mode="after")
     def _quantum_fits_physics(self) -> Config:
@@ -332,6 +474,11 @@ class Config(_Model):
             raise ValueError(f"mavlink.system_id_base = {m.system_id_base}: {self.robot_count} robots need system "
                              f"ids up to {m.system_id_base + self.robot_count - 1}, beyond MAVLink's 255")
         real = [f"robots[{i}].{f}" for i, g in enumerate(self.robots) for f in g.real_ports()]
+        real += [f"xbee_gateways[{i}]" for i in range(len(self.xbee_gateways))]
+        remote = [f"robots[{i}].logic" for i, g in enumerate(self.robots) if g.logic == "remote"]
+        if remote and self.session.listen is None:
+            raise ValueError(f"session.listen: {', '.join(remote)} = \"remote\" joins over zenoh from another "
+                             "computer: give the world an endpoint to listen on, e.g. listen = \"tcp/0.0.0.0:7447\"")
         if real and self.session.speed != 1:
             raise ValueError(f"session.speed = {self.session.speed!r}: a session with ports to the outside world "
                              f"({', '.join(real)}) runs paced to wall time: set speed = 1 (or --speed 1)")
@@ -476,6 +623,18 @@ def _check_geometry(path: str, cfg: Config) -> None:
     for i, light in enumerate(cfg.light.sources):
         if not (math.isfinite(light.x) and math.isfinite(light.y)):
             raise ConfigError(f"{path}: light.sources[{i}]: position must be finite")
+    def inside(x: float, y: float) -> bool:
+        return 0 < x < w and 0 < y < length
+
+    for i, g in enumerate(cfg.robots):
+        for j, (_, x, y, _) in enumerate(g.motion.waypoints):
+            if not inside(x, y):
+                raise ConfigError(f"{path}: robots[{i}].motion.waypoints[{j}]: ({x}, {y}) is outside the arena")
+    for i, gw in enumerate(cfg.xbee_gateways):
+        for where, (x, y) in [("pose", gw.pose)] + [(f"waypoints[{j}]", (x, y)) for j, (_, x, y) in
+                                                    enumerate(gw.waypoints)]:
+            if not inside(x, y):
+                raise ConfigError(f"{path}: xbee_gateways[{i}].{where}: ({x}, {y}) is outside the arena")
     for i, g in enumerate(cfg.robots):
         pl = g.placement
         if pl.kind == "explicit":

@@ -86,7 +86,7 @@ class Hub:
             boot = (r * self.q_ns) % max(period, self.q_ns) // self.q_ns * self.q_ns
             for role in rp.modules():
                 self.next_wake[entity(r, role)] = boot
-            if rp.logic == "session":
+            if rp.has_logic:
                 self.next_wake[entity(r, "logic")] = (r * self.q_ns) % max(LOGIC_BOOT_SPREAD_NS, self.q_ns)
         # wake on message: False, True (any input), or the input kinds that wake it (item[0] of inbox items)
         self.wom: dict[str, Any] = dict.fromkeys(self.ents, False)
@@ -123,7 +123,7 @@ class Hub:
         robots = plan.robots
         geometry = _Geometry(self.world)
         # every entity of a robot: its firmware's, and its logic when the session runs it
-        self.roles = {r: rp.modules() + (("logic",) if rp.logic == "session" else ()) for r, rp in enumerate(robots)}
+        self.roles = {r: rp.modules() + (("logic",) if rp.has_logic else ()) for r, rp in enumerate(robots)}
         self.radio = RadioMedium(cfg.radio, self.n, cfg.session.seed, geometry) if any(
             rp.sim_xbee for rp in robots) else None
         self.uwb = UwbMedium(cfg.uwb, self.n, cfg.session.seed, geometry) if any(rp.uwb for rp in robots) else None
@@ -152,7 +152,7 @@ class Hub:
             from bridge.mavlink_gateway import MavlinkGateway
 
             self.mavlink = MavlinkGateway(m.endpoint, {r: m.system_id_base + r for r, rp in enumerate(robots)
-                                                       if rp.logic == "session"}, m.per_robot)
+                                                       if rp.has_logic and rp.vehicle is None}, m.per_robot)
 
     def _can_bus(self, r: int, rp: Any) -> CanMedium:
         """Robot ``r``'s CAN bus: its nodes (the LLC's MCP2515 recovers from bus-off by itself; the companion

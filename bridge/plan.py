@@ -28,14 +28,32 @@ class RobotPlan:
     xbee: dict | None = None  # the group's XBeeCfg as a dict, or None without a radio
     uwb: bool = False
     pose_source: str = "odometry"  # "ground_truth": the LLC is fed the true pose (RobotGroup.pose_source)
-    logic: str = "session"  # "external": its swarm logic runs outside the session (RobotGroup.logic)
+    logic: str = "session"  # "external" | "remote" (RobotGroup.logic); "none" for an XBee gateway
     slcan_pty: str | None = None  # its CAN bus on a pseudo-terminal as an slcan adapter (RobotCanCfg.slcan_pty)
+    can_device: dict | None = None  # its real LLC board's CAN interface, python-can Bus arguments (RobotCanCfg.device)
+    vehicle: dict | None = None  # a MAVLink vehicle stands for it (VehicleCfg)
+    motion: dict | None = None  # how the body moves when nothing simulated drives it (MotionCfg): kind, waypoints
+    gateway: dict | None = None  # an XBee gateway, not a robot: the real module's settings (XBeeGatewayCfg)
 
     def modules(self) -> tuple[str, ...]:
-        """The firmware entities' roles of this robot: its LLC, the radio modules it carries, and the slcan
-        adapter on its CAN bus when it is exposed."""
-        return (("llc",) + (("xbee",) if self.sim_xbee else ()) + (("uwb",) if self.uwb else ())
+        """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
+        modules it carries, and the slcan adapter on its CAN bus when it is exposed."""
+        llc = () if self.llc_role is None else (self.llc_role,)
+        return (llc + (("xbee",) if self.sim_xbee else ()) + (("uwb",) if self.uwb else ())
                 + (("slcan",) if self.slcan_pty else ()))
+
+    @property
+    def llc_role(self) -> str | None:
+        """``llc`` (simulated), ``can_bridge`` (its real board, reached through a CAN interface) or None (a MAVLink
+        vehicle, an XBee gateway)."""
+        if self.vehicle is not None or self.gateway is not None:
+            return None
+        return "can_bridge" if self.can_device is not None else "llc"
+
+    @property
+    def has_logic(self) -> bool:
+        """The session runs its swarm logic (here or on a remote computer), as entity ``rNNN/logic``."""
+        return self.logic in ("session", "remote")
 
     @property
     def sim_xbee(self) -> bool:
@@ -44,13 +62,19 @@ class RobotPlan:
 
     def can_nodes(self) -> tuple[str, ...]:
         """The roles of the nodes on this robot's CAN bus."""
-        return ("llc",) + (("logic",) if self.logic == "session" else ()) + (("slcan",) if self.slcan_pty else ())
+        llc = () if self.llc_role is None else (self.llc_role,)
+        return llc + (("logic",) if self.has_logic else ()) + (("slcan",) if self.slcan_pty else ())
 
     @property
     def host_node(self) -> str:
         """The role of the companion computer's CAN node: its session logic, or the slcan adapter an external
         logic uses."""
-        return "logic" if self.logic == "session" else "slcan"
+        return "logic" if self.has_logic else "slcan"
+
+    @property
+    def scripted(self) -> bool:
+        """Its body follows a stated motion (fixed or scripted), not the world's motor model."""
+        return self.motion is not None and self.motion["kind"] != "simulated"
 
 
 @dataclass(frozen=True)
@@ -58,6 +82,7 @@ class ProcPlan:
     name: str
     kind: str  # "firmware" | "logic"
     robots: tuple[int, ...]
+    remote: bool = False  # it joins from another computer (swarm-sitl join); the launcher does not start it
 
     def entities(self, robots: list[RobotPlan]) -> list[str]:
         if self.kind == "logic":
@@ -78,7 +103,7 @@ class Plan:
     @classmethod
     def from_json(cls, d: dict) -> Plan:
         robots = [RobotPlan(**{**r, "pose": tuple(r["pose"])}) for r in d["robots"]]
-        procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"])) for p in d["procs"]]
+        procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"]), p.get("remote", False)) for p in d["procs"]]
         return cls(d["config"], robots, procs)
 
 
@@ -109,9 +134,22 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
         poses = _place(cfg, gi, prof.radius_m, path)
         for pose in poses:
             rid = len(robots)
+            if group.motion.kind == "scripted":  # it starts where its path starts
+                _, x, y, yaw_deg = group.motion.waypoints[0]
+                pose = (x, y, math.radians(yaw_deg))
             robots.append(RobotPlan(rid, f"r{rid:03d}", group.profile, group.behaviour, dict(group.params), pose,
                                     group.xbee.model_dump() if group.xbee else None, group.uwb, group.pose_source,
-                                    group.logic, group.can.slcan_pty))
+                                    group.logic, group.can.slcan_pty, group.can.device,
+                                    group.vehicle.model_dump() if group.vehicle else None,
+                                    group.motion.model_dump(mode="json")))
+    for gi, gw in enumerate(cfg.xbee_gateways):  # after the robots, so robot ids do not depend on gateways
+        rid = len(robots)
+        waypoints = [[t, x, y, 0.0] for t, x, y in gw.waypoints]
+        twin = {"series": gw.series, "api_mode": 1, "baud": 115200, "power_level": gw.power_level,
+                "pan_id": gw.pan_id, "channel": gw.channel, "pty": None, "device": None}
+        robots.append(RobotPlan(rid, f"gateway{gi}", cfg.robots[0].profile, "", {}, (gw.pose[0], gw.pose[1], 0.0),
+                                twin, logic="none", gateway=gw.model_dump(),
+                                motion={"kind": "scripted" if waypoints else "fixed", "waypoints": waypoints}))
     k = cfg.session.robots_per_process
     ids = [r.id for r in robots]
     chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
@@ -119,6 +157,8 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
     ids = [r.id for r in robots if r.logic == "session"]  # an external logic is nobody's process here
     chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
     procs += [ProcPlan(f"lg{j}", "logic", c) for j, c in enumerate(chunks)]
+    # a remote logic is its robot's own process, started by swarm-sitl join on the other computer
+    procs += [ProcPlan(f"remote{r.id}", "logic", (r.id,), remote=True) for r in robots if r.logic == "remote"]
     return Plan(cfg.model_dump(mode="json"), robots, procs)
 
 
