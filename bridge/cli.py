@@ -54,6 +54,34 @@ def cmd_run(a: argparse.Namespace) -> int:
     return res.code
 
 
+def cmd_join(a: argparse.Namespace) -> int:
+    import os
+
+    from bridge.join import JoinError, join
+
+    try:
+        code = join(a.endpoint, a.session, a.robot, timeout_s=a.timeout, world_timeout_s=a.world_timeout)
+    except JoinError as e:
+        print(f"swarm-sitl join: {e}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print("swarm-sitl join: interrupted before joining", file=sys.stderr)
+        code = 130
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)  # zenoh-python can hang in interpreter teardown
+
+
+def _positive(v: str) -> float:
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {v!r}") from None
+    if not f > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {v}")
+    return f
+
+
 def cmd_validate(a: argparse.Namespace) -> int:
     from bridge.config import config_warnings
     from bridge.plan import make_plan
@@ -210,6 +238,18 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", help="output directory (default runs/<config name>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(fn=cmd_run)
+
+    p = sub.add_parser("join", help="run a remote robot's swarm logic on this computer for a session on another one "
+                                    "(its config: session.listen, the robot's logic = \"remote\")")
+    p.add_argument("endpoint", help="where the session's world listens: its session.listen with that computer's "
+                                    "address, e.g. tcp/192.168.1.10:7447")
+    p.add_argument("--session", required=True, help="the session's name (session.name in its config)")
+    p.add_argument("--robot", type=int, help="the robot whose logic to run (default: the session's only remote robot)")
+    p.add_argument("--timeout", type=_positive, default=10.0,
+                   help="wall seconds to wait for the session to answer (default 10)")
+    p.add_argument("--world-timeout", type=_positive, default=10.0,
+                   help="wall seconds the world may be unreachable before the join gives up (default 10)")
+    p.set_defaults(fn=cmd_join)
 
     p = sub.add_parser("validate", help="check a config without running it")
     session_args(p)

@@ -320,6 +320,11 @@ class RobotGroup(_Model):
             if self.logic == "external":
                 raise ValueError("vehicle: the session's logic drives a MAVLink vehicle; an external program talks to "
                                  "it directly, without the session")
+        if self.logic == "remote":
+            for what, on in (("xbee.device", bool(self.xbee and self.xbee.device)), ("vehicle", self.vehicle)):
+                if on:
+                    raise ValueError(f"{what}: a remote logic would open it on its own computer, where the session "
+                                     "cannot check it before the start; run that robot's logic in the session")
         simulated_llc = self.can.device is None and self.vehicle is None
         if simulated_llc and self.motion.kind != "simulated":
             raise ValueError(f"motion.kind = {self.motion.kind!r}: the session drives this robot's wheels through its "
@@ -602,6 +607,14 @@ def config_warnings(cfg: Config) -> list[str]:
 
         if not is_loopback(parse_endpoint(cfg.mavlink.endpoint).host):
             out.append(f"mavlink.endpoint: {cfg.mavlink.endpoint} is not on this machine: MAVLink traffic leaves it")
+    if cfg.session.listen is not None:
+        from bridge.mavlink_gateway import is_loopback
+
+        host = cfg.session.listen.removeprefix("tcp/").rpartition(":")[0].removeprefix("[").removesuffix("]")
+        if not is_loopback(host):
+            out.append(f"session.listen: {cfg.session.listen} is reachable from other machines: the session's traffic "
+                       "(ticks, frames, the plan with the whole config) leaves this one unencrypted, and anyone who "
+                       "can reach the port can join or disturb the session (use a trusted network or a firewall)")
     for i, g in enumerate(cfg.robots):
         warn = getattr(load_behaviour(g.behaviour), "warnings", None)
         if warn is not None:

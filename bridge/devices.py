@@ -286,11 +286,33 @@ def session_devices(cfg: Any, out_dir: str = "runs/<config name>") -> list[Sessi
                                            f"{out_dir}/{g.can.slcan_pty.replace('{id}', str(rid))}", False,
                                            f"the robot's CAN bus ({cfg.can.bitrate} bit/s) as an slcan adapter: "
                                            "python-can interface 'slcan'"))
+            if g.can.device is not None:
+                dev = g.can.device
+                found.append(SessionDevice(
+                    f"robots[{i}].can.device ({who})", "can", _can_name(dev), True,
+                    "the robot's real LLC board: the session bridges its CAN bus there (expects the board's "
+                    "traffic)", lambda dev=dev: probe_can({**dev, "ignore_config": True})))
+            if g.vehicle is not None:
+                v = g.vehicle
+                found.append(SessionDevice(
+                    f"robots[{i}].vehicle ({who})", "mavlink", v.url, True,
+                    f"a MAVLink vehicle (system {v.target_system}) the robot's {g.behaviour} logic drives",
+                    lambda v=v: probe_mavlink(v.url, baudrate=v.baudrate)))
             if g.logic == "external":
                 found.append(SessionDevice(f"robots[{i}].logic ({who})", "logic", "(outside the session)", False,
                                            f"the robot's {g.behaviour} logic runs outside, in wall time, through "
                                            "the ports above"))
+            if g.logic == "remote":
+                found.append(SessionDevice(f"robots[{i}].logic ({who})", "logic", f"{cfg.session.listen}", False,
+                                           f"the robot's {g.behaviour} logic joins from another computer "
+                                           "(swarm-sitl join), in simulated time"))
         r += g.count
+    for i, gw in enumerate(cfg.xbee_gateways):
+        found.append(SessionDevice(
+            f"xbee_gateways[{i}] (r{r + i:03d})", "xbee", gw.device, True,
+            f"real XBee joined to the simulated channel at ({gw.pose[0]:g}, {gw.pose[1]:g}), expected Series "
+            f"{gw.series}, API {gw.api_mode}, {gw.baud} baud",
+            lambda gw=gw: probe_xbee(gw.device, gw.baud, gw.api_mode)))
     m = cfg.mavlink
     if m.endpoint is not None:
         ep = parse_endpoint(m.endpoint)

@@ -21,6 +21,7 @@ from bridge.config import Config
 from bridge.plan import Plan, entity, robot_of, uwb_addr16, xbee_serial64
 from bridge.profiles import PROFILES, RobotProfile
 from bridge.rng import stream
+from bridge.xbee_gateway import XBeeGateway
 from firmware_sim import sensors
 from firmware_sim.arduino import Board
 from firmware_sim.can_controller import Frame
@@ -108,6 +109,52 @@ class PtyLink:
                 os.close(fd)
 
 
+class CanBridge:
+    """A robot's simulated CAN bus bridged to its real LLC board on a python-can interface (socketcan, slcan, any):
+    frames other nodes put on the simulated bus go to the real one, frames from the real bus (the board's) go on
+    the simulated one, once per quantum. A send the real adapter refuses is counted; an interface that fails to
+    receive has failed or disappeared, and the robot fails with it."""
+
+    def __init__(self, device: dict[str, Any]) -> None:
+        import can
+
+        self.can = can
+        self.name = f"{device.get('interface')}:{device.get('channel')}"
+        try:  # the host's python-can config must not change the device the session was given
+            self.bus = can.Bus(**{**device, "ignore_config": True})
+        except Exception as e:  # python-can raises many kinds for a missing or busy adapter
+            raise RuntimeError(f"can.device {self.name}: cannot open the real board's bus: {e}") from None
+        self.counters = {"to_board": 0, "from_board": 0, "send_failed": 0, "error_frames": 0, "remote_frames": 0}
+
+    def exchange(self, frames: list[tuple[int, bytes, bool]]) -> list[tuple[int, bytes, bool]]:
+        """Send ``frames`` (id, data, extended) to the real bus; return what arrived from it since the last call."""
+        for arb_id, data, ext in frames:
+            try:
+                self.bus.send(self.can.Message(arbitration_id=arb_id, data=data, is_extended_id=ext), timeout=0)
+                self.counters["to_board"] += 1
+            except self.can.CanError:  # a full queue, the adapter bus-off: the frame is lost, as on the wire
+                self.counters["send_failed"] += 1
+        out = []
+        while True:
+            try:
+                m = self.bus.recv(0)
+            except Exception as e:
+                raise RuntimeError(f"can.device {self.name}: the real board's bus failed or disappeared: {e}") from e
+            if m is None:
+                return out
+            if m.is_error_frame:
+                self.counters["error_frames"] += 1
+            elif m.is_remote_frame:
+                self.counters["remote_frames"] += 1
+            else:
+                self.counters["from_board"] += 1
+                out.append((m.arbitration_id, bytes(m.data), m.is_extended_id))
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.bus.shutdown()
+
+
 class FirmwareHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
         cfg = Config.model_validate(plan.config)
@@ -121,14 +168,20 @@ class FirmwareHost:
         self.ptys: dict[int, PtyLink] = {}
         self.uwbs: dict[int, UwbModule] = {}
         self.slcans: dict[int, tuple[SlcanAdapter, PtyLink]] = {}
+        self.bridges: dict[int, CanBridge] = {}  # robots whose LLC is a real board
+        self.gateways: dict[int, XBeeGateway] = {}
         self.crash_ns = {f.robot: round(f.at_s * 1e9) for f in cfg.faults if f.kind == "firmware_crash"}
         uwb_team = [r.id for r in plan.robots if r.uwb]
         self.uwb_baud = cfg.uwb.uart_baud
         for r in robots:
             rp = plan.robots[r]
-            board = Board()
-            self.boards[r] = board
-            self.llcs[r] = LowLevelController(board, llc_params(PROFILES[rp.profile], rp.xbee if rp.sim_xbee else None))
+            if rp.llc_role == "llc":
+                board = Board()
+                self.boards[r] = board
+                self.llcs[r] = LowLevelController(board, llc_params(PROFILES[rp.profile],
+                                                                   rp.xbee if rp.sim_xbee else None))
+            elif rp.llc_role == "can_bridge":
+                self.bridges[r] = CanBridge(rp.can_device)
             if rp.sim_xbee:
                 x = rp.xbee
                 self.xbees[r] = XBeeModule(
@@ -137,6 +190,8 @@ class FirmwareHost:
                     power_level=x["power_level"])
                 if x.get("pty"):
                     self.ptys[r] = PtyLink(x["pty"])
+                if rp.gateway is not None:
+                    self.gateways[r] = XBeeGateway(rp.gateway)
             if rp.slcan_pty:
                 self.slcans[r] = (SlcanAdapter(cfg.can.bitrate, serial_number=f"{r % 10000:04d}"),
                                   PtyLink(rp.slcan_pty, "can.slcan_pty"))
@@ -157,6 +212,8 @@ class FirmwareHost:
             return self._xbee(r, t_ns, inputs)
         if role == "slcan":
             return self._slcan(r, t_ns, inputs)
+        if role == "can_bridge":
+            return self._can_bridge(r, t_ns, inputs)
         return self._uwb(r, t_ns, inputs)
 
     def _llc(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
@@ -203,7 +260,10 @@ class FirmwareHost:
 
     def _xbee(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         m = self.xbees[r]
-        link = self.ptys.get(r)
+        link: PtyLink | XBeeGateway | None = self.ptys.get(r)
+        if r in self.gateways:
+            link = self.gateways[r]
+            link.set_time(t_ns)
         uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
         if link is not None:
             uart += link.read()
@@ -223,7 +283,7 @@ class FirmwareHost:
         if res.rssi_pwm is not None:
             out.append(["rssi_pwm", float(res.rssi_pwm)])
         wake = m.next_wake()
-        if link is not None:  # poll the pseudo-terminal every quantum
+        if link is not None:  # poll the pseudo-terminal (the gateway's real module) every quantum
             wake = t_ns + 1 if wake is None else min(wake, t_ns + 1)
         return {"out": out, "wake": wake, "wom": True}
 
@@ -242,6 +302,12 @@ class FirmwareHost:
             link.write(out)
         frames = [["can0", f.arbitration_id, f.data, f.extended] for f in adapter.take_tx()]
         return {"out": frames, "wake": t_ns + 1, "wom": True}
+
+    def _can_bridge(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        """The robot's real LLC board, reached through a CAN interface: polled every quantum."""
+        frames = [(item[1], item[2], item[3]) for item in inputs["in"] if item[0] == "can0" and len(item) == 5]
+        back = self.bridges[r].exchange(frames)
+        return {"out": [["can0", arb, data, ext] for arb, data, ext in back], "wake": t_ns + 1, "wom": True}
 
     def _uwb(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         m = self.uwbs[r]
@@ -266,8 +332,13 @@ class FirmwareHost:
             out[entity(r, "uwb")] = dict(m.counters)
         for r, (adapter, link) in self.slcans.items():
             out[entity(r, "slcan")] = {**adapter.counters, "pty_dropped_bytes": link.dropped}
+        for r, bridge in self.bridges.items():
+            out[entity(r, "can_bridge")] = dict(bridge.counters)
+        for r, gw in self.gateways.items():
+            out.setdefault(entity(r, "xbee"), {})["gateway"] = gw.stats()
         return out
 
     def stop(self) -> None:
-        for link in [*self.ptys.values(), *(link for _, link in self.slcans.values())]:
+        for link in [*self.ptys.values(), *(link for _, link in self.slcans.values()), *self.bridges.values(),
+                     *self.gateways.values()]:
             link.close()

@@ -131,12 +131,14 @@ class Hub:
         self.lines: dict[tuple[int, str], SerialLine] = {}  # host -> module, paced at the host's baud
         self.host_baud: dict[tuple[int, str], int] = {}  # what the host's port is set to (last write)
         for r, rp in enumerate(robots):
-            if rp.sim_xbee and not rp.xbee.get("pty"):
+            if rp.sim_xbee and not rp.xbee.get("pty") and rp.has_logic:
                 self.lines[(r, "xbee")] = SerialLine(rp.xbee["baud"])
                 self.host_baud[(r, "xbee")] = rp.xbee["baud"]
             if rp.uwb:
                 self.lines[(r, "uwb")] = SerialLine(cfg.uwb.uart_baud)
                 self.host_baud[(r, "uwb")] = cfg.uwb.uart_baud
+        # the swarm's radio network, whose connectivity is sampled: the robots' XBees (not a gateway's)
+        self.swarm_radios = [r for r, rp in enumerate(robots) if rp.sim_xbee and rp.gateway is None]
         self.rssi_pwm = [0.0] * self.n
         self.ideal_pose = {r for r, rp in enumerate(robots) if rp.pose_source == "ground_truth"}
         self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
@@ -176,7 +178,9 @@ class Hub:
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def open(self) -> None:
-        self.session = transport.open_session(self.endpoint, self.namespace, listen=True)
+        listen = self.cfg.session.listen  # remote logic joins there (swarm-sitl join), besides the unix socket
+        self.session = transport.open_session(self.endpoint, self.namespace, listen=True,
+                                              extra_listen=[listen] if listen else None)
         s = self.session
         self._subs = [
             transport.queue_subscriber(s, "done/*", self.q),
@@ -185,6 +189,17 @@ class Hub:
         ]
         self.status_pub = transport.publisher(s, "status")
         self.tick_pub = {p: transport.publisher(s, f"tick/{p}") for p in self.procs}
+        # the remote procs that may still join (None: started); the plan's answer tells a joiner, who refuses to
+        # join twice or late
+        self.joinable: frozenset[str] | None = frozenset(p for p, pp in self.procs.items() if pp.remote)
+        if listen:
+            from bridge.join import plan_offer
+
+            def offer(query: Any) -> None:  # a zenoh thread: reads the plan and a frozenset (or None)
+                query.reply(transport.PLAN_KEY, plan_offer(self.plan, self.joinable))
+
+            self._subs.append(s.declare_queryable(transport.PLAN_KEY, offer))
+            self._world_token = s.liveliness().declare_token(transport.WORLD_KEY)  # a joiner sees the world go
 
     def status(self, **msg: Any) -> None:
         """Tell the launcher (nothing to tell before ``open``, e.g. a hub driven directly by tests)."""
@@ -194,34 +209,54 @@ class Hub:
     def wait_for_participants(self) -> None:
         t0 = time.monotonic()
         timeout = self.cfg.session.startup_timeout_s
-        self.status(op="listening")
+        remote = {p for p, pp in self.procs.items() if pp.remote}  # they join from other computers, maybe later
+        self.status(op="listening", listen=self.cfg.session.listen, remote=sorted(remote))
         missing = set(self.procs)
-        while missing:
-            left = timeout - (time.monotonic() - t0)
-            if left <= 0:
-                raise TimeoutError(f"processes did not join within {timeout:.0f} s: {', '.join(sorted(missing))}")
-            if self.abort or os.getppid() != self.parent_pid:
-                raise KeyboardInterrupt
-            try:
-                key, data = self.q.get(timeout=min(left, 0.2))
-            except queue.Empty:
-                continue
-            msg = _unpack_dict(data)
-            if msg is None:
-                self.counts["malformed_control"] += 1
-                continue
-            if key.startswith("hello/"):
-                p = key.split("/", 1)[1]
-                if p in missing and isinstance(msg.get("pid"), int):
-                    self.pids[p] = msg["pid"]
-                    transport.wait_matched(self.tick_pub[p], timeout, f"tick/{p}")
-                    missing.discard(p)
-            elif key == "control":
-                if msg.get("op") == "dead":
-                    raise RuntimeError(f"process {msg.get('proc')} exited during start-up ({msg.get('detail')})")
-                if msg.get("op") == "stop":
+        try:
+            while missing:
+                left = timeout - (time.monotonic() - t0)
+                if left <= 0:
+                    hint = (" (remote logic: run the swarm-sitl join command the launcher printed on the other "
+                            "computer, or raise session.startup_timeout_s)" if missing & remote else "")
+                    raise TimeoutError(f"processes did not join within {timeout:.0f} s: {', '.join(sorted(missing))}"
+                                       + hint)
+                if self.abort or os.getppid() != self.parent_pid:
                     raise KeyboardInterrupt
+                try:
+                    key, data = self.q.get(timeout=min(left, 0.2))
+                except queue.Empty:
+                    continue
+                msg = _unpack_dict(data)
+                if msg is None:
+                    self.counts["malformed_control"] += 1
+                    continue
+                if key.startswith("hello/"):
+                    p = key.split("/", 1)[1]
+                    if p in missing and isinstance(msg.get("pid"), int):
+                        if p in remote:  # its pid is on another computer: never ours to kill
+                            self.joinable = frozenset((missing & remote) - {p})
+                            self.status(op="notice", joined=p, text=f"robot {self.procs[p].robots[0]}'s logic joined "
+                                                                    f"from another computer ({p})")
+                        else:
+                            self.pids[p] = msg["pid"]
+                        transport.wait_matched(self.tick_pub[p], timeout, f"tick/{p}")
+                        missing.discard(p)
+                elif key == "control":
+                    if msg.get("op") == "dead" and msg.get("proc") in remote:  # a joiner left: it may join again
+                        p = msg["proc"]
+                        missing.add(p)
+                        self.joinable = frozenset(missing & remote)
+                        self.status(op="notice", text=f"{p} left before the start ({msg.get('detail')}); waiting "
+                                                      "for it again")
+                    elif msg.get("op") == "dead":
+                        raise RuntimeError(f"process {msg.get('proc')} exited during start-up ({msg.get('detail')})")
+                    if msg.get("op") == "stop":
+                        raise KeyboardInterrupt
+        except BaseException:
+            self.live_procs -= missing & remote  # they never joined: nobody to say stop to
+            raise
         self.startup_wall_s = time.monotonic() - t0
+        self.joinable = None  # started: a late joiner is refused
         self.status(op="started", startup_s=self.startup_wall_s,
                     mavlink=self.mavlink.endpoints if self.mavlink is not None else None)
 
@@ -501,8 +536,8 @@ class Hub:
             return
         for t_ev, r, ev in self.radio.advance(t + 2 * q):
             self._radio_event(t_ev, r, ev)
-        if t % CONNECTIVITY_EVERY_NS < q and all(r in self.node_net for r in range(self.n)
-                                                 if "xbee" in self.roles[r] and r not in self.dead):
+        if t % CONNECTIVITY_EVERY_NS < q and all(r in self.node_net for r in self.swarm_radios
+                                                 if r not in self.dead):
             lam = self.algebraic_connectivity()
             self.connectivity.append((t / 1e9, lam))
             self.rec.write(t, "/radio/connectivity", "swarm_sitl.Connectivity", {"lambda2": round(lam, 6)})
@@ -510,7 +545,7 @@ class Hub:
     def algebraic_connectivity(self) -> float:
         """lambda2 of the graph of live robots whose mean link budget (no fast fading) clears the receiver's
         sensitivity both ways: above zero exactly when the radio network is connected."""
-        live = [r for r in range(self.n) if r not in self.dead and "xbee" in self.roles[r]]
+        live = [r for r in self.swarm_radios if r not in self.dead]
         if len(live) < 2:
             return 0.0
         rssi = self.radio.mean_rssi()[np.ix_(live, live)]  # row: sender, column: receiver
@@ -769,8 +804,9 @@ class Hub:
                     out["per_robot"].setdefault(r, {})["radio"] = stats["robots"][r]
                     out["per_robot"][r]["xbee_module"] = self.module_stats.get(entity(r, "xbee"))
         for r in range(self.n):
-            if "slcan" in self.roles[r]:  # the USB-CAN adapter's own counters (lines, malformed, frames)
-                out["per_robot"].setdefault(r, {})["slcan"] = self.module_stats.get(entity(r, "slcan"))
+            for role in ("slcan", "can_bridge"):  # the USB-CAN adapter's own counters; the real board's bridge's
+                if role in self.roles[r]:
+                    out["per_robot"].setdefault(r, {})[role] = self.module_stats.get(entity(r, role))
         if self.uwb is not None:
             ustats = self.uwb.stats()
             out["uwb_medium"] = ustats.get("all", {})
@@ -817,6 +853,8 @@ class Hub:
                                 round(float(self.world.yaw[r]), 3)],
                  "battery_v": round(float(self.world.battery_v[r]), 3),
                  "pose_source": self.plan.robots[r].pose_source,
+                 "kind": "xbee_gateway" if self.plan.robots[r].gateway is not None else "robot",
+                 "motion": self.plan.robots[r].motion["kind"] if self.plan.robots[r].scripted else "simulated",
                  "can_frames": self.can[r].frames,
                  "can_bus_load": round(self.can[r].bits / self.can[r].bitrate / max(self.sim_end_ns / 1e9, 1e-9), 4),
                  "can": _can_summary(self.can[r])}

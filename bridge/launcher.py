@@ -3,7 +3,9 @@
 It owns the terminal: Ctrl-C (or SIGTERM) asks the world to stop at the end of the current quantum and
 finish the recording; a second Ctrl-C kills everything at once. A child that dies is reported to the
 world, which applies the failure policy. Children are in their own process groups and die with the
-launcher (PR_SET_PDEATHSIG), so no process of a session outlives it.
+launcher (PR_SET_PDEATHSIG), so no process of a session outlives it. A remote logic process (``logic = "remote"``)
+is not its child: it joins from another computer (``swarm-sitl join``, whose command the launcher prints), and the
+world's timeouts (``startup_timeout_s``, ``hang_timeout_s``) watch it.
 """
 
 from __future__ import annotations
@@ -13,20 +15,21 @@ import dataclasses
 import json
 import os
 import queue
+import shlex
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
 import time
-import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
 from bridge import transport
 from bridge.config import ConfigError, config_warnings, load_config
-from bridge.plan import make_plan
+from bridge.plan import Plan, make_plan
 
 # One worker thread per zenoh runtime: a session runs tens of processes on a few cores, and fewer
 # runtime threads mean fewer context switches per quantum (about 5% faster at 10 robots, measured).
@@ -86,6 +89,10 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
                 progress: TextIO | None = sys.stderr, plot: bool = True) -> SessionResult:
     cfg = load_config(config_path, overrides)
     plan = make_plan(cfg, config_path)
+    try:  # random, or for a session that remote logic joins, its name's (the joiner knows only that)
+        namespace = transport.namespace_for(cfg.session.name if cfg.session.listen else None)
+    except ValueError as e:
+        raise ConfigError(f"{config_path}: {e}") from None
     if progress is not None:
         for w in config_warnings(cfg):
             print(f"{config_path}: warning: {w}", file=progress)
@@ -94,6 +101,8 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     for d in session_devices(cfg):  # a real device that does not answer stops the session before it starts
         if d.real and not (rep := d.check()).ok:
             raise ConfigError(f"{config_path}: {d.field}: {rep.detail}")
+    if cfg.session.listen and (why := _cannot_listen(cfg.session.listen)):  # before anything starts, as devices
+        raise ConfigError(f"{config_path}: session.listen: cannot listen on {cfg.session.listen}: {why}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("session.mcap", "summary.json", "world_result.json", "trajectories.png", "plan.json"):
@@ -113,9 +122,9 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     plan_path = out / "plan.json"
     plan_path.write_text(json.dumps(plan.to_json(), indent=1))
     session_dir = tempfile.mkdtemp(prefix="swarm-sitl-")
-    namespace = f"swarm-sitl/{uuid.uuid4().hex[:16]}"
     endpoint = transport.endpoint_for(session_dir)
     prog = _Progress(progress, cfg.session.name, cfg.session.duration_s, len(plan.robots))
+    remote = sum(p.remote for p in plan.procs)
 
     def spawn(role: str, name: str) -> subprocess.Popen:
         log = open(logs / f"{name}.log", "wb")  # noqa: SIM115 - owned by the child
@@ -159,8 +168,11 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         session = transport.open_session(endpoint, namespace, listen=False)
         _sub = transport.queue_subscriber(session, "status", status_q)
         control = transport.publisher(session, "control")
+        for line in join_commands(cfg.session.name, cfg.session.listen, plan):  # the world listens there now
+            prog.note(f"[{cfg.session.name}] {line}")
         for p in plan.procs:
-            children.append(Child(p.name, p.kind, spawn(p.kind, p.name), p.robots))
+            if not p.remote:  # a remote logic is started on its own computer; the world's timeouts watch it
+                children.append(Child(p.name, p.kind, spawn(p.kind, p.name), p.robots))
         sent_stop = False
         last_sim = 0.0
         while True:
@@ -174,7 +186,7 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
                 op = msg.get("op")
                 if op == "started":
                     t_started = time.monotonic()
-                    prog.note(f"[{cfg.session.name}] started: {len(children)} processes joined in "
+                    prog.note(f"[{cfg.session.name}] started: {len(children) + remote} processes joined in "
                               f"{t_started - t_launch:.1f} s")
                     for line in ports:
                         prog.note(f"[{cfg.session.name}] port: {line}")
@@ -230,6 +242,43 @@ class _Abort(Exception):
     pass
 
 
+def _cannot_listen(listen: str) -> str | None:
+    """Why the world could not listen on ``tcp/HOST:PORT`` (the port is taken, the address is not this machine's),
+    or None. A trial bind, closed at once (SO_REUSEADDR as zenoh's listener, so a port in TIME_WAIT is free)."""
+    host, _, port = listen.removeprefix("tcp/").rpartition(":")
+    try:
+        family, _, _, _, addr = socket.getaddrinfo(host.strip("[]"), int(port), type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind(addr)
+    except OSError as e:
+        return e.strerror or str(e)
+    return None
+
+
+def join_commands(name: str, listen: str | None, plan: Plan) -> list[str]:
+    """For each robot whose logic joins from another computer, the line telling the user how: ``swarm-sitl join``
+    with an address of this machine (a wildcard listen address is not one another computer can connect to)."""
+    remote = [p for p in plan.procs if p.remote]
+    if not remote or listen is None:
+        return []
+    host, _, port = listen.removeprefix("tcp/").rpartition(":")
+    lines = []
+    if host in ("0.0.0.0", "[::]"):
+        import psutil
+
+        mine = [a.address for addrs in psutil.net_if_addrs().values() for a in addrs
+                if a.family == socket.AF_INET and not a.address.startswith("127.")]
+        host = mine[0] if mine else "127.0.0.1"
+        if len(mine) > 1:
+            lines.append(f"listening on {listen}: this machine's addresses are {', '.join(mine)}; use one the other "
+                         "computer reaches")
+    for p in remote:
+        lines.append(f"robot {p.robots[0]}'s logic: swarm-sitl join tcp/{host}:{port} --session {shlex.quote(name)} "
+                     f"--robot {p.robots[0]}")
+    return lines
+
+
 def _reap(c: Child) -> None:
     try:
         pid, status, ru = os.wait4(c.popen.pid, os.WNOHANG)
@@ -275,7 +324,8 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "name": cfg.session.name,
         "seed": cfg.session.seed,
         "robots": n,
-        "processes": len(children),
+        "processes": len(children) + sum(p.remote for p in plan.procs),
+        "remote_processes": [p.name for p in plan.procs if p.remote],  # joined from other computers
         "robots_per_process": cfg.session.robots_per_process,
         "speed": cfg.session.speed,
         "sim_time_s": sim_t,

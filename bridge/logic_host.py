@@ -26,6 +26,10 @@ SITL_CAN = {"interface": "sitl", "channel": "can0", "ignore_config": True}
 def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
     """The HAL config of a robot in a session: the devices it carries, on their simulated ports."""
     hal: dict[str, Any] = {"llc_can": dict(SITL_CAN)}
+    if rp.vehicle is not None:  # a real MAVLink vehicle stands for the robot: the logic drives it over its link
+        v = rp.vehicle
+        hal = {"llc_mavlink": {"url": v["url"], "baudrate": v["baudrate"], "target_system": v["target_system"],
+                               "target_component": v["target_component"], "timeout_s": v["timeout_s"]}}
     if rp.xbee and not rp.xbee.get("pty"):  # an XBee on a pseudo-terminal belongs to whoever opens the pty
         # Series 2 receive frames carry no RSSI: the host asks the module (ATDB) after each packet
         port = "sitl://xbee"
@@ -36,7 +40,8 @@ def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
     if rp.uwb:
         hal["uwb"] = {"port": "sitl://uwb", "baudrate": cfg.uwb.uart_baud}
     m = cfg.mavlink
-    if m.endpoint is not None:  # its MAVLink face, behind the world's ground-station endpoint
+    if m.endpoint is not None and rp.vehicle is None:  # its face, behind the world's ground-station endpoint
+        # (a vehicle has its own MAVLink: a ground station talks to it directly)
         hal["mavlink"] = {"port": "sitl://mavlink", "system_id": m.system_id_base + rp.id, "boot": m.boot}
         if m.rates:
             hal["mavlink"]["rates"] = dict(m.rates)

@@ -2,7 +2,8 @@
 
 A participant never advances time by itself: it computes quantum k only when the world's tick for k
 arrives, and the world starts k+1 only when every ticked participant has answered. It exits when the
-world says stop, and also when its parent (the launcher) disappears.
+world says stop, and also when its parent (the launcher) disappears; a remote logic (``swarm-sitl join``, no
+launcher parent) instead when it is interrupted or loses the world (``watch``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,10 @@ import queue
 import signal
 import sys
 import traceback
+from collections.abc import Callable
 from typing import Any, Protocol
+
+import zenoh
 
 from bridge import transport
 
@@ -37,8 +41,17 @@ class Host(Protocol):
     def stop(self) -> None: ...
 
 
-def serve(proc: str, endpoint: str, namespace: str, host: Host, parent_pid: int) -> int:
-    session = transport.open_session(endpoint, namespace, listen=False)
+def serve(proc: str, endpoint: str, namespace: str, host: Host, parent_pid: int | None = None, *,
+          session: zenoh.Session | None = None, watch: Callable[[], int | None] | None = None) -> int:
+    """Answer the world's ticks for ``proc`` until it says stop (exit code 0).
+
+    A launcher's child connects to ``endpoint`` itself and stops (code 3) when its parent ``parent_pid`` is gone. A
+    joiner on another computer has no such parent: it passes its own ``session`` (connected over TCP; left open for
+    it) and ``watch``, polled after every tick and every idle second, whose first non-None answer ends the loop with
+    that code (Ctrl-C, the world gone)."""
+    own = session is None
+    if session is None:
+        session = transport.open_session(endpoint, namespace, listen=False)
     q: queue.SimpleQueue = queue.SimpleQueue()
     _sub = transport.queue_subscriber(session, f"tick/{proc}", q, "tick")
     done = transport.publisher(session, f"done/{proc}")
@@ -52,8 +65,11 @@ def serve(proc: str, endpoint: str, namespace: str, host: Host, parent_pid: int)
             try:
                 _, data = q.get(timeout=1.0)
             except queue.Empty:
-                if os.getppid() != parent_pid:
+                if parent_pid is not None and os.getppid() != parent_pid:
                     code = 3
+                    break
+                if watch is not None and (verdict := watch()) is not None:
+                    code = verdict
                     break
                 continue
             try:
@@ -75,8 +91,12 @@ def serve(proc: str, endpoint: str, namespace: str, host: Host, parent_pid: int)
                 except Exception:
                     ents[ent] = {"err": traceback.format_exc(), "wake": None}
             done.put(transport.pack({"k": k, "ents": ents}))
+            if watch is not None and (verdict := watch()) is not None:
+                code = verdict
+                break
     finally:
         sys.stdout.flush()
         sys.stderr.flush()
-        session.close()
+        if own:
+            session.close()
     return code

@@ -1,8 +1,11 @@
 """zenoh, configured explicitly: peer mode, no multicast or gossip scouting, a unix socket endpoint in
 the session's private directory, and a namespace per session, so two sessions on one machine never see
-each other and nothing leaves the machine.
+each other and nothing leaves the machine. A session whose config sets ``session.listen`` also listens on
+that TCP endpoint, so that a robot's swarm logic on another computer can join it (``swarm-sitl join``); its
+namespace then follows from the session's name, which the joiner gives.
 
-Key space (relative to the session namespace ``swarm-sitl/<session id>``):
+Key space (relative to the session namespace ``swarm-sitl/<session id>``, or ``swarm-sitl/<session name>``
+for a session that listens on TCP):
 
 ==================  ===================  =====================================================
 key                 direction            payload (msgpack)
@@ -10,8 +13,13 @@ key                 direction            payload (msgpack)
 ``hello/<proc>``    participant -> world  ``{"proc", "pid"}`` once subscribed and matched
 ``tick/<proc>``     world -> participant  one quantum's work for the process's due entities
 ``done/<proc>``     participant -> world  the entities' outputs and next wake times
-``control``         launcher -> world     ``{"op": "stop"}`` or ``{"op": "dead", "proc", ...}``
-``status``          world -> launcher     progress once per simulated second, events, the end
+``control``         launcher -> world     ``{"op": "stop"}`` or ``{"op": "dead", "proc", ...}`` (also a
+                                          joiner that leaves: ``{"op": "dead", "proc": "remote<id>"}``)
+``status``          world -> launcher     progress once per simulated second, events, the end (a joiner
+                                          listens too: its robot's failure, the end)
+``plan``            joiner -> world       queryable, TCP sessions only: the reply (JSON, not msgpack) is
+                                          the plan, the swarm-sitl version and which remote procs may join
+``world``           world                 liveliness token, TCP sessions only: a joiner sees the world go
 ==================  ===================  =====================================================
 
 Every publisher that carries something that must arrive uses ``CongestionControl.BLOCK`` (``DROP``
@@ -24,31 +32,62 @@ from __future__ import annotations
 import json
 import queue
 import time
+import urllib.parse
+import uuid
 from typing import Any
 
 import msgpack
 import zenoh
+
+PLAN_KEY = "plan"  # the world's queryable in a session that listens on TCP (see the key table)
+WORLD_KEY = "world"  # the world's liveliness token in such a session
 
 
 def endpoint_for(session_dir: str) -> str:
     return f"unixsock-stream/{session_dir}/zenoh.sock"
 
 
-def make_config(endpoint: str, namespace: str, listen: bool) -> zenoh.Config:
+def namespace_for(session_name: str | None) -> str:
+    """The session's key namespace: random (``None``: nobody outside the launcher needs to know it), or derived
+    from the session's name for a session that remote logic joins (the joiner knows only the name). Every character
+    a key expression reserves (``* $ ? # /``) is percent-encoded, so any non-empty name works."""
+    if session_name is None:
+        return f"swarm-sitl/{uuid.uuid4().hex[:16]}"
+    if not session_name:
+        raise ValueError("session.name: must not be empty for a session that listens on TCP (joiners name it)")
+    return "swarm-sitl/" + urllib.parse.quote(session_name, safe="")
+
+
+def make_config(endpoint: str, namespace: str | None, listen: bool, extra_listen: list[str] | None = None,
+                connect_timeout_s: float | None = None) -> zenoh.Config:
+    """Peer mode, no scouting, no shared memory, no adminspace. ``listen``: this process (the world) listens on
+    ``endpoint`` and ``extra_listen`` (e.g. ``tcp/0.0.0.0:7447`` for joiners); otherwise it connects to
+    ``endpoint``. ``connect_timeout_s``: fail to open unless the connection succeeds by then, trying every second at
+    most (a joiner, whose world may still be starting; by default a peer opens anyway and keeps trying in the
+    background). ``namespace`` None: full keys (a joiner asking which
+    sessions answer at an endpoint)."""
+    if extra_listen and not listen:
+        raise ValueError("extra_listen: only a listening session (the world) listens on more endpoints")
     c = zenoh.Config()
     c.insert_json5("mode", '"peer"')
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("scouting/gossip/enabled", "false")
-    c.insert_json5("namespace", json.dumps(namespace))
-    c.insert_json5("listen/endpoints", json.dumps([endpoint] if listen else []))
+    if namespace is not None:
+        c.insert_json5("namespace", json.dumps(namespace))
+    c.insert_json5("listen/endpoints", json.dumps([endpoint, *(extra_listen or [])] if listen else []))
     c.insert_json5("connect/endpoints", json.dumps([] if listen else [endpoint]))
+    if connect_timeout_s is not None:
+        c.insert_json5("connect/timeout_ms", json.dumps(max(1, round(connect_timeout_s * 1000))))
+        c.insert_json5("connect/exit_on_failure", "true")
+        c.insert_json5("connect/retry", '{"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}')
     c.insert_json5("transport/shared_memory/enabled", "false")
     c.insert_json5("adminspace/enabled", "false")
     return c
 
 
-def open_session(endpoint: str, namespace: str, listen: bool) -> zenoh.Session:
-    return zenoh.open(make_config(endpoint, namespace, listen))
+def open_session(endpoint: str, namespace: str | None, listen: bool, extra_listen: list[str] | None = None,
+                 connect_timeout_s: float | None = None) -> zenoh.Session:
+    return zenoh.open(make_config(endpoint, namespace, listen, extra_listen, connect_timeout_s))
 
 
 def pack(obj: Any) -> bytes:

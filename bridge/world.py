@@ -124,6 +124,10 @@ class World:
                     pb.GEOM_CYLINDER, radius=prof.radius_m, height=prof.height_m, physicsClientId=self.cid
                 )
             x, y, yaw = r.pose
+            if r.gateway is not None:  # a radio's antenna, not a body: nothing collides with it or sees it
+                self.bodies.append(pb.createMultiBody(0, -1, basePosition=[x, y, prof.height_m / 2 + 1e-3],
+                                                      physicsClientId=self.cid))
+                continue
             body = pb.createMultiBody(
                 prof.mass_kg, shapes[prof.name], basePosition=[x, y, prof.height_m / 2 + 1e-3],
                 baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=self.cid,
@@ -134,6 +138,8 @@ class World:
             pb.changeDynamics(body, -1, localInertiaDiagonal=[1e3, 1e3, izz], lateralFriction=0.0,
                               linearDamping=0.0, angularDamping=0.0, physicsClientId=self.cid)
             self.bodies.append(body)
+        # bodies whose motion the config states (a real board's or vehicle's robot, a gateway): (t, x, y, yaw) rows
+        self.paths = {r.id: _path(r) for r in robots if r.scripted}
         p = self.profiles
         self.wheel_r = np.empty((n, 2))
         self.gain = np.empty((n, 2))
@@ -237,6 +243,8 @@ class World:
             pb.stepSimulation(physicsClientId=c)
             yaw += w * self.dt
             self.steps_done += 1
+            if self.paths:
+                self._follow_paths(self.steps_done / self.hz)
             stepped = True
         if stepped:
             self._read_poses()
@@ -250,6 +258,19 @@ class World:
             self._update_sonar()
             while self._next_sonar_ns <= t_end:
                 self._next_sonar_ns += self._sonar_period_ns
+
+    def _follow_paths(self, t_s: float) -> None:
+        """Put every body with a stated motion where its path says at ``t_s``, moving as the path moves (so what
+        hits it feels its motion); nothing pushes it off its path."""
+        c = self.cid
+        for i, path in self.paths.items():
+            x, y, yaw = path_pose(path, t_s)
+            x1, y1, yaw1 = path_pose(path, t_s + self.dt)
+            z = self.profiles[i].height_m / 2 + 1e-3
+            pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, z], pb.getQuaternionFromEuler([0, 0, yaw]),
+                                               physicsClientId=c)
+            pb.resetBaseVelocity(self.bodies[i], [(x1 - x) * self.hz, (y1 - y) * self.hz, 0.0],
+                                 [0.0, 0.0, _wrap(yaw1 - yaw) * self.hz], physicsClientId=c)
 
     def _read_poses(self) -> None:
         c = self.cid
@@ -356,3 +377,30 @@ class World:
     def close(self) -> None:
         if pb.isConnected(self.cid):
             pb.disconnect(self.cid)
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _path(r: RobotPlan) -> np.ndarray:
+    """A stated motion as rows (t_s, x, y, yaw rad): a fixed body is a one-row path at its placement."""
+    way = r.motion["waypoints"] if r.motion["kind"] == "scripted" else []
+    if not way:
+        return np.array([[0.0, r.pose[0], r.pose[1], r.pose[2]]])
+    return np.array([[t, x, y, math.radians(yd)] for t, x, y, yd in way], dtype=float)
+
+
+def path_pose(path: np.ndarray, t_s: float) -> tuple[float, float, float]:
+    """The pose on a path at ``t_s``: linear between waypoints (the heading the short way round), the first
+    before it starts and the last after it ends."""
+    t = path[:, 0]
+    k = int(np.searchsorted(t, t_s, side="right"))
+    if k == 0:
+        return float(path[0, 1]), float(path[0, 2]), float(path[0, 3])
+    if k == len(t):
+        return float(path[-1, 1]), float(path[-1, 2]), float(path[-1, 3])
+    a, b = path[k - 1], path[k]
+    f = (t_s - a[0]) / (b[0] - a[0])
+    return (float(a[1] + f * (b[1] - a[1])), float(a[2] + f * (b[2] - a[2])),
+            _wrap(float(a[3] + f * _wrap(float(b[3] - a[3])))))
