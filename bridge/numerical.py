@@ -23,25 +23,10 @@ from scipy.sparse.csgraph import connected_components
 
 from bridge.objectives import Field, obstacle_distance, segment_entry
 from swarm_logic.behaviours import load_behaviour
+from swarm_logic.clock import SteppedClock
 from swarm_logic.controller import Controller
 from swarm_logic.llc_client import LlcState
 from swarm_logic.robot import Robot
-
-
-class NumClock:
-    """The runner's clock: simulated seconds, advanced by the runner only."""
-
-    def __init__(self) -> None:
-        self.t = 0.0
-
-    def now(self) -> float:
-        return self.t
-
-    def sleep(self, dt: float) -> None:
-        raise RuntimeError("the numerical runner drives controllers by their period; they must not sleep")
-
-    def sleep_until(self, t: float) -> None:
-        self.sleep(t - self.t)
 
 
 @dataclass(slots=True)
@@ -198,7 +183,7 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
         start = chain_deployment(n, groups, size, float(p.get("d_max_m", link.range_m)), obstacles, rng)
     theta = rng.uniform(-math.pi, math.pi, n)
     world = NumericalWorld(size, objective, obstacles, link, np.array(start, float), theta)
-    clock = NumClock()
+    clock = SteppedClock("the numerical runner drives controllers by their period; they must not sleep")
     logs: list[dict[str, Any]] = []
     per_iter: dict[int, list[tuple[int, int, bool, float, float]]] = {}
 

@@ -22,6 +22,7 @@ from typing import Any
 
 import serial
 
+from swarm_logic.clock import SteppedClock
 from swarm_logic.xbee import XBee
 
 TWIN_API_MODE = 1  # the simulated module's UART, internal to the gateway (bridge.plan sets it up so)
@@ -30,22 +31,6 @@ RESULTS_KEPT = 64  # transmit requests whose status is still counted
 
 class GatewayError(RuntimeError):
     """The real module of a gateway failed or disappeared."""
-
-
-class _StepClock:
-    """The relay's clock: the firmware host's simulated time, set every poll (the relay never waits)."""
-
-    def __init__(self) -> None:
-        self.t = 0.0
-
-    def now(self) -> float:
-        return self.t
-
-    def sleep(self, dt: float) -> None:
-        raise RuntimeError("the gateway relay never blocks")
-
-    def sleep_until(self, t: float) -> None:
-        raise RuntimeError("the gateway relay never blocks")
 
 
 class _TwinLine:
@@ -119,7 +104,7 @@ class XBeeGateway:
     real module on ``gw["device"]`` (``config.XBeeGatewayCfg`` as a dict)."""
 
     def __init__(self, gw: dict[str, Any]) -> None:
-        self.clock = _StepClock()
+        self.clock = SteppedClock("the gateway relay is polled once per quantum; it never waits")
         self.twin_line = _TwinLine()
         self.real_line = _RealLine(gw["device"], gw["baud"])
         series = gw["series"]

@@ -40,3 +40,21 @@ class RealtimeClock(WallClock):
 
     def sleep_until(self, t: float) -> None:
         self.sleep(t - time.time())
+
+
+class SteppedClock:
+    """Time its owner sets (``t``, seconds) for code that must never block on it: a runner that drives controllers
+    by their period, a relay polled once per quantum. ``sleep`` raises with ``why``."""
+
+    def __init__(self, why: str = "nothing may sleep on this clock") -> None:
+        self.t = 0.0
+        self.why = why
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, dt: float) -> None:
+        raise RuntimeError(self.why)
+
+    def sleep_until(self, t: float) -> None:
+        self.sleep(t - self.t)

@@ -1,6 +1,7 @@
 """Hardware stand-ins for sessions with real devices: the real byte protocols on pseudo-terminals, driven in wall
 time by a thread, with the project's own firmware emulations on the far side.
 
+- ``EmulatedXBee``: an XBee module on a pty, with a neighbour heard over its air now and then.
 - ``LlcStand``: an eSwarBot's LLC board on the bench, wheels off the ground, its CAN bus reached through a USB-CAN
   adapter that speaks slcan (LAWICEL), as a CANable does. The session opens it with python-can's ``slcan``.
 - ``DeskRadios``: two XBees on a desk: the gateway's (the session opens it) and a desk radio (the test's program
@@ -16,6 +17,7 @@ import itertools
 import math
 import os
 import select
+import termios
 import threading
 import time
 import tty
@@ -30,7 +32,34 @@ from firmware_sim.arduino import Board
 from firmware_sim.can_controller import Frame
 from firmware_sim.llc import PIN_BATTERY, PIN_DIR, PIN_LDR, PIN_PWM, PIN_SONAR, LowLevelController
 from firmware_sim.slcan import SlcanAdapter
-from firmware_sim.xbee import XBeeModule
+from firmware_sim.xbee import BAUD_CODES, XBeeModule
+
+SERIAL64 = 0x0013A20040B0C0D1
+NEIGHBOUR64 = 0x0013A20040B0C0D2
+SPEEDS = {getattr(termios, f"B{b}"): b for b in (*BAUD_CODES, 38400)}
+
+
+def uart_resample(data: bytes, tx_baud: int, rx_baud: int) -> bytes:
+    """What a UART at ``rx_baud`` reads from ``data`` sent back to back at ``tx_baud`` (8N1, LSB first): when
+    the line is low it takes that as a start bit and samples the middle of each of its own bit times; bytes
+    with a framing error are delivered as read. Time in units of 1 / (2 tx rx) s, so every edge is exact."""
+    bits = [bit for b in data for bit in (0, *((b >> k) & 1 for k in range(8)), 1)]
+    tx_bit, rx_bit = 2 * rx_baud, 2 * tx_baud  # one bit time of each side, in those units
+
+    def level(u: int) -> int:
+        i = u // tx_bit
+        return bits[i] if i < len(bits) else 1
+
+    out = bytearray()
+    u = 0
+    while True:
+        if level(u):
+            nxt = next((i for i in range(u // tx_bit + 1, len(bits)) if bits[i] == 0), None)
+            if nxt is None:
+                return bytes(out)
+            u = nxt * tx_bit
+        out.append(sum(level(u + (2 * k + 3) * rx_bit // 2) << k for k in range(8)))
+        u += 19 * rx_bit // 2  # to the middle of the stop bit
 
 
 class _Pty:
@@ -151,6 +180,57 @@ class LlcStand(_Stand):
                 self.adapter.on_bus_frame(t_ns, f.arbitration_id, f.data, f.is_extended_id)
         if out := self.adapter.take_output():
             self.pty.write(out)
+
+    def close(self) -> None:
+        self.pty.close()
+
+
+class EmulatedXBee(_Stand):
+    """An XBee on a pseudo-terminal: ``path`` is the side a host opens; a thread pumps the other side through
+    the firmware emulation in wall time. Both ends have a line speed (the module's BD, the host's as pyserial set it
+    on the terminal); when they differ, bytes cross as a UART at one rate samples a line driven at the other.
+    ``neighbour_every_s``: a neighbour's broadcast arrives over the air that often (Series 1), so the module talks
+    on its own."""
+
+    def __init__(self, *, series: int = 1, api_mode: int = 1, baud: int = 9600,
+                 neighbour_every_s: float | None = None) -> None:
+        super().__init__("xbee-pty")
+        self.pty = _Pty()
+        self.master, self.slave, self.path = self.pty.master, self.pty.slave, self.pty.path
+        self.module = XBeeModule(series=series, serial64=SERIAL64, node_id="probe-me",
+                                 rng=np.random.default_rng(7), api_mode=api_mode, baud=baud)
+        self.neighbour_every_ns = None if neighbour_every_s is None else int(neighbour_every_s * 1e9)
+        self.next_air, self.seq = 0, 0
+
+    def host_baud(self) -> int | None:
+        """The line speed the host set on its side of the terminal (the settings belong to the device)."""
+        return SPEEDS.get(termios.tcgetattr(self.slave)[5])
+
+    def _neighbour(self, t_ns: int, seq: int) -> dict:
+        payload = b"hello from a neighbour"
+        return {"ev": "rx", "t_ns": t_ns, "rssi_dbm": -60, "frame": {
+            "handle": seq, "src64": NEIGHBOUR64, "src16": 0xFFFE, "dst": "bcast", "dst_addr": 0xFFFF,
+            "pan_id": 0x3332, "channel": 0x0C, "seq": seq % 256, "psdu_len": 11 + len(payload) + 2,
+            "mac_retries": 0, "payload": payload, "ack": False}}
+
+    def _wait(self, s: float) -> None:
+        select.select([self.master], [], [], s)
+
+    def _step(self, t_ns: int) -> None:
+        data = self.pty.read()
+        host, own = self.host_baud(), self.module.baud
+        if data and host != own:
+            data = uart_resample(data, host or 38400, own)
+        air = []
+        if self.neighbour_every_ns is not None and t_ns >= self.next_air:
+            air.append(self._neighbour(t_ns, self.seq))
+            self.seq += 1
+            self.next_air = t_ns + self.neighbour_every_ns
+        tx = self.module.step(t_ns, data, air).uart_tx
+        if tx and host != own:
+            tx = uart_resample(tx, own, host or 38400)
+        if tx:
+            self.pty.write(tx)
 
     def close(self) -> None:
         self.pty.close()

@@ -17,7 +17,6 @@ import errno
 import os
 import select
 import socket
-import termios
 import threading
 import time
 import tty
@@ -25,21 +24,17 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import can
-import numpy as np
 import pytest
 import serial
 from can.interfaces import virtual
 
 from bridge import devices
 from bridge.devices import probe_can, probe_mavlink, probe_xbee
-from firmware_sim.xbee import BAUD_CODES, XBeeModule
 from swarm_logic.interfaces import eswarbot_llc_db
+from tests.standins import EmulatedXBee, uart_resample
 
 pytestmark = pytest.mark.timeout(60)
 
-SERIAL64 = 0x0013A20040B0C0D1
-NEIGHBOUR64 = 0x0013A20040B0C0D2
-SPEEDS = {getattr(termios, f"B{b}"): b for b in (*BAUD_CODES, 38400)}
 
 
 @pytest.fixture(autouse=True)
@@ -53,96 +48,11 @@ def no_leaks() -> Iterator[None]:
 # -- XBee ---------------------------------------------------------------------------------------------------------
 
 
-def uart_resample(data: bytes, tx_baud: int, rx_baud: int) -> bytes:
-    """What a UART at ``rx_baud`` reads from ``data`` sent back to back at ``tx_baud`` (8N1, LSB first): when
-    the line is low it takes that as a start bit and samples the middle of each of its own bit times; bytes
-    with a framing error are delivered as read. Time in units of 1 / (2 tx rx) s, so every edge is exact."""
-    bits = [bit for b in data for bit in (0, *((b >> k) & 1 for k in range(8)), 1)]
-    tx_bit, rx_bit = 2 * rx_baud, 2 * tx_baud  # one bit time of each side, in those units
-
-    def level(u: int) -> int:
-        i = u // tx_bit
-        return bits[i] if i < len(bits) else 1
-
-    out = bytearray()
-    u = 0
-    while True:
-        if level(u):
-            nxt = next((i for i in range(u // tx_bit + 1, len(bits)) if bits[i] == 0), None)
-            if nxt is None:
-                return bytes(out)
-            u = nxt * tx_bit
-        out.append(sum(level(u + (2 * k + 3) * rx_bit // 2) << k for k in range(8)))
-        u += 19 * rx_bit // 2  # to the middle of the stop bit
-
-
 def test_uart_resample() -> None:
     data = bytes(range(256))
     assert uart_resample(data, 9600, 9600) == data
     assert uart_resample(b"\x7e\x00\x04", 9600, 115200) != b"\x7e\x00\x04"
     assert len(uart_resample(b"\x00" * 10, 9600, 115200)) > 10  # a slow zero byte reads as several bytes
-
-
-class EmulatedXBee:
-    """An XBee on a pseudo-terminal: ``path`` is the side a host opens; a thread pumps the other side through
-    the firmware emulation in wall time. ``neighbour_every_s``: a neighbour's broadcast arrives over the air
-    that often (Series 1), so the module talks on its own."""
-
-    def __init__(self, *, series: int = 1, api_mode: int = 1, baud: int = 9600,
-                 neighbour_every_s: float | None = None) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        os.set_blocking(self.master, False)
-        self.path = os.ttyname(self.slave)
-        self.module = XBeeModule(series=series, serial64=SERIAL64, node_id="probe-me",
-                                 rng=np.random.default_rng(7), api_mode=api_mode, baud=baud)
-        self.neighbour_every_ns = None if neighbour_every_s is None else int(neighbour_every_s * 1e9)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._pump, name="xbee-pty", daemon=True)
-
-    def __enter__(self) -> EmulatedXBee:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-        assert not self._thread.is_alive()
-        os.close(self.master)
-        os.close(self.slave)
-
-    def host_baud(self) -> int | None:
-        """The line speed the host set on its side of the terminal (the settings belong to the device)."""
-        return SPEEDS.get(termios.tcgetattr(self.slave)[5])
-
-    def _neighbour(self, t_ns: int, seq: int) -> dict:
-        payload = b"hello from a neighbour"
-        return {"ev": "rx", "t_ns": t_ns, "rssi_dbm": -60, "frame": {
-            "handle": seq, "src64": NEIGHBOUR64, "src16": 0xFFFE, "dst": "bcast", "dst_addr": 0xFFFF,
-            "pan_id": 0x3332, "channel": 0x0C, "seq": seq % 256, "psdu_len": 11 + len(payload) + 2,
-            "mac_retries": 0, "payload": payload, "ack": False}}
-
-    def _pump(self) -> None:
-        t0 = time.monotonic_ns()
-        next_air, seq = 0, 0
-        while not self._stop.is_set():
-            ready, _, _ = select.select([self.master], [], [], 0.002)
-            data = os.read(self.master, 4096) if ready else b""
-            host, own = self.host_baud(), self.module.baud
-            if data and host != own:
-                data = uart_resample(data, host or 38400, own)
-            t = time.monotonic_ns() - t0
-            air = []
-            if self.neighbour_every_ns is not None and t >= next_air:
-                air.append(self._neighbour(t, seq))
-                seq += 1
-                next_air = t + self.neighbour_every_ns
-            tx = self.module.step(t, data, air).uart_tx
-            if tx and host != own:
-                tx = uart_resample(tx, own, host or 38400)
-            if tx:
-                with contextlib.suppress(BlockingIOError):  # the terminal's buffer is full: lost, as on a line
-                    os.write(self.master, tx)
 
 
 @pytest.mark.parametrize(("series", "api_mode"), [(1, 1), (1, 2), (2, 1), (2, 2)])

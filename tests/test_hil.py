@@ -162,7 +162,7 @@ def test_a_robot_with_a_real_xbee_on_a_serial_device(tmp_path: Path) -> None:
     """A simulated robot whose XBee is a real module on a serial port (here a pseudo-terminal whose far side runs the
     XBee firmware in wall time, with a neighbour heard over its air): its logic identifies the module, hears the
     neighbour with RSSI and transmits through it; the simulated radio channel does not include it."""
-    from tests.test_devices import NEIGHBOUR64, SERIAL64, EmulatedXBee
+    from tests.standins import NEIGHBOUR64, SERIAL64, EmulatedXBee
 
     with EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5) as radio:
         cfg = real_xbee_config(tmp_path, radio.path, 6)
@@ -207,7 +207,7 @@ def test_a_real_xbee_that_disappears_fails_its_robot_only(tmp_path: Path) -> Non
     """Unplugged mid-session: the robot with the real XBee fails (its logic's port raises), the others go on."""
     import threading
 
-    from tests.test_devices import EmulatedXBee
+    from tests.standins import EmulatedXBee
 
     radio = EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5).__enter__()
     unplug = threading.Timer(4.0, radio.__exit__, (None, None, None))

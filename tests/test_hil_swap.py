@@ -168,19 +168,24 @@ def test_can_bridge_names_a_missing_adapter(tmp_path: Path) -> None:
         CanBridge({"interface": "slcan", "channel": str(tmp_path / "ttyACM9"), "bitrate": 500000})
 
 
+def board_config(cfg: Path, channel: str) -> None:
+    """Two simulated robots and robot 2, whose LLC is the board behind the slcan adapter on ``channel``."""
+    cfg.write_text(header(8) + swarm(2) + f"""
+[[robots]]
+behaviour = "random_walk"
+can = {{ device = {{ interface = "slcan", channel = "{channel}", bitrate = 500000, sleep_after_open = 0 }} }}
+motion = {{ kind = "fixed" }}
+placement = {{ kind = "explicit", poses = [[4.5, 4.5, 0.0]] }}
+""")
+
+
 @pytest.mark.session
 def test_a_robot_whose_llc_is_a_real_board_on_slcan(tmp_path: Path) -> None:
     """Robot 2's LLC is a board on the bench behind an slcan adapter: the session's logic drives it through the
     bridged bus (its wheels turn), hears its STATUS and ODOMETRY, and the body stays where the config puts it."""
     with LlcStand() as stand:
         cfg = tmp_path / "board.toml"
-        cfg.write_text(header(8) + swarm(2) + f"""
-[[robots]]
-behaviour = "random_walk"
-can = {{ device = {{ interface = "slcan", channel = "{stand.path}", bitrate = 500000, sleep_after_open = 0 }} }}
-motion = {{ kind = "fixed" }}
-placement = {{ kind = "explicit", poses = [[4.5, 4.5, 0.0]] }}
-""")
+        board_config(cfg, stand.path)
         s = run(cfg, tmp_path / "run")
         turns, frames_in = stand.wheel_turns, stand.frames_in
         assert stand.error is None
@@ -320,13 +325,7 @@ def test_a_real_board_that_disappears_fails_its_robot_only(tmp_path: Path) -> No
 
     unplug = threading.Thread(target=pull_the_plug)
     cfg = tmp_path / "board.toml"
-    cfg.write_text(header(8) + swarm(2) + f"""
-[[robots]]
-behaviour = "random_walk"
-can = {{ device = {{ interface = "slcan", channel = "{stand.path}", bitrate = 500000, sleep_after_open = 0 }} }}
-motion = {{ kind = "fixed" }}
-placement = {{ kind = "explicit", poses = [[4.5, 4.5, 0.0]] }}
-""")
+    board_config(cfg, stand.path)
     unplug.start()
     try:
         s = run(cfg, tmp_path / "run")
