@@ -336,3 +336,28 @@ def test_a_real_board_that_disappears_fails_its_robot_only(tmp_path: Path) -> No
     (failure,) = s["failures"]
     assert failure["robot"] == 2 and failure["kind"] == "raised" and 0.5 < failure["t_s"] < 7.0
     assert "the real board's bus failed or disappeared" in failure["detail"]
+
+
+@pytest.mark.session
+def test_a_gateway_whose_xbee_disappears_fails_alone(tmp_path: Path) -> None:
+    """The gateway's XBee is unplugged mid-session: the gateway fails (its relay's port raises), the robots go on."""
+    import threading
+
+    desk = DeskRadios(series=2, baud=115200).__enter__()
+
+    def pull_the_plug() -> None:  # once the session's twin has joined and the relay carried something
+        deadline = time.monotonic() + 60
+        while desk.frames[0] < 3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        desk.__exit__(None, None, None)
+
+    unplug = threading.Thread(target=pull_the_plug)
+    unplug.start()
+    try:
+        s = run(gateway_config(tmp_path, desk.gateway_path, 8), tmp_path / "run")
+    finally:
+        unplug.join()
+    assert [r["alive"] for r in s["per_robot"]] == [True, True, True, True, False]
+    (failure,) = s["failures"]
+    assert failure["robot"] == 4 and failure["kind"] == "raised"
+    assert "the gateway's XBee failed or disappeared" in failure["detail"]
