@@ -15,13 +15,12 @@ import os
 import pty
 import tty
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bridge.config import Config
 from bridge.plan import Plan, entity, robot_of, uwb_addr16, xbee_serial64
 from bridge.profiles import PROFILES, RobotProfile
 from bridge.rng import stream
-from bridge.xbee_gateway import XBeeGateway
 from firmware_sim import sensors
 from firmware_sim.arduino import Board
 from firmware_sim.can_controller import Frame
@@ -39,6 +38,9 @@ from firmware_sim.llc import (
 from firmware_sim.slcan import SlcanAdapter
 from firmware_sim.uwb import UwbModule
 from firmware_sim.xbee import XBeeModule
+
+if TYPE_CHECKING:
+    from bridge.xbee_gateway import XBeeGateway
 
 
 def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
@@ -190,7 +192,9 @@ class FirmwareHost:
                     power_level=x["power_level"])
                 if x.get("pty"):
                     self.ptys[r] = PtyLink(x["pty"])
-                if rp.gateway is not None:
+                if rp.gateway is not None:  # its relay's driver (digi-xbee) only in a process that has one
+                    from bridge.xbee_gateway import XBeeGateway
+
                     self.gateways[r] = XBeeGateway(rp.gateway)
             if rp.slcan_pty:
                 self.slcans[r] = (SlcanAdapter(cfg.can.bitrate, serial_number=f"{r % 10000:04d}"),

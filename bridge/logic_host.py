@@ -57,9 +57,15 @@ class LogicHost:
         seed = cfg.session.seed
         self.rts: dict[int, RobotRuntime] = {}
         self.reported: set[int] = set()
+        # What robot programs import when they open their devices, imported while the session starts rather than in
+        # a robot's first simulated quantum, where it would stall the lock-step: python-can's interface table and
+        # the sitl bus, digi-xbee's packets (about 0.1 s together), filterpy with scipy (about a second)
+        import can.interfaces  # noqa: F401
+
+        import bridge.sitl_can  # noqa: F401
+        if any(plan.robots[r].xbee for r in robots):
+            import swarm_logic.xbee  # noqa: F401
         if any(plan.robots[r].uwb for r in robots):
-            # filterpy (with scipy) takes about a second to import: do it while the session starts, not in the
-            # first simulated quantum, where every robot would stall the lock-step
             import filterpy.common
             import filterpy.kalman  # noqa: F401
         for r in robots:
