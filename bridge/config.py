@@ -298,6 +298,10 @@ class RobotGroup(_Model):
     vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
                                                          "over MAVLink (state the body's motion)")
     motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
+    carried_by: int | None = Field(None, ge=0, description="index of the robot group whose robots carry these on "
+                                                           "their conveyor (TraxBot rangers): they start on board, "
+                                                           "filled ranger by ranger in robot order, and are "
+                                                           "released when the carrier's belt advances")
 
     @model_validator(mode="after")
     def _pty_per_robot(self) -> RobotGroup:
@@ -338,6 +342,11 @@ class RobotGroup(_Model):
                                  "or { kind = \"scripted\", waypoints = [[t_s, x, y, yaw_deg], ...] }")
             if self.pose_source == "ground_truth":
                 raise ValueError(f"pose_source: with {what} the LLC that would report the true pose is not simulated")
+        if self.carried_by is not None and self.placement != Placement():
+            raise ValueError("placement: robots carried by a ranger start on board; where they go down is the "
+                             "ranger's to decide")
+        if self.carried_by is not None and not simulated_llc:
+            raise ValueError("carried_by: a carried robot is a simulated one")
         if self.motion.kind == "scripted" and self.count > 1:
             raise ValueError("motion: scripted waypoints are one body's path: give the robot a group of its own "
                              "(count = 1)")
@@ -487,6 +496,23 @@ class Config(_Model):
         if real and self.session.speed != 1:
             raise ValueError(f"session.speed = {self.session.speed!r}: a session with ports to the outside world "
                              f"({', '.join(real)}) runs paced to wall time: set speed = 1 (or --speed 1)")
+        capacity: dict[int, int] = {}
+        for i, g in enumerate(self.robots):
+            c = g.carried_by
+            if c is None:
+                continue
+            if c >= len(self.robots) or c == i:
+                raise ValueError(f"robots[{i}].carried_by = {c}: not another robot group (there are "
+                                 f"{len(self.robots)})")
+            carrier = self.robots[c]
+            slots = PROFILES[carrier.profile].conveyor_slots
+            if not slots or carrier.carried_by is not None:
+                raise ValueError(f"robots[{i}].carried_by = {c}: robots[{c}] ({carrier.profile}) has no conveyor "
+                                 "to carry robots on")
+            capacity[c] = capacity.get(c, 0) + g.count
+            if capacity[c] > carrier.count * slots:
+                raise ValueError(f"robots[{i}].count: robots[{c}] carries at most {carrier.count} x {slots} = "
+                                 f"{carrier.count * slots} robots, {capacity[c]} would ride on them")
         for g in self.robots:
             period_ms = 1000.0 / PROFILES[g.profile].llc_loop_hz
             if self.session.quantum_ms > period_ms + 1e-9:

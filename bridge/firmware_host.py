@@ -31,6 +31,8 @@ from firmware_sim.llc import (
     PIN_PWM,
     PIN_RSSI,
     PIN_SONAR,
+    PIN_SONAR_LEFT,
+    PIN_SONAR_RIGHT,
     RSSI_PWM_HZ,
     LlcParams,
     LowLevelController,
@@ -44,7 +46,12 @@ if TYPE_CHECKING:
 
 
 def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
+    # the wheel PI was tuned on the eSwarBot's 48-pulse encoders: the same gains per radian of wheel angle
+    per_pulse = 48 / p.encoder_cpr
     return LlcParams(
+        kp=LlcParams.kp * per_pulse,
+        ki=LlcParams.ki * per_pulse,
+        max_err_pulses=LlcParams.max_err_pulses / per_pulse,
         wheel_radius_m=p.wheel_radius_m,
         half_track_m=p.half_track_m,
         encoder_cpr=p.encoder_cpr,
@@ -55,6 +62,11 @@ def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
         battery_cells=p.battery_cells,
         sonar_min_mm=round(p.sonar_min_range_m * 1000),
         sonar_max_mm=round(p.sonar_max_range_m * 1000),
+        side_sonars=len(p.sonar_angles_deg) == 3,
+        conveyor_slots=p.conveyor_slots,
+        conveyor_pitch_mm=p.conveyor_pitch_m * 1000,
+        conveyor_speed_mm_s=p.conveyor_speed_m_s * 1000,
+        belt_mm_per_step=p.conveyor_m_per_step * 1000,
         rssi_pwm_input=xbee is not None,
         # the firmware inverts eq. 3.9 with the sensitivity of the module it is built for
         xbee_sensitivity_dbm=-92.0 if xbee is not None and xbee["series"] == 1 else -94.0,
@@ -226,6 +238,8 @@ class FirmwareHost:
         s = inputs["sens"]
         b.encoder_counts = [s["enc"][0], s["enc"][1]]
         b.analog_volts[PIN_SONAR] = sensors.sonar_volts(s["sonar_m"])
+        for pin, m in zip((PIN_SONAR_LEFT, PIN_SONAR_RIGHT), s.get("sides", ()), strict=False):
+            b.analog_volts[pin] = sensors.sonar_volts(m)
         b.analog_volts[PIN_LDR] = sensors.ldr_volts(s["lux"])
         b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(s["battery_v"])
         b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
@@ -251,7 +265,7 @@ class FirmwareHost:
         pwm = tuple(
             b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1) for i in (0, 1)
         )
-        pins = (pwm, b.led_rgb)
+        pins = (pwm, b.led_rgb, b.stepper_steps)
         out: dict[str, Any] = {
             "out": [["can0", f.arbitration_id, f.data, f.is_extended_id] for f in b.can.take_tx()],
             "wake": nominal,
@@ -260,6 +274,8 @@ class FirmwareHost:
         if pins != self.last_pins.get(r):
             self.last_pins[r] = pins
             out["pins"] = {"pwm": list(pwm), "led": list(b.led_rgb)}
+            if llc.p.conveyor_slots:  # the belt's stepper: how far it has turned
+                out["pins"]["belt_steps"] = b.stepper_steps
         return out
 
     def _xbee(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:

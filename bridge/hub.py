@@ -139,6 +139,8 @@ class Hub:
                 self.host_baud[(r, "uwb")] = cfg.uwb.uart_baud
         # the swarm's radio network, whose connectivity is sampled: the robots' XBees (not a gateway's)
         self.swarm_radios = [r for r, rp in enumerate(robots) if rp.sim_xbee and rp.gateway is None]
+        self.carriers = {rp.carrier for rp in robots if rp.carrier is not None}  # robots with scouts on board
+        self.releases: list[dict[str, Any]] = []
         self.rssi_pwm = [0.0] * self.n
         self.ideal_pose = {r for r, rp in enumerate(robots) if rp.pose_source == "ground_truth"}
         self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
@@ -330,6 +332,8 @@ class Hub:
                     continue
                 world.set_pwm(r, *pins["pwm"])
                 world.set_led(r, tuple(pins["led"]))
+                if "belt_steps" in pins:
+                    world.set_belt(r, pins["belt_steps"])
 
     def _can_event(self, t: int, r: int, ev: Any) -> None:
         """An error frame or a node's change of fault-confinement state on robot ``r``'s bus: to the recording, to
@@ -716,6 +720,8 @@ class Hub:
                         s = world.sensors(r)
                         entry["sens"] = {"enc": list(s.encoders), "sonar_m": s.sonar_m, "lux": s.lux,
                                          "battery_v": s.battery_v}
+                        if s.side_sonars_m:
+                            entry["sens"]["sides"] = list(s.side_sonars_m)
                         if "xbee" in self.roles[r]:
                             entry["sens"]["rssi_pwm"] = self.rssi_pwm[r]
                         sensed[e] = entry["sens"]  # recorded as the pins' values; the pose is in /world/poses
@@ -726,11 +732,18 @@ class Hub:
                 self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
                 self.proc_ticks += 1
             if self.k % poses_every == 0:
-                rec.write(t, "/world/poses", "swarm_sitl.Poses", {
-                    "x": np.round(world.pos[:, 0], 5).tolist(), "y": np.round(world.pos[:, 1], 5).tolist(),
-                    "yaw": np.round(world.yaw, 5).tolist(), "alive": world.alive.tolist(), "led": world.led.tolist(),
-                })
+                poses = {"x": np.round(world.pos[:, 0], 5).tolist(), "y": np.round(world.pos[:, 1], 5).tolist(),
+                         "yaw": np.round(world.yaw, 5).tolist(), "alive": world.alive.tolist(),
+                         "led": world.led.tolist()}
+                if self.carriers:
+                    poses["carried"] = [r in world.carried for r in range(self.n)]
+                rec.write(t, "/world/poses", "swarm_sitl.Poses", poses)
             world.step_quantum(t, q)
+            for ev in world.released:  # scouts that dropped off a carrier's conveyor in this quantum
+                rel = {k: ev[k] for k in ("robot", "carrier", "slot", "pose")}
+                self.deliveries[ev["t_ns"]].append(("rec", "/world/releases", "swarm_sitl.Release", rel))
+                self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})
+            world.released.clear()
             if due:
                 results = self._collect(set(due), t)
                 self.barrier_us.append((time.perf_counter() - t_pub) * 1e6)
@@ -842,6 +855,7 @@ class Hub:
             "barrier_us_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
             "wall_lag": _lag_summary(self.lag_s),
             "can_events": self.can_events,
+            "releases": self.releases if self.carriers else None,
             "mavlink": self.mavlink.stats() if self.mavlink is not None else None,
             "startup_s": getattr(self, "startup_wall_s", None),
             "failures": self.failures,
@@ -854,6 +868,8 @@ class Hub:
                  "battery_v": round(float(self.world.battery_v[r]), 3),
                  "pose_source": self.plan.robots[r].pose_source,
                  "kind": "xbee_gateway" if self.plan.robots[r].gateway is not None else "robot",
+                 "profile": self.plan.robots[r].profile,
+                 "on_board": self.world.carried[r][0] if r in self.world.carried else None,
                  "motion": self.plan.robots[r].motion["kind"] if self.plan.robots[r].scripted else "simulated",
                  "can_frames": self.can[r].frames,
                  "can_bus_load": round(self.can[r].bits / self.can[r].bitrate / max(self.sim_end_ns / 1e9, 1e-9), 4),
@@ -943,6 +959,7 @@ def _valid_node(node: Any) -> bool:
 def _valid_pins(pins: Any) -> bool:
     if not isinstance(pins, dict):
         return False
-    pwm, led = pins.get("pwm"), pins.get("led")
+    pwm, led, belt = pins.get("pwm"), pins.get("led"), pins.get("belt_steps", 0)
     return (isinstance(pwm, list) and len(pwm) == 2 and all(isinstance(v, int) and -255 <= v <= 255 for v in pwm)
-            and isinstance(led, list) and len(led) == 3 and all(isinstance(v, int) and 0 <= v <= 255 for v in led))
+            and isinstance(led, list) and len(led) == 3 and all(isinstance(v, int) and 0 <= v <= 255 for v in led)
+            and type(belt) is int and belt >= 0)

@@ -7,7 +7,7 @@ Everything in it follows from the config and the seed alone.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -34,6 +34,8 @@ class RobotPlan:
     vehicle: dict | None = None  # a MAVLink vehicle stands for it (VehicleCfg)
     motion: dict | None = None  # how the body moves when nothing simulated drives it (MotionCfg): kind, waypoints
     gateway: dict | None = None  # an XBee gateway, not a robot: the real module's settings (XBeeGatewayCfg)
+    carrier: int | None = None  # it starts on this robot's conveyor (RobotGroup.carried_by) ...
+    slot: int = 0  # ... in this slot, 1 being the first to drop off
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
@@ -129,19 +131,34 @@ def uwb_addr16(robot: int) -> int:
 
 def make_plan(cfg: Config, path: str = "config") -> Plan:
     robots: list[RobotPlan] = []
+    first = [sum(g.count for g in cfg.robots[:gi]) for gi in range(len(cfg.robots))]  # each group's first id
+    load: dict[int, int] = {}  # carrier group -> robots loaded so far
     for gi, group in enumerate(cfg.robots):
         prof = cfg.profile(group)
-        poses = _place(cfg, gi, prof.radius_m, path)
-        for pose in poses:
+        carriers: list[tuple[int, int]] = []  # (carrier id, slot) per robot of a carried group
+        if group.carried_by is not None:
+            slots = cfg.profile(cfg.robots[group.carried_by]).conveyor_slots
+            for _ in range(group.count):
+                k = load.get(group.carried_by, 0)
+                load[group.carried_by] = k + 1
+                carriers.append((first[group.carried_by] + k // slots, k % slots + 1))
+            poses = [(0.0, 0.0, 0.0)] * group.count  # on board: where its carrier is (set below)
+        else:
+            poses = _place(cfg, gi, prof.radius_m, path)
+        for j, pose in enumerate(poses):
             rid = len(robots)
             if group.motion.kind == "scripted":  # it starts where its path starts
                 _, x, y, yaw_deg = group.motion.waypoints[0]
                 pose = (x, y, math.radians(yaw_deg))
+            carrier, slot = carriers[j] if carriers else (None, 0)
             robots.append(RobotPlan(rid, f"r{rid:03d}", group.profile, group.behaviour, dict(group.params), pose,
                                     group.xbee.model_dump() if group.xbee else None, group.uwb, group.pose_source,
                                     group.logic, group.can.slcan_pty, group.can.device,
                                     group.vehicle.model_dump() if group.vehicle else None,
-                                    group.motion.model_dump(mode="json")))
+                                    group.motion.model_dump(mode="json"), carrier=carrier, slot=slot))
+    for i, rp in enumerate(robots):  # a carried robot starts where its carrier is
+        if rp.carrier is not None:
+            robots[i] = replace(rp, pose=robots[rp.carrier].pose)
     for gi, gw in enumerate(cfg.xbee_gateways):  # after the robots, so robot ids do not depend on gateways
         rid = len(robots)
         waypoints = [[t, x, y, 0.0] for t, x, y in gw.waypoints]

@@ -55,6 +55,9 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "rssi_pwm": {"type": "number", "description": "XBee RSSI PWM duty (0..1) at the board's pin"},
             "pwm": {"type": "array", "items": {"type": "integer"}},
             "led": {"type": "array", "items": {"type": "integer"}},
+            "sides": {"type": "array", "items": {"type": "number"},
+                      "description": "a robot with three sonars: the left and right ranges (m)"},
+            "belt_steps": {"type": "integer", "description": "a carrier's conveyor stepper, steps since power-up"},
         },
     },
     "swarm_sitl.Poses": {
@@ -66,7 +69,15 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "yaw": {"type": "array", "items": {"type": "number"}},
             "alive": {"type": "array", "items": {"type": "boolean"}},
             "led": {"type": "array", "items": {"type": "array", "items": {"type": "integer"}}},
+            "carried": {"type": "array", "items": {"type": "boolean"},
+                        "description": "on a carrier's conveyor (sessions with carried robots only)"},
         },
+    },
+    "swarm_sitl.Release": {
+        "type": "object",
+        "description": "A carried robot dropped off its carrier's conveyor onto the floor",
+        "properties": {"robot": {"type": "integer"}, "carrier": {"type": "integer"}, "slot": {"type": "integer"},
+                       "pose": {"type": "array", "items": {"type": "number"}}},
     },
     "swarm_sitl.Uart": {
         "type": "object",

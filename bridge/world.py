@@ -39,6 +39,7 @@ class Sensors:
     sonar_m: float
     lux: float
     battery_v: float
+    side_sonars_m: tuple[float, ...] = ()  # a robot with more sonars (TraxBot): the others, left then right
 
 
 class World:
@@ -140,6 +141,12 @@ class World:
             self.bodies.append(body)
         # bodies whose motion the config states (a real board's or vehicle's robot, a gateway): (t, x, y, yaw) rows
         self.paths = {r.id: _path(r) for r in robots if r.scripted}
+        # robots riding on a carrier's conveyor: robot -> (carrier, slot); they drop off as its belt advances
+        self.carried: dict[int, tuple[int, int]] = {r.id: (r.carrier, r.slot) for r in robots if r.carrier is not None}
+        self.belt_m = np.zeros(n)  # each carrier's belt travel since power-up
+        self.released: list[dict] = []  # releases since the hub last took them (t_ns, robot, carrier, pose)
+        for i in self.carried:  # on board nothing touches them and they touch nothing
+            pb.setCollisionFilterGroupMask(self.bodies[i], -1, 0, 0, physicsClientId=self.cid)
         p = self.profiles
         self.wheel_r = np.empty((n, 2))
         self.gain = np.empty((n, 2))
@@ -170,7 +177,8 @@ class World:
         self.pos = np.array([[r.pose[0], r.pose[1]] for r in robots], dtype=float).reshape(n, 2)
         self.yaw = np.array([r.pose[2] for r in robots], dtype=float)
         self.odometer = np.zeros(n)
-        self.sonar_m = np.array([q.sonar_max_range_m for q in p])
+        self.sonar_m = np.array([q.sonar_max_range_m for q in p])  # each robot's front sonar
+        self.sonars = [np.full(len(q.sonar_angles_deg), q.sonar_max_range_m) for q in p]  # all of its sonars
         self._sonar_rng = [stream(self.seed, "robot", i, "sonar") for i in range(n)]
         self._light_rng = [stream(self.seed, "robot", i, "light") for i in range(n)]
         self._light_noise = [q.light_noise_rel for q in p]
@@ -178,9 +186,19 @@ class World:
         self._walls_rows: dict[int, np.ndarray] = {}
         self._sonar_period_ns = round(1e9 / max(q.sonar_rate_hz for q in p)) if n else 0
         self._next_sonar_ns = 0
-        offsets = [np.linspace(-1, 1, q.sonar_rays) * math.radians(q.sonar_half_beam_deg) if q.sonar_rays > 1
-                   else np.zeros(1) for q in p]
+        # rays: a cone per sonar; ``_ray_sonar`` numbers every robot's sonars consecutively (robot i's first is
+        # ``_sonar_base[i]``), ``_ray_owner`` is the robot
+        cones = [np.linspace(-1, 1, q.sonar_rays) * math.radians(q.sonar_half_beam_deg) if q.sonar_rays > 1
+                 else np.zeros(1) for q in p]
+        offsets = [np.concatenate([c + math.radians(a) for a in q.sonar_angles_deg]) for c, q in zip(cones, p,
+                                                                                                      strict=True)]
+        counts = [len(q.sonar_angles_deg) for q in p]
+        self._sonar_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int) if n else np.zeros(0, int)
         self._ray_owner = np.concatenate([np.full(len(o), i) for i, o in enumerate(offsets)]) if n else np.zeros(0, int)
+        self._ray_sonar = (np.concatenate([self._sonar_base[i] + np.repeat(np.arange(k), len(c))
+                                           for i, (k, c) in enumerate(zip(counts, cones, strict=True))])
+                           if n else np.zeros(0, int))
+        self._sonar_count = int(sum(counts))
         self._ray_angle = np.concatenate(offsets) if n else np.zeros(0)
         self._ray_r0 = np.array([q.radius_m + 0.005 for q in p])
         self._ray_len = np.array([q.sonar_max_range_m for q in p])
@@ -190,6 +208,11 @@ class World:
     def set_pwm(self, robot: int, left: int, right: int) -> None:
         if self.alive[robot]:
             self.pwm[robot] = (left, right)
+
+    def set_belt(self, robot: int, steps: int) -> None:
+        """The carrier's conveyor stepper has turned ``steps`` steps since power-up."""
+        if self.alive[robot]:
+            self.belt_m[robot] = steps * self.profiles[robot].conveyor_m_per_step
 
     def set_led(self, robot: int, rgb: tuple[int, int, int]) -> None:
         self.led[robot] = rgb
@@ -245,9 +268,13 @@ class World:
             self.steps_done += 1
             if self.paths:
                 self._follow_paths(self.steps_done / self.hz)
+            if self.carried:
+                self._ride()
             stepped = True
         if stepped:
             self._read_poses()
+        if self.carried:
+            self._release(t_ns + q_ns)
         current = self.i_idle + self.i_motor * np.abs(self.pwm).sum(axis=1) / 510.0
         self.soc = np.clip(self.soc - current * (q_ns * 1e-9) / self.capacity_as, 0.0, 1.0)
         self.battery_v = self._battery_voltage(current)
@@ -272,6 +299,38 @@ class World:
             pb.resetBaseVelocity(self.bodies[i], [(x1 - x) * self.hz, (y1 - y) * self.hz, 0.0],
                                  [0.0, 0.0, _wrap(yaw1 - yaw) * self.hz], physicsClientId=c)
 
+    def _ride(self) -> None:
+        """Robots on a conveyor sit on their carrier's deck and move with it (their wheels turn in the air)."""
+        c = self.cid
+        get = pb.getBasePositionAndOrientation
+        for i, (carrier, _slot) in self.carried.items():
+            (x, y, z), orn = get(self.bodies[carrier], physicsClientId=c)
+            top = z + self.profiles[carrier].height_m / 2 + self.profiles[i].height_m / 2 + 1e-3
+            pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, top], orn, physicsClientId=c)
+            v, w = pb.getBaseVelocity(self.bodies[carrier], physicsClientId=c)
+            pb.resetBaseVelocity(self.bodies[i], v, w, physicsClientId=c)
+
+    def _release(self, t_ns: int) -> None:
+        """A robot whose slot the belt has passed drops off behind its carrier, on the floor, facing its way."""
+        for i, (carrier, slot) in list(self.carried.items()):
+            prof = self.profiles[carrier]
+            if self.belt_m[carrier] + 1e-9 < slot * prof.conveyor_pitch_m:
+                continue
+            del self.carried[i]
+            yaw = float(self.yaw[carrier])
+            back = prof.radius_m + self.profiles[i].radius_m + 0.02
+            x = float(self.pos[carrier, 0]) - back * math.cos(yaw)
+            y = float(self.pos[carrier, 1]) - back * math.sin(yaw)
+            c = self.cid
+            pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, self.profiles[i].height_m / 2 + 1e-3],
+                                               pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
+            pb.resetBaseVelocity(self.bodies[i], [0, 0, 0], [0, 0, 0], physicsClientId=c)
+            pb.setCollisionFilterGroupMask(self.bodies[i], -1, 1, -1, physicsClientId=c)
+            self.pos[i] = (x, y)
+            self.yaw[i] = yaw
+            self.released.append({"t_ns": t_ns, "robot": i, "carrier": carrier, "slot": slot,
+                                  "pose": [round(x, 4), round(y, 4), round(yaw, 4)]})
+
     def _read_poses(self) -> None:
         c = self.cid
         get = pb.getBasePositionAndOrientation
@@ -282,7 +341,10 @@ class World:
             ys.append(y)
             yaws.append(math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz)))
         new = np.column_stack((xs, ys)) if self.bodies else self.pos
-        self.odometer += np.hypot(*(new - self.pos).T)
+        moved = np.hypot(*(new - self.pos).T)
+        if self.carried:  # a ride is not the robot's own travel
+            moved[list(self.carried)] = 0.0
+        self.odometer += moved
         self.pos = new
         self.yaw = np.array(yaws)
 
@@ -301,25 +363,28 @@ class World:
         tos = np.column_stack([x + r1 * ca, y + r1 * sa, z])
         hits = pb.rayTestBatch(froms.tolist(), tos.tolist(), numThreads=1, physicsClientId=self.cid)
         frac = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits])
-        nearest = np.ones(self.n)
-        np.minimum.at(nearest, owner, frac)
+        nearest = np.ones(self._sonar_count)
+        np.minimum.at(nearest, self._ray_sonar[rays], frac)
         for i in live.tolist():
-            frac = float(nearest[i])
             prof = self.profiles[i]
             rng = self._sonar_rng[i]
-            true_r = frac * prof.sonar_max_range_m + 0.005
             moving = abs(self.omega[i]).max() * prof.wheel_radius_m > 0.01
-            noise = rng.standard_normal()
-            outlier = rng.random() < prof.sonar_outlier_p
-            spurious = rng.uniform(prof.sonar_min_range_m, prof.sonar_max_range_m)
-            if frac >= 1.0:
-                r = prof.sonar_max_range_m
-            else:
-                r = true_r + noise * (prof.sonar_noise_m + prof.sonar_noise_rel * true_r)
-            if moving and outlier:
-                r = spurious
-            # inside its blind zone the ranger reports its minimum range (as MaxBotix sensors do)
-            self.sonar_m[i] = float(min(max(r, prof.sonar_min_range_m), prof.sonar_max_range_m))
+            out = self.sonars[i]
+            for k in range(len(out)):
+                frac = float(nearest[self._sonar_base[i] + k])
+                true_r = frac * prof.sonar_max_range_m + 0.005
+                noise = rng.standard_normal()
+                outlier = rng.random() < prof.sonar_outlier_p
+                spurious = rng.uniform(prof.sonar_min_range_m, prof.sonar_max_range_m)
+                if frac >= 1.0:
+                    r = prof.sonar_max_range_m
+                else:
+                    r = true_r + noise * (prof.sonar_noise_m + prof.sonar_noise_rel * true_r)
+                if moving and outlier:
+                    r = spurious
+                # inside its blind zone the ranger reports its minimum range (as MaxBotix sensors do)
+                out[k] = float(min(max(r, prof.sonar_min_range_m), prof.sonar_max_range_m))
+            self.sonar_m[i] = out[0]
 
     # -- radio geometry (the Geometry the radio and UWB media ask) ---------------------------------------
     STATIC_RAY_MASK = 2  # Bullet puts static bodies (walls, obstacles) in its StaticFilter group: robots are skipped
@@ -372,7 +437,8 @@ class World:
             self._sample_all()
         counts, lux, sonar, batt = self._sampled
         noisy = lux[robot] * (1 + self._light_noise[robot] * self._light_rng[robot].standard_normal())
-        return Sensors((counts[robot][0], counts[robot][1]), sonar[robot], max(noisy, 0.0), batt[robot])
+        sides = tuple(self.sonars[robot][1:].tolist()) if len(self.sonars[robot]) > 1 else ()
+        return Sensors((counts[robot][0], counts[robot][1]), sonar[robot], max(noisy, 0.0), batt[robot], sides)
 
     def close(self) -> None:
         if pb.isConnected(self.cid):

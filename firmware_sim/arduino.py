@@ -29,6 +29,7 @@ class Board:
         self.digital: dict[str, int] = {}
         self.encoder_counts = [0, 0]
         self.led_rgb = (0, 0, 0)
+        self.stepper_steps = 0  # steps a stepper driver was pulsed (a conveyor belt), one direction
         self.pwm_inputs: dict[str, tuple[float, float]] = {}  # pin -> (duty 0..1, frequency Hz) of a PWM source
         # a motion-capture receiver's latest pose (x m, y m, yaw rad, world frame), when one is fitted
         self.external_pose: tuple[float, float, float] | None = None
@@ -72,6 +73,10 @@ class Board:
     def encoder(self, channel: int) -> int:
         """Signed pulse count kept by the encoder interrupt routine of wheel ``channel``."""
         return self.encoder_counts[channel]
+
+    def stepper_pulses(self, n: int) -> None:
+        """Pulse the stepper driver's STEP pin ``n`` times (the belt advances one step each)."""
+        self.stepper_steps += max(0, int(n))
 
     def led_strip(self, r: int, g: int, b: int) -> None:
         self.led_rgb = (max(0, min(255, r)), max(0, min(255, g)), max(0, min(255, b)))

@@ -27,6 +27,7 @@ from firmware_sim.xbee import rssi_dbm_from_pwm
 from swarm_logic.interfaces import eswarbot_llc_db
 
 PIN_SONAR, PIN_LDR, PIN_BATTERY = "A0", "A1", "A2"
+PIN_SONAR_LEFT, PIN_SONAR_RIGHT = "A3", "A4"  # a robot with three sonars (TraxBot)
 PIN_PWM = ("D5", "D6")
 PIN_DIR = ("D7", "D8")
 PIN_RSSI = "D2"  # the XBee's RSSI PWM output (pin 6), wired to a digital input
@@ -44,6 +45,7 @@ RSSI_KEEPALIVE_MS = 1000
 STALL_MS = 1000
 SONAR_NO_ECHO_MARGIN_MM = 30  # about two ADC steps below full range
 PERIOD_MOVE_STATUS_MS = 100
+PERIOD_CONVEYOR_STATUS_MS = 100
 MOVE_TIMEOUT_FACTOR = 3.0  # a move not finished within 3x its nominal duration + 1 s is aborted (stall safety)
 MOVE_TIMEOUT_MARGIN_MS = 1000
 MOVE_ACCEL_PPS2 = 200.0  # the wheels' set-point ramps up and down at this rate (pulses/s^2, about 0.55 m/s^2)
@@ -71,6 +73,11 @@ class LlcParams:
     rssi_pwm_input: bool = False  # an XBee's RSSI PWM output is wired to PIN_RSSI (eSwarBot radio hack)
     xbee_sensitivity_dbm: float = -94.0  # the module's sensitivity, as eq. 3.9 uses it (Series 2; Series 1: -92)
     rot_threshold_deg: float = 3.6  # theta_T: smaller rotations of a MOVE are skipped (one pulse, digest A12)
+    side_sonars: bool = False  # left and right sonars on PIN_SONAR_LEFT / PIN_SONAR_RIGHT (TraxBot)
+    conveyor_slots: int = 0  # a conveyor belt for scouts (TraxBot: 5); 0: none, CONVEYOR_CMD is a bad frame
+    conveyor_pitch_mm: float = 150.0  # belt per slot
+    conveyor_speed_mm_s: float = 50.0
+    belt_mm_per_step: float = 0.5  # the stepper's resolution ("< 1 mm", Table 3.4)
 
 
 def rotation_pulses(theta_rad: float, p: LlcParams) -> float:
@@ -184,7 +191,12 @@ class LowLevelController:
         self.move_deadline_ms = 0
         now = b.millis()
         self.next_ms = {"odom": now, "sonar": now, "light": now, "status": now, "battery": now, "rssi": now,
-                        "move": now}
+                        "move": now, "conveyor": now}
+        self.belt_steps = 0  # stepper steps emitted since power-up
+        self.belt_target = 0.0  # where the belt is going, in steps
+        self.belt_frac = 0.0  # steps owed to the speed ramp, below one
+        self.conveyor_seq = 0
+        self.conveyor_reported: tuple[int, int, int] | None = None
         self._set_motor(0, 0)
         self._set_motor(1, 0)
         self._sample_battery()
@@ -235,6 +247,14 @@ class LowLevelController:
             self.sonar_valid = 0 < mm < self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
             self.sonar_mm = mm
             self._send("SONAR", range_mm=min(mm, 65535), valid=int(self.sonar_valid))
+            if self.p.side_sonars:
+                left, right = (sensors.sonar_mm_from_adc(b.analog_read(pin)) for pin in (PIN_SONAR_LEFT,
+                                                                                         PIN_SONAR_RIGHT))
+                limit = self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
+                self._send("SONAR_SIDES", left_mm=min(left, 65535), right_mm=min(right, 65535),
+                           left_valid=int(0 < left < limit), right_valid=int(0 < right < limit))
+        if self.p.conveyor_slots:
+            self._conveyor(now, dt)
         if now >= self.next_ms["odom"]:
             self.next_ms["odom"] += PERIOD_ODOM_MS
             self._send("ENCODERS", left=counts[0], right=counts[1])
@@ -326,6 +346,12 @@ class LowLevelController:
                 self.x = sig["x_mm"] / 1000.0
                 self.y = sig["y_mm"] / 1000.0
                 self.theta = sig["theta_mrad"] / 1000.0
+            elif msg.name == "CONVEYOR_CMD":
+                if not self.p.conveyor_slots or sig["slots"] < 1:
+                    self._bad_frame()
+                    continue
+                self.conveyor_seq = int(sig["seq"])
+                self.belt_target += sig["slots"] * self.p.conveyor_pitch_mm / self.p.belt_mm_per_step
             elif msg.name == "MOVE_CMD":
                 if sig["dist_mm"] < 0 or sig["speed_mm_s"] <= 0:  # forward only, and it must get somewhere
                     self._bad_frame()
@@ -333,6 +359,30 @@ class LowLevelController:
                 self._abort_move(now)
                 self._start_move(int(sig["seq"]), sig["rot_mrad"] / 1000.0, sig["dist_mm"] / 1000.0,
                                  sig["speed_mm_s"] / 1000.0, now)
+
+    # -- conveyor ----------------------------------------------------------------------------------------
+    def _conveyor(self, now: int, dt: float) -> None:
+        """Step the belt toward its target at the belt's speed; report on each change and 10 Hz while moving."""
+        p = self.p
+        left = self.belt_target - self.belt_steps
+        if left >= 1:
+            self.belt_frac += p.conveyor_speed_mm_s * dt / p.belt_mm_per_step
+            n = min(int(self.belt_frac), int(left))
+            self.belt_frac -= n
+            self.belt_steps += n
+            self.board.stepper_pulses(n)
+        else:
+            self.belt_frac = 0.0
+        steps_per_slot = p.conveyor_pitch_mm / p.belt_mm_per_step
+        moving = int(self.belt_target - self.belt_steps >= 1)
+        pos = int(self.belt_steps // steps_per_slot + 1e-9)
+        pending = max(0, round((self.belt_target - self.belt_steps) / steps_per_slot + 0.4999))
+        state = (moving, pos, pending)
+        if state != self.conveyor_reported or (moving and now >= self.next_ms["conveyor"]):
+            self.conveyor_reported = state
+            self.next_ms["conveyor"] = now + PERIOD_CONVEYOR_STATUS_MS
+            self._send("CONVEYOR_STATUS", seq=self.conveyor_seq, moving=moving, position_slots=min(pos, 255),
+                       pending_slots=min(pending, 255))
 
     # -- rotate-then-go -------------------------------------------------------------------------------
     def _start_move(self, seq: int, theta: float, h: float, speed: float, now: int) -> None:

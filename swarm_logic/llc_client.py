@@ -47,6 +47,13 @@ class LlcState:
     move_rot_pulses: int = 0  # executed rotation, encoder pulses (positive counter-clockwise)
     move_fwd_pulses: int = 0  # executed forward run, encoder pulses
     move_t: float | None = None
+    sonar_left_m: float = math.inf  # a robot with three sonars (TraxBot): the side ones (SONAR_SIDES)
+    sonar_right_m: float = math.inf
+    conveyor_position: int = 0  # a carrier: slots its belt has advanced (CONVEYOR_STATUS) ...
+    conveyor_pending: int = 0  # ... still to advance ...
+    conveyor_moving: bool = False  # ... and whether it is moving
+    conveyor_seq: int | None = None
+    conveyor_t: float | None = None
 
 
 class LlcClient:
@@ -60,6 +67,7 @@ class LlcClient:
         self.tx_failed = 0
         self._seq = 0
         self._move_seq = 0
+        self._conveyor_seq = 0
 
     def poll(self) -> int:
         """Decode every frame waiting on the bus; returns how many were accepted."""
@@ -115,6 +123,13 @@ class LlcClient:
             st.move_state = MOVE_STATES[state] if state < len(MOVE_STATES) else f"unknown({state})"
             st.move_rot_pulses, st.move_fwd_pulses = int(s["rot_pulses"]), int(s["fwd_pulses"])
             st.move_t = ts
+        elif name == "SONAR_SIDES":
+            st.sonar_left_m = s["left_mm"] / 1000.0 if s["left_valid"] else math.inf
+            st.sonar_right_m = s["right_mm"] / 1000.0 if s["right_valid"] else math.inf
+        elif name == "CONVEYOR_STATUS":
+            st.conveyor_seq, st.conveyor_moving = int(s["seq"]), bool(s["moving"])
+            st.conveyor_position, st.conveyor_pending = int(s["position_slots"]), int(s["pending_slots"])
+            st.conveyor_t = ts
         self.rx_frames += 1
         return True
 
@@ -164,3 +179,12 @@ class LlcClient:
 
     def set_odometry(self, x: float, y: float, theta: float) -> None:
         self._send("ODOM_SET", x_mm=round(x * 1000), y_mm=round(y * 1000), theta_mrad=round(theta * 1000))
+
+    def release(self, slots: int = 1) -> int:
+        """A carrier (TraxBot): advance the conveyor by ``slots`` pitches, dropping that many scouts behind the
+        robot, one after the other. Returns the command's ``seq``, which ``state.conveyor_seq`` echoes."""
+        if not 1 <= slots <= 255:
+            raise ValueError(f"release: slots must be 1..255, got {slots!r}")
+        self._conveyor_seq = (self._conveyor_seq + 1) & 0xFF
+        self._send("CONVEYOR_CMD", slots=slots, seq=self._conveyor_seq)
+        return self._conveyor_seq

@@ -1,0 +1,115 @@
+"""TraxBot rangers: the profile (tracked, three sonars, a conveyor of five scouts), scouts carried on board and
+released one by one as the conveyor turns, in the world and in a session."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from bridge.config import ConfigError, load_config
+from bridge.plan import make_plan
+from bridge.recorder import iter_messages
+from tests.conftest import ROOT
+from tests.test_session import cli
+
+RANGER = """[session]
+duration_s = {duration}
+seed = 4
+[arena]
+width_m = 5
+length_m = 8
+[[robots]]
+profile = "traxbot"
+count = {rangers}
+behaviour = "tests.ranger_probe:Unloader"
+placement = {{ kind = "explicit", poses = {poses} }}
+[[robots]]
+count = {scouts}
+behaviour = "random_walk"
+carried_by = 0
+"""
+
+
+def ranger_config(tmp_path: Path, duration: float = 20, rangers: int = 1, scouts: int = 5) -> Path:
+    poses = [[2.0, 1.5 + 3.0 * i, 90.0] for i in range(rangers)]
+    p = tmp_path / "rangers.toml"
+    p.write_text(RANGER.format(duration=duration, rangers=rangers, scouts=scouts, poses=poses))
+    return p
+
+
+def test_scouts_are_loaded_ranger_by_ranger(tmp_path: Path) -> None:
+    plan = make_plan(load_config(ranger_config(tmp_path, rangers=2, scouts=7)))
+    scouts = plan.robots[2:]
+    assert [(r.carrier, r.slot) for r in scouts] == [(0, 1), (0, 2), (0, 3), (0, 4), (0, 5), (1, 1), (1, 2)]
+    assert all(r.pose == plan.robots[r.carrier].pose for r in scouts)
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    (lambda t: t.replace("count = 5\n", "count = 6\n"), r"robots\[1\].count: robots\[0\] carries at most 1 x 5"),
+    (lambda t: t.replace("carried_by = 0", "carried_by = 1"), r"robots\[1\].carried_by = 1: not another robot group"),
+    (lambda t: t.replace('profile = "traxbot"', 'profile = "eswarbot"'), r"robots\[0\] \(eswarbot\) has no conveyor"),
+    (lambda t: t + 'placement = { kind = "random" }\n', "robots carried by a ranger start on board"),
+])
+def test_carrying_is_checked(tmp_path: Path, edit, match: str) -> None:
+    p = ranger_config(tmp_path)
+    p.write_text(edit(p.read_text()))
+    with pytest.raises(ConfigError, match=match):
+        load_config(p)
+
+
+@pytest.mark.session
+def test_a_ranger_unloads_its_scouts_one_by_one(tmp_path: Path) -> None:
+    """The ranger asks for 2 slots at 1 s and 3 more at 8 s; the belt (0.15 m a slot at 0.05 m/s) drops a scout
+    every 3 s behind the ranger, which keeps driving; on board the scouts ride along, then each drives off."""
+    cfg = ranger_config(tmp_path)
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    rel = s["releases"]
+    assert [e["robot"] for e in rel] == [1, 2, 3, 4, 5] and [e["slot"] for e in rel] == [1, 2, 3, 4, 5]
+    times = [e["t_s"] for e in rel]
+    assert times[0] == pytest.approx(4.0, abs=0.2) and times[1] == pytest.approx(7.0, abs=0.2)
+    assert times[2] == pytest.approx(11.0, abs=0.3)  # the second request starts after the first is done
+    assert all(b - a == pytest.approx(3.0, abs=0.2) for a, b in itertools.pairwise(times[2:]))
+    poses, releases = [], []
+    for topic, t, payload in iter_messages(tmp_path / "run" / "session.mcap"):
+        if topic == "/world/poses":
+            poses.append((t, json.loads(payload)))
+        elif topic == "/world/releases":
+            releases.append(json.loads(payload))
+    assert releases == [{k: e[k] for k in ("robot", "carrier", "slot", "pose")} for e in rel]
+    # on board until released, each where the ranger was, then behind it (the ranger drives along +y)
+    at = {round(t / 1e9, 2): p for t, p in poses}
+    before = at[3.5]
+    assert before["carried"] == [False, True, True, True, True, True]
+    assert math.hypot(before["x"][1] - before["x"][0], before["y"][1] - before["y"][0]) < 1e-3
+    for e in rel:
+        _, y, yaw = e["pose"]
+        assert yaw == pytest.approx(math.pi / 2, abs=0.05)
+        ranger_y = next(p["y"][0] for t, p in poses if t / 1e9 >= e["t_s"])
+        assert ranger_y - y == pytest.approx(0.11 + 0.063 + 0.02, abs=0.03)
+    end = s["per_robot"]
+    assert all(r["on_board"] is None for r in end) and end[0]["profile"] == "traxbot"
+    assert all(r["distance_m"] > 0.05 for r in end[1:4])  # released early, they drove off on their own
+    logs = [json.loads(p) for topic, _t, p in iter_messages(tmp_path / "run" / "session.mcap")
+            if topic == "/r000/log/ranger"]
+    assert logs[-1]["position"] == 5 and logs[-1]["pending"] == 0
+    assert any(entry["left"] is not None and entry["right"] is not None for entry in logs)  # side walls
+
+
+@pytest.mark.session
+def test_a_dead_ranger_keeps_its_scouts_on_board(tmp_path: Path) -> None:
+    cfg = ranger_config(tmp_path, duration=10)
+    cfg.write_text(cfg.read_text() + "[[faults]]\nrobot = 0\nat_s = 5.0\n")
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert [e["robot"] for e in s["releases"]] == [1]  # one dropped at 4 s, then the ranger died
+    assert [r["on_board"] for r in s["per_robot"]] == [None, None, 0, 0, 0, 0]
