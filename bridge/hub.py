@@ -44,6 +44,7 @@ from bridge.can_medium import (
     frame_fault,
 )
 from bridge.config import Config
+from bridge.deployment import covered_share, dispersion
 from bridge.plan import Plan, entity, robot_of, uwb_addr16
 from bridge.profiles import PROFILES
 from bridge.radio_medium import RadioMedium
@@ -141,6 +142,7 @@ class Hub:
         self.swarm_radios = [r for r, rp in enumerate(robots) if rp.sim_xbee and rp.gateway is None]
         self.carriers = {rp.carrier for rp in robots if rp.carrier is not None}  # robots with scouts on board
         self.releases: list[dict[str, Any]] = []
+        self.deployed: dict[int, dict[str, Any]] = {}  # ranger -> its deployment as it ended (deployment_report)
         self.rssi_pwm = [0.0] * self.n
         self.ideal_pose = {r for r, rp in enumerate(robots) if rp.pose_source == "ground_truth"}
         self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
@@ -640,10 +642,32 @@ class Hub:
                 self.rec.write(t, f"/r{r:03d}/log/{topic}", "swarm_sitl.Log", values)
                 if topic == "uwb_ranges":
                     self._uwb_log(r, values)
+                elif topic == "deployment" and values.get("event") == "done" and r in self.carriers:
+                    self._deployed(r, t)
             else:
                 raise ValueError
         except (ValueError, TypeError, KeyError, IndexError, OverflowError):
             self.counts["malformed_items"] += 1
+
+    def _deployed(self, carrier: int, t: int) -> None:
+        """A ranger says it has deployed its scouts (and broadcast START): where they are, by ground truth."""
+        scouts = [rp.id for rp in self.plan.robots if rp.carrier == carrier and rp.id not in self.world.carried]
+        pts = self.world.pos[scouts] if scouts else np.zeros((0, 2))
+        self.deployed[carrier] = {"t_s": t / 1e9, "scouts": scouts, "dispersion_m": round(dispersion(pts), 3),
+                                  "positions": np.round(pts, 3).tolist()}
+
+    def deployment_report(self) -> dict[str, Any] | None:
+        """Per ranger: when it was done, its scouts' dispersion (eq. 5.11) and positions then; over all, the share
+        of the arena within 1 m of a deployed scout (each where it was when its ranger was done)."""
+        if not self.carriers:
+            return None
+        pts = [p for d in self.deployed.values() for p in d["positions"]]
+        a = self.cfg.arena
+        return {"rangers": {str(c): self.deployed.get(c) for c in sorted(self.carriers)},
+                "done": len(self.deployed), "rangers_total": len(self.carriers),
+                "time_s_max": max((d["t_s"] for d in self.deployed.values()), default=None),
+                "covered_share": round(covered_share(np.array(pts), a.width_m, a.length_m), 4) if pts else 0.0,
+                "left_on_board": sorted(self.world.carried)}
 
     def _radio_event(self, t_ev: int, r: int, ev: dict) -> None:
         """A reception or a transmit result from the medium: to the module at the next quantum boundary, and
@@ -856,6 +880,7 @@ class Hub:
             "wall_lag": _lag_summary(self.lag_s),
             "can_events": self.can_events,
             "releases": self.releases if self.carriers else None,
+            "deployment": self.deployment_report(),
             "mavlink": self.mavlink.stats() if self.mavlink is not None else None,
             "startup_s": getattr(self, "startup_wall_s", None),
             "failures": self.failures,

@@ -345,6 +345,7 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "wall_lag": world_res.get("wall_lag"),
         "can_events": world_res.get("can_events", []),
         "releases": world_res.get("releases"),  # scouts dropped off carriers' conveyors (sessions with carriers)
+        "deployment": world_res.get("deployment"),  # the rangers' deployments: time, dispersion, coverage
         "mavlink": world_res.get("mavlink"),
         "cpu_s_total": round(cpu_total, 3),
         "cpu_s_per_robot_per_sim_s": round(cpu_total / n / sim_t, 5) if sim_t and n else None,

@@ -46,6 +46,8 @@ def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
         if m.rates:
             hal["mavlink"]["rates"] = dict(m.rates)
     hal["start_pose"] = list(rp.pose)  # where the robot was put down, as an operator would tell it
+    if rp.payload:  # a carrier: who rides on its conveyor, as its operator loaded it
+        hal["payload"] = list(rp.payload)
     return hal
 
 

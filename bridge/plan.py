@@ -36,6 +36,7 @@ class RobotPlan:
     gateway: dict | None = None  # an XBee gateway, not a robot: the real module's settings (XBeeGatewayCfg)
     carrier: int | None = None  # it starts on this robot's conveyor (RobotGroup.carried_by) ...
     slot: int = 0  # ... in this slot, 1 being the first to drop off
+    payload: tuple[int, ...] = ()  # a carrier: the robots on its conveyor, by slot
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
@@ -104,7 +105,8 @@ class Plan:
 
     @classmethod
     def from_json(cls, d: dict) -> Plan:
-        robots = [RobotPlan(**{**r, "pose": tuple(r["pose"])}) for r in d["robots"]]
+        robots = [RobotPlan(**{**r, "pose": tuple(r["pose"]), "payload": tuple(r.get("payload", ()))})
+                  for r in d["robots"]]
         procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"]), p.get("remote", False)) for p in d["procs"]]
         return cls(d["config"], robots, procs)
 
@@ -159,6 +161,9 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
     for i, rp in enumerate(robots):  # a carried robot starts where its carrier is
         if rp.carrier is not None:
             robots[i] = replace(rp, pose=robots[rp.carrier].pose)
+    for c in {rp.carrier for rp in robots if rp.carrier is not None}:
+        load_c = sorted((rp.slot, rp.id) for rp in robots if rp.carrier == c)
+        robots[c] = replace(robots[c], payload=tuple(r for _, r in load_c))
     for gi, gw in enumerate(cfg.xbee_gateways):  # after the robots, so robot ids do not depend on gateways
         rid = len(robots)
         waypoints = [[t, x, y, 0.0] for t, x, y in gw.waypoints]

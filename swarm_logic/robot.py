@@ -53,6 +53,7 @@ class Robot:
     log_sink: Sink | None = None
     start_pose: tuple[float, float, float] | None = None
     mavlink: MavlinkFace | None = None
+    payload: tuple[int, ...] = ()  # a carrier (TraxBot): the robots on its conveyor, in the order they drop off
     rng_py: random.Random = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -83,6 +84,8 @@ class Robot:
             if len(pose) != 3:
                 raise ValueError(f"HAL config start_pose: [x, y, yaw] expected, got {hal['start_pose']!r}")
             robot.start_pose = pose  # type: ignore[assignment]
+        if hal.get("payload"):
+            robot.payload = tuple(int(v) for v in hal["payload"])
         try:
             if hal.get("xbee"):
                 from swarm_logic.xbee import XBee

@@ -113,3 +113,57 @@ def test_a_dead_ranger_keeps_its_scouts_on_board(tmp_path: Path) -> None:
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert [e["robot"] for e in s["releases"]] == [1]  # one dropped at 4 s, then the ranger died
     assert [r["on_board"] for r in s["per_robot"]] == [None, None, 0, 0, 0, 0]
+
+
+def test_deployment_messages_round_trip_and_refuse_garbage() -> None:
+    from swarm_logic.rdpso.est import BEACON, POSE, START, Msg, decode, encode
+
+    for m in (Msg(POSE, 2, 7, 1.5, -2.25, 0.5), Msg(BEACON, 2, 7, 1.5, -2.25), Msg(START, 2, hops=3)):
+        assert decode(encode(m)) == m
+    assert decode(b"") is None and decode(b"R\x01") is None  # another protocol's frame
+    assert decode(encode(Msg(POSE, 2, 7, 1.0, 2.0, 0.0))[:-1]) is None  # cut short
+    assert decode(b"D\x09\x00\x00") is None  # unknown type
+    nan = encode(Msg(BEACON, 2, 7, float("nan"), 0.0))
+    assert decode(nan) is None
+
+
+EST = RANGER.replace('behaviour = "tests.ranger_probe:Unloader"', 'behaviour = "est_ranger"\n'
+                     'xbee = {{ series = 2, baud = 115200 }}\nparams = {{ q_min_dbm = -70.0, mode = "{mode}" }}')
+EST = EST.replace('behaviour = "random_walk"\ncarried_by = 0', 'behaviour = "rdpso"\ncarried_by = 0\n'
+                  'xbee = {{ series = 2, baud = 115200 }}\nparams = {{ deployed = true, first_id = 1, n_total = 5, '
+                  'subgroups_init = 1, subgroups_max = 1, link_mode = "rssi", q_min_dbm = -70.0 }}')
+
+
+@pytest.mark.session
+def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: Path) -> None:
+    """Algorithm 5.1 end to end: the ranger drops its 5 scouts one by one, each told its pose (the ranger's
+    dead reckoning), each beaconing; then START, which every scout relays before its first RDPSO iteration."""
+    cfg = tmp_path / "est.toml"
+    cfg.write_text(EST.format(duration=100, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="est")
+                   .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14"))
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+                       text=True, timeout=180)
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    dep = s["deployment"]
+    assert dep["done"] == 1 and dep["left_on_board"] == [] and len(s["releases"]) == 5
+    assert dep["rangers"]["0"]["dispersion_m"] > 0.3 and dep["covered_share"] > 0.05
+    logs: dict[int, list[dict]] = {}
+    first_iteration: dict[int, float] = {}
+    for topic, t, payload in iter_messages(tmp_path / "run" / "session.mcap"):
+        if topic.endswith("/log/deployment"):
+            logs.setdefault(int(topic[2:5]), []).append({**json.loads(payload), "t": t / 1e9})
+        elif topic.endswith("/log/rdpso"):
+            first_iteration.setdefault(int(topic[2:5]), t / 1e9)
+    true = {e["robot"]: e["pose"] for e in s["releases"]}
+    start_t = next(e["t"] for e in logs[0] if e["event"] == "done")
+    errors = []
+    for scout in range(1, 6):
+        landed = next(e for e in logs[scout] if e["event"] == "landed")
+        errors.append(math.hypot(landed["x"] - true[scout][0], landed["y"] - true[scout][1]))
+        started = next(e for e in logs[scout] if e["event"] == "start")
+        assert started["t"] <= start_t and first_iteration[scout] > started["t"]  # no iteration before START
+    # the pose a scout is told is the ranger's dead reckoning, which drifts as it bumps walls: off, not lost
+    assert errors[0] < 0.3 and sorted(errors)[2] < 1.0 and max(errors) < 2.0, errors
+    dropped = [e for e in logs[0] if e["event"] == "dropped"]
+    assert [e["scout"] for e in dropped] == [1, 2, 3, 4, 5]

@@ -32,7 +32,9 @@ import zlib
 from typing import Any, ClassVar
 
 from swarm_logic.controller import Controller
+from swarm_logic.iteration import IterationSchedule
 from swarm_logic.rdpso import fuzzy, graph, motion
+from swarm_logic.rdpso.est import ScoutDeployment
 from swarm_logic.rdpso.messages import (
     F_CALL,
     F_CANDIDATE,
@@ -77,7 +79,7 @@ def half(v: float) -> float:
 _HALF = struct.Struct("<e")
 
 
-class Rdpso(Controller):
+class Rdpso(IterationSchedule, Controller):
     """One robot of the RDPSO swarm. Parameters (``defaults``) follow the digest's master table (4.1)."""
 
     needs_radio = True  # a config must give its robots an XBee
@@ -117,9 +119,12 @@ class Rdpso(Controller):
         "swarm_seed": 0,  # shared by every robot: seeds the subgroups' common draws
         "log_every": 1,  # iterations between "rdpso" log records (0: none)
         "payload_max": 92,  # bytes per hello: a ZigBee broadcast's limit (more members than fit: nearest sent)
+        "first_id": 0,  # the robot id of the swarm's first scout (rangers or other robots may come before)
+        "deployed": False,  # dropped by a ranger (swarm_logic.rdpso.est): start at its START, from its pose
     }
     # read only at init and reset: the iteration clock every robot shares, the swarm's size and its initial split
-    static_params = frozenset({"iteration_s", "n_total", "subgroups_init", "n_init", "n_min", "n_max", "fuzzy"})
+    static_params = frozenset({"iteration_s", "n_total", "subgroups_init", "n_init", "n_min", "n_max", "fuzzy",
+                               "first_id", "deployed"})
 
     # -- parameters -----------------------------------------------------------------------------------------
     @classmethod
@@ -187,15 +192,15 @@ class Rdpso(Controller):
             raise ValueError("rdpso needs a radio (robots.xbee in the session config)")
         self.p = self.resolve(robot.params)
         self.reset()
-        if robot.start_pose is not None:
-            robot.llc.set_odometry(*robot.start_pose)
-        # start on an iteration boundary, after the LLC has taken the start pose
-        it = self.p["iteration_s"]
-        now = robot.clock.now()
-        self.k = math.ceil((now + 0.3) / it)
-        self.phase = "A"
-        self.next_t = self.k * it
-        self.period_s = self.next_t - now
+        # deployed by a ranger: on board until it drops the robot and tells it its pose, then beaconing until
+        # START (swarm_logic.rdpso.est); otherwise the mission starts now, from the start pose
+        self.deployment = ScoutDeployment(robot) if self.p["deployed"] else None
+        if self.deployment is None:
+            if robot.start_pose is not None:
+                robot.llc.set_odometry(*robot.start_pose)
+            self._begin()
+        else:
+            self.period_s = 0.1
 
     def reset(self) -> None:
         p = self.p
@@ -206,7 +211,8 @@ class Rdpso(Controller):
         self.adapter = fuzzy.FuzzyAdapter() if p["fuzzy"] else None
         rid = self.robot.id
         g_init, n_total = int(p["subgroups_init"]), int(p["n_total"])
-        self.sid = 1 + rid * g_init // n_total if g_init else 0
+        # the initial subgroups: consecutive blocks of the swarm's robots (ids from first_id, as rangers load them)
+        self.sid = 1 + (rid - int(p["first_id"])) * g_init // n_total if g_init else 0
         self.x = self.y = self.theta = 0.0
         self.prev: tuple[float, float] | None = None
         self.h = -math.inf
@@ -258,38 +264,12 @@ class Rdpso(Controller):
 
     def step(self) -> None:
         """Phase A at k * iteration_s, phase B comm_window_s later; ``period_s`` tells the runner when to call."""
-        it = self.p["iteration_s"]
-        now = self.robot.clock.now()
-        if now < self.next_t - 1e-6:  # called early (a runner's first call comes at once)
-            self.period_s = self.next_t - now
+        if self.deployment is not None and not self.deployment.started:
+            self.deployment.step()
+            if self.deployment.started:
+                self._begin()
             return
-        if self.phase == "A":
-            if self.robot.llc.state.odom_t is None:  # no pose from the LLC yet: sit this iteration out
-                self.k = math.floor(now / it + 1e-9) + 1
-            else:
-                self._phase_a()
-                jitter = self.p["send_jitter_s"]
-                if jitter > 0:
-                    self.phase = "S"
-                    self.next_t = self.k * it + self.robot.rng_py.uniform(0.0, jitter)
-                else:
-                    self._send()
-                    self.phase = "B"
-                    self.next_t = self.k * it + self.p["comm_window_s"]
-                self.period_s = max(0.0, self.next_t - now)
-                return
-        elif self.phase == "S":
-            self._send()
-            self.phase = "B"
-            self.next_t = self.k * it + self.p["comm_window_s"]
-            self.period_s = self.next_t - now
-            return
-        else:
-            self._phase_b()
-            self.phase = "A"
-            self.k = max(self.k + 1, math.floor(now / it + 1e-9) + 1)
-        self.next_t = self.k * it
-        self.period_s = self.next_t - now
+        self._iterate()
 
     # -- phase A: sense and tell --------------------------------------------------------------------------------
     def _phase_a(self) -> None:
@@ -349,18 +329,8 @@ class Rdpso(Controller):
     def _listen(self) -> None:
         """Drain the radio; keep this iteration's hellos, refresh the group table (direct and relayed)."""
         r = self.robot
-        k16 = self.k & 0xFFFF
         heard: dict[int, Hello] = {}
-        while (pkt := r.xbee.recv(timeout=0)) is not None:
-            msg = decode(pkt.data)
-            if msg is None:  # another application's frame, or a damaged one
-                self.dropped["foreign"] += 1
-                continue
-            if msg.robot == r.id:
-                continue
-            if msg.k != k16:  # late, or from a robot whose clock disagrees: not this iteration's
-                self.dropped["late"] += 1
-                continue
+        for msg, pkt in self._frames_of_iteration(decode, "foreign"):
             heard[msg.robot] = msg
             if pkt.rssi_dbm is not None:
                 self.rssi[msg.robot] = float(pkt.rssi_dbm)
