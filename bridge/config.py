@@ -404,7 +404,9 @@ class XBeeGatewayCfg(_Model):
 class FaultCfg(_Model):
     """An injected fault, from ``at_s`` on.
 
-    ``firmware_crash``: the robot's firmware crashes and the robot is dead from then on (as a battery death in the
+    ``battery_depleted``: the robot's battery is exhausted: its motors stop and its radio falls silent, for good
+    (the thesis' battery deaths). ``firmware_crash``: the robot's firmware crashes and the robot is dead from then on
+    (as a battery death in the
     thesis: motors stop, its radio goes silent, its logic stops). ``can_bus_off``: every frame the robot's CAN node
     ``node`` transmits is destroyed (a failing transceiver, a loose CAN_H/CAN_L wire at its connector), so its
     error counter climbs to bus-off within a few milliseconds and again after each recovery, for ``duration_s``.
@@ -413,7 +415,7 @@ class FaultCfg(_Model):
 
     robot: int = Field(ge=0, description="robot id")
     at_s: float = Field(gt=0, description="simulated time the fault starts")
-    kind: Literal["firmware_crash", "can_bus_off", "can_noise"] = "firmware_crash"
+    kind: Literal["firmware_crash", "battery_depleted", "can_bus_off", "can_noise"] = "firmware_crash"
     node: Literal["host", "llc", "slcan"] = Field(
         "host", description="can_bus_off: whose transmissions fail: host (the companion computer's CAN adapter), llc "
                             "or slcan")
@@ -422,7 +424,7 @@ class FaultCfg(_Model):
 
     @model_validator(mode="after")
     def _fields_fit_kind(self) -> FaultCfg:
-        applies = {"firmware_crash": set(), "can_bus_off": {"node", "duration_s"},
+        applies = {"firmware_crash": set(), "battery_depleted": set(), "can_bus_off": {"node", "duration_s"},
                    "can_noise": {"duration_s", "probability"}}[self.kind]
         self._only_for_kind(self.kind, applies, {"robot", "at_s", "kind"})
         return self

@@ -20,6 +20,7 @@ order, so the recording does not depend on process packing, speed or machine loa
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import os
 import queue
@@ -55,6 +56,7 @@ from bridge.uwb_medium import UwbMedium
 from bridge.world import World
 from firmware_sim.xbee import valid_air_frame
 from swarm_logic.interfaces import eswarbot_llc_db
+from swarm_logic.rdpso import graph
 
 LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
 CONNECTIVITY_EVERY_NS = 1_000_000_000  # how often the radio graph's algebraic connectivity is sampled
@@ -147,6 +149,12 @@ class Hub:
         self.ideal_pose = {r for r, rp in enumerate(robots) if rp.pose_source == "ground_truth"}
         self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
         self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
+        # partitions: how many pieces the live swarm's radio graph is in, and each ranger's subgroup's (by sample)
+        self.pieces: list[int] = []
+        self.group_of = {rp.id: rp.carrier for rp in robots if rp.carrier is not None}
+        self.group_pieces: dict[int, list[int]] = defaultdict(list)
+        # battery deaths to come: (time, robot)
+        self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
         self.module_stats: dict[str, dict] = {}
         self.addr_robot: dict[tuple[str, int], int] = {}  # ("64" | "16", address) -> robot, from the modules
         self.tx_dst: dict[tuple[int, int], tuple] = {}  # (robot, frame handle) -> (addressed robot, MAC seq)
@@ -170,7 +178,7 @@ class Hub:
         for role in rp.can_nodes():
             bus.add_node(entity(r, role), host_restart if role == "logic" else 0)
         for f in cfg.faults:
-            if f.robot != r or f.kind == "firmware_crash":
+            if f.robot != r or f.kind in ("firmware_crash", "battery_depleted"):
                 continue
             start = round(f.at_s * 1e9)
             end = None if f.duration_s is None else start + round(f.duration_s * 1e9)
@@ -546,23 +554,40 @@ class Hub:
                                                  if r not in self.dead):
             lam = self.algebraic_connectivity()
             self.connectivity.append((t / 1e9, lam))
+            self._partitions()
             self.rec.write(t, "/radio/connectivity", "swarm_sitl.Connectivity", {"lambda2": round(lam, 6)})
 
-    def algebraic_connectivity(self) -> float:
-        """lambda2 of the graph of live robots whose mean link budget (no fast fading) clears the receiver's
-        sensitivity both ways: above zero exactly when the radio network is connected."""
+    def radio_graph(self) -> tuple[list[int], np.ndarray]:
+        """The live robots' radio graph: a link where the mean link budget (no fast fading) clears the receiver's
+        sensitivity both ways, on the same channel and PAN."""
         live = [r for r in self.swarm_radios if r not in self.dead]
-        if len(live) < 2:
-            return 0.0
         rssi = self.radio.mean_rssi()[np.ix_(live, live)]  # row: sender, column: receiver
         sens = np.array([self.node_sens.get(r, -94.0) for r in live])
         net = [self.node_net.get(r) for r in live]  # modules hear only their own channel and PAN
-        same = np.array([[a is not None and a == b for b in net] for a in net])
+        same = np.array([[a is not None and a == b for b in net] for a in net]).reshape(len(live), len(live))
         up = rssi >= sens[None, :]
         adj = (up & up.T & same).astype(float)
         np.fill_diagonal(adj, 0.0)
+        return live, adj
+
+    def algebraic_connectivity(self) -> float:
+        """lambda2 of the radio graph: above zero exactly when the radio network is connected."""
+        live, adj = self.radio_graph()
+        if len(live) < 2:
+            return 0.0
         lap = np.diag(adj.sum(axis=1)) - adj
         return float(max(0.0, np.sort(np.linalg.eigvalsh(lap))[1]))
+
+    def _partitions(self) -> None:
+        """Sample how many pieces the swarm's radio graph is in, and each ranger's subgroup's (its live scouts)."""
+        live, adj = self.radio_graph()
+        self.pieces.append(graph.components(adj))
+        if self.group_of:
+            idx = {r: i for i, r in enumerate(live)}
+            for g in sorted(set(self.group_of.values())):
+                members = [idx[r] for r, c in self.group_of.items() if c == g and r in idx
+                           and r not in self.world.carried]
+                self.group_pieces[g].append(graph.components(adj[np.ix_(members, members)]) if members else 0)
 
     def _route(self, e: str, r: int, t: int, item: list) -> None:
         """One output item other than a CAN frame: UART bytes, an air frame, a node setting, a ranging request,
@@ -723,6 +748,11 @@ class Hub:
             t = self.k * q
             if t >= self.end_ns:
                 break
+            while self.battery_deaths and self.battery_deaths[0][0] <= t:  # injected: the battery is empty
+                at, r = self.battery_deaths.pop(0)
+                self.world.deplete(r)
+                self.robot_failed(r, t, "battery_depleted", f"battery exhausted at {at / 1e9:g} s: motors stopped, "
+                                                            "radio silent")
             self._deliver(t)
             self._lines(t)
             if self.mavlink is not None:
@@ -833,7 +863,12 @@ class Hub:
             out["connectivity"] = {
                 "samples": len(lam), "connected_share": share,
                 "lambda2_min": round(min(lam), 4) if lam else None,
-                "lambda2_median": round(statistics.median(lam), 4) if lam else None}
+                "lambda2_median": round(statistics.median(lam), 4) if lam else None,
+                # a partition event: the graph falls into more pieces than at the previous sample
+                "partition_events": _splits(self.pieces), "pieces_max": max(self.pieces, default=0)}
+            if self.group_pieces:
+                out["connectivity"]["subgroups"] = {str(g): {"partition_events": _splits(v), "pieces_max": max(v)}
+                                                    for g, v in sorted(self.group_pieces.items())}
             out["totals"] = stats.get("totals", {})
             out["rssi_hist_bins_dbm"] = [stats.get("rssi_hist_lo_dbm"), stats.get("rssi_hist_bin_db")]
             for r in range(self.n):
@@ -925,6 +960,11 @@ def _can_summary(bus: CanMedium) -> dict[str, Any]:
     st = bus.stats()
     return {"error_frames": st["error_frames"],
             "nodes": {name[name.index("/") + 1:]: v for name, v in st["nodes"].items()}}
+
+
+def _splits(pieces: list[int]) -> int:
+    """Partition events in a series of component counts: the times it rose (a piece broke off)."""
+    return sum(max(0, b - a) for a, b in itertools.pairwise(pieces) if a > 0)
 
 
 def _lag_summary(lag_s: list[float]) -> dict[str, Any] | None:

@@ -217,6 +217,11 @@ class World:
     def set_led(self, robot: int, rgb: tuple[int, int, int]) -> None:
         self.led[robot] = rgb
 
+    def deplete(self, robot: int) -> None:
+        """The robot's battery is exhausted (an injected fault): no charge left; ``kill`` stops the rest."""
+        self.soc[robot] = 0.0
+        self.battery_v[robot] = float(self._battery_voltage(np.zeros(self.n))[robot])
+
     def kill(self, robot: int) -> None:
         """A dead robot: motors off, it stays in the arena as an obstacle."""
         self.alive[robot] = False

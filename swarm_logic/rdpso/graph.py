@@ -67,6 +67,28 @@ def multihop_matrix(a: np.ndarray) -> np.ndarray:
     return c
 
 
+def components(a: np.ndarray) -> int:
+    """How many pieces the MANET is in: connected components of the graph (a link counts if it works either way;
+    0 for no robots)."""
+    am = np.asarray(a) != 0
+    am = am | am.T
+    n = am.shape[0]
+    seen = np.zeros(n, dtype=bool)
+    count = 0
+    for src in range(n):
+        if seen[src]:
+            continue
+        count += 1
+        seen[src] = True
+        q = deque([src])
+        while q:
+            u = q.popleft()
+            for v in np.flatnonzero(am[u] & ~seen).tolist():
+                seen[v] = True
+                q.append(v)
+    return count
+
+
 def fiedler(a: np.ndarray) -> float:
     """Algebraic connectivity lambda_2 of L = D - A (eq. 5.14-5.15): > 0 iff the graph is connected.
 
