@@ -151,7 +151,10 @@ def test_receive_ring_overflow_is_counted() -> None:
 
 
 def _valid_move(arb: int, data: bytes) -> bool:
-    """A MOVE_CMD needs a distance >= 0 and a speed > 0; every other well-sized command is valid."""
+    """A MOVE_CMD needs a distance >= 0 and a speed > 0; a CONVEYOR_CMD is bad on a robot without a conveyor (the
+    eSwarBot); every other well-sized command is valid."""
+    if arb == DB.get_message_by_name("CONVEYOR_CMD").frame_id:
+        return False
     if arb != MOVE.frame_id:
         return True
     sig = MOVE.decode(data)

@@ -167,3 +167,50 @@ def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: 
     assert errors[0] < 0.3 and sorted(errors)[2] < 1.0 and max(errors) < 2.0, errors
     dropped = [e for e in logs[0] if e["event"] == "dropped"]
     assert [e["scout"] for e in dropped] == [1, 2, 3, 4, 5]
+
+
+@pytest.mark.session
+def test_the_random_baseline_drops_each_scout_within_d_max_of_the_last(tmp_path: Path) -> None:
+    cfg = tmp_path / "random.toml"
+    cfg.write_text(EST.format(duration=100, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="random")
+                   .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14")
+                   .replace('mode = "random" }', 'mode = "random", d_max_m = 2.0 }'))
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+                       text=True, timeout=180)
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert s["deployment"]["done"] == 1 and len(s["releases"]) == 5
+    drops = [json.loads(p) for topic, _t, p in iter_messages(tmp_path / "run" / "session.mcap")
+             if topic == "/r000/log/deployment" and json.loads(p)["event"] == "dropped"]
+    gaps = [math.hypot(b["x"] - a["x"], b["y"] - a["y"]) for a, b in itertools.pairwise(drops)]
+    # where the ranger believed it dropped them: each within d_max (+ reach) of the last, never on top of it
+    assert len(gaps) == 4 and all(0.4 - 1e-6 <= g <= 2.0 + 0.15 + 0.05 for g in gaps), gaps
+
+
+def test_the_conveyor_command_is_checked_and_advances_whole_slots() -> None:
+    """On the TraxBot's LLC: CONVEYOR_CMD with 0 slots is a bad frame; 2 slots advance the belt 2 pitches at the
+    belt's speed, reported in CONVEYOR_STATUS; the stepper's steps are what the world sees."""
+    from bridge.firmware_host import llc_params
+    from bridge.profiles import TRAXBOT
+    from firmware_sim.arduino import Board
+    from firmware_sim.can_controller import Frame
+    from firmware_sim.llc import LowLevelController
+    from swarm_logic.interfaces import eswarbot_llc_db
+
+    db = eswarbot_llc_db()
+    cmd = db.get_message_by_name("CONVEYOR_CMD")
+    board = Board()
+    llc = LowLevelController(board, llc_params(TRAXBOT))
+    llc.setup()
+    board.can.on_bus_frame(Frame(cmd.frame_id, bytes([0, 1])))  # 0 slots: outside the DBC's range
+    board.can.on_bus_frame(Frame(cmd.frame_id, cmd.encode({"slots": 2, "seq": 2})))
+    status = []
+    for _ in range(400):  # 8 s at 50 Hz: 2 x 0.15 m at 0.05 m/s takes 6 s
+        board.time_us += 20_000
+        llc.loop()
+        status += [db.decode_message(f.arbitration_id, f.data) for f in board.can.take_tx()
+                   if f.arbitration_id == db.get_message_by_name("CONVEYOR_STATUS").frame_id]
+    assert llc.rx_bad == 1
+    assert board.stepper_steps == round(2 * 150 / 0.5)
+    assert status[-1] == {"seq": 2, "moving": 0, "position_slots": 2, "pending_slots": 0}
+    assert any(s["position_slots"] == 1 and s["moving"] for s in status)

@@ -267,6 +267,9 @@ class EstRanger(Controller):
     def _leg_done(self, x: float, y: float, travelled: float, now: float) -> bool:
         p = self.p
         n = len(self.dropped)
+        # where a scout would land now: behind the ranger (the points to reach are for the scouts, not the ranger)
+        th = self.robot.llc.state.theta
+        x, y = x - p["drop_back_m"] * math.cos(th), y - p["drop_back_m"] * math.sin(th)
         if n and math.hypot(x - self.dropped[-1][1], y - self.dropped[-1][2]) < p["min_leg_m"]:
             # never drop a scout onto the last one
             if self.blocked_s > 6.0:  # boxed in right after a drop: give up the point, turn back the way it came
