@@ -96,7 +96,6 @@ class Hub:
         self.inbox: dict[str, list] = {e: [] for e in self.ents}
         self.seq: dict[str, int] = dict.fromkeys(self.ents, 0)
         self.can = [self._can_bus(r, rp) for r, rp in enumerate(plan.robots)]
-        self.can_nodes = [tuple(entity(r, role) for role in rp.can_nodes()) for r, rp in enumerate(plan.robots)]
         self.can_echo: set[str] = set()  # nodes whose own frames come back to them (receive_own_messages)
         self.can_events: list[dict[str, Any]] = []  # bus-off and recovery of every node, for the summary
         self.can_noticed: dict[str, tuple[int | None, int]] = {}  # node -> (last notice, events not told since)
@@ -142,7 +141,6 @@ class Hub:
                 self.host_baud[(r, "uwb")] = cfg.uwb.uart_baud
         # the swarm's radio network, whose connectivity is sampled: the robots' XBees (not a gateway's)
         self.swarm_radios = [r for r, rp in enumerate(robots) if rp.sim_xbee and rp.gateway is None]
-        self.carriers = {rp.carrier for rp in robots if rp.carrier is not None}  # robots with scouts on board
         self.releases: list[dict[str, Any]] = []
         self.deployed: dict[int, dict[str, Any]] = {}  # ranger -> its deployment as it ended (deployment_report)
         self.rssi_pwm = [0.0] * self.n
@@ -151,7 +149,8 @@ class Hub:
         self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
         # partitions: how many pieces the live swarm's radio graph is in, and each ranger's subgroup's (by sample)
         self.pieces: list[int] = []
-        self.group_of = {rp.id: rp.carrier for rp in robots if rp.carrier is not None}
+        self.group_of = {rp.id: rp.carrier for rp in robots if rp.carrier is not None}  # scout -> its ranger
+        self.carriers = set(self.group_of.values())  # robots with scouts on board
         self.group_pieces: dict[int, list[int]] = defaultdict(list)
         # battery deaths to come: (time, robot)
         self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
@@ -584,7 +583,7 @@ class Hub:
         self.pieces.append(graph.components(adj))
         if self.group_of:
             idx = {r: i for i, r in enumerate(live)}
-            for g in sorted(set(self.group_of.values())):
+            for g in sorted(self.carriers):
                 members = [idx[r] for r, c in self.group_of.items() if c == g and r in idx
                            and r not in self.world.carried]
                 self.group_pieces[g].append(graph.components(adj[np.ix_(members, members)]) if members else 0)
@@ -676,7 +675,7 @@ class Hub:
 
     def _deployed(self, carrier: int, t: int) -> None:
         """A ranger says it has deployed its scouts (and broadcast START): where they are, by ground truth."""
-        scouts = [rp.id for rp in self.plan.robots if rp.carrier == carrier and rp.id not in self.world.carried]
+        scouts = [r for r, c in self.group_of.items() if c == carrier and r not in self.world.carried]
         pts = self.world.pos[scouts] if scouts else np.zeros((0, 2))
         self.deployed[carrier] = {"t_s": t / 1e9, "scouts": scouts, "dispersion_m": round(dispersion(pts), 3),
                                   "positions": np.round(pts, 3).tolist()}

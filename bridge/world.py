@@ -24,6 +24,7 @@ from bridge.config import ArenaCfg, BoxObstacle, Config
 from bridge.plan import RobotPlan
 from bridge.profiles import PROFILES, RobotProfile
 from bridge.rng import stream
+from swarm_logic.geometry import wrap
 
 # Li-ion open-circuit voltage per cell against state of charge (typical curve).
 _OCV_SOC = np.array([0.0, 0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0])
@@ -302,7 +303,7 @@ class World:
             pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, z], pb.getQuaternionFromEuler([0, 0, yaw]),
                                                physicsClientId=c)
             pb.resetBaseVelocity(self.bodies[i], [(x1 - x) * self.hz, (y1 - y) * self.hz, 0.0],
-                                 [0.0, 0.0, _wrap(yaw1 - yaw) * self.hz], physicsClientId=c)
+                                 [0.0, 0.0, wrap(yaw1 - yaw) * self.hz], physicsClientId=c)
 
     def _ride(self) -> None:
         """Robots on a conveyor sit on their carrier's deck and move with it (their wheels turn in the air)."""
@@ -450,10 +451,6 @@ class World:
             pb.disconnect(self.cid)
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
 def _path(r: RobotPlan) -> np.ndarray:
     """A stated motion as rows (t_s, x, y, yaw rad): a fixed body is a one-row path at its placement."""
     way = r.motion["waypoints"] if r.motion["kind"] == "scripted" else []
@@ -474,4 +471,4 @@ def path_pose(path: np.ndarray, t_s: float) -> tuple[float, float, float]:
     a, b = path[k - 1], path[k]
     f = (t_s - a[0]) / (b[0] - a[0])
     return (float(a[1] + f * (b[1] - a[1])), float(a[2] + f * (b[2] - a[2])),
-            _wrap(float(a[3] + f * _wrap(float(b[3] - a[3])))))
+            wrap(float(a[3] + f * wrap(float(b[3] - a[3])))))

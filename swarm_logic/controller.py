@@ -25,6 +25,14 @@ class Controller(ABC):
     def init(self, robot: Robot) -> None:
         self.robot = robot
 
+    @classmethod
+    def with_defaults(cls, params: dict[str, Any]) -> dict[str, Any]:
+        """``defaults`` overlaid with ``params``; ValueError naming any parameter the controller does not have."""
+        unknown = sorted(set(params) - set(cls.defaults))
+        if unknown:
+            raise ValueError(f"{cls.__name__}: unknown parameters {unknown}; known: {sorted(cls.defaults)}")
+        return {**cls.defaults, **params}
+
     @abstractmethod
     def step(self) -> None: ...
 

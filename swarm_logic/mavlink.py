@@ -71,6 +71,7 @@ import serial
 from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_logic.clock import Clock
+from swarm_logic.geometry import wrap
 
 if TYPE_CHECKING:
     from swarm_logic.controller import Controller
@@ -123,11 +124,6 @@ BODY_FRAMES = (mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED)
 
 
 # -- frames and scales ---------------------------------------------------------------------------------------
-def wrap(a: float) -> float:
-    """``a`` in [-pi, pi]."""
-    return math.atan2(math.sin(a), math.cos(a))
-
-
 def yaw_ned(theta: float) -> float:
     """NED yaw (clockwise from north) of an ENU heading ``theta`` (counter-clockwise from east); its own inverse."""
     return wrap(math.pi / 2 - theta)

@@ -38,6 +38,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_logic.clock import Clock
+from swarm_logic.geometry import wrap
 from swarm_logic.llc_client import LlcState
 from swarm_logic.mavlink import (
     GUIDED,
@@ -48,7 +49,6 @@ from swarm_logic.mavlink import (
     Link,
     open_link,
     sik_dbm,
-    wrap,
     yaw_ned,
 )
 

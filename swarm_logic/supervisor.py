@@ -16,6 +16,7 @@ from typing import Any
 from pymavlink.dialects.v20.common import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING
 
 from swarm_logic.controller import Controller
+from swarm_logic.geometry import wrap
 from swarm_logic.mavlink import (
     AUTO,
     EPS,
@@ -25,7 +26,6 @@ from swarm_logic.mavlink import (
     MavlinkFace,
     PositionTarget,
     Target,
-    wrap,
 )
 from swarm_logic.robot import Robot
 

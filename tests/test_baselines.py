@@ -4,8 +4,6 @@ controller the co-simulation runs), plus one short co-simulation."""
 
 from __future__ import annotations
 
-import ast
-import inspect
 import json
 import math
 import tomllib
@@ -29,6 +27,7 @@ from swarm_logic.llc_client import LlcState
 from swarm_logic.rdpso.messages import Hello
 from swarm_logic.rdpso.messages import encode as rdpso_encode
 from swarm_logic.robot import Robot
+from tests.test_rdpso import assert_device_protocols_only
 
 ROOT = Path(__file__).resolve().parent.parent
 CLASSES = {"epso": Epso, "ppso": Ppso, "gso": Gso, "afs": Afs}
@@ -388,12 +387,7 @@ def test_behaviours_are_registered_with_complete_defaults() -> None:
 
 @pytest.mark.parametrize("mod", [common, epso, ppso, gso, afs], ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 def test_the_controllers_use_only_the_device_protocols(mod: Any) -> None:
-    tree = ast.parse(inspect.getsource(mod))
-    names = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert not any(m.startswith(("bridge", "firmware_sim")) for m in names if m)
-    used = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Attribute)
-            and n.value.attr in ("llc", "xbee")}
-    assert used <= {"state", "move", "set_led", "stop", "set_odometry", "send_nowait", "recv"}
+    assert_device_protocols_only(mod)
 
 
 # -- searching peaks in the numerical runner -------------------------------------------------------------------

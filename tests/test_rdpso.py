@@ -238,17 +238,9 @@ def test_a_call_recruits_one_robot_and_a_founder_at_most_n_i_minus_one(seed: int
 
 def test_the_controller_cannot_tell_the_runners_apart() -> None:
     """It only touches the device protocols: the numerical runner's devices offer nothing else it uses."""
-    import ast
-    import inspect
-
     import swarm_logic.rdpso.controller as mod
 
-    tree = ast.parse(inspect.getsource(mod))
-    names = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert not any(m.startswith(("bridge", "firmware_sim")) for m in names if m)
-    used = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Attribute)
-            and n.value.attr in ("llc", "xbee")}
-    assert used <= {"state", "move", "set_led", "stop", "set_odometry", "send_nowait", "recv"}
+    assert_device_protocols_only(mod)
     assert math.isfinite(arena_run(n=4, iterations=10).best[-1])
 
 
@@ -288,3 +280,17 @@ def test_frames_that_are_not_hellos_are_counted_and_dropped() -> None:
     last = [r for r in res.logs if r["topic"] == "rdpso" and r["k"] == max(q["k"] for q in res.logs)]
     assert all(r["dropped"]["foreign"] >= 2 * 19 for r in last)  # two neighbours' junk every iteration
     assert all(r["heard"] == 2 for r in last)  # the hellos still get through
+
+
+def assert_device_protocols_only(mod: object) -> None:
+    """A controller module imports nothing of the simulator and uses of its robot's LLC and radio only what the
+    numerical runner's point devices offer too."""
+    import ast
+    import inspect
+
+    tree = ast.parse(inspect.getsource(mod))
+    names = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert not any(m.startswith(("bridge", "firmware_sim")) for m in names if m)
+    used = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Attribute)
+            and n.value.attr in ("llc", "xbee")}
+    assert used <= {"state", "move", "set_led", "stop", "set_odometry", "send_nowait", "recv"}

@@ -22,6 +22,7 @@ from collections.abc import Callable, Iterable
 from typing import Any, ClassVar
 
 from swarm_logic.controller import Controller
+from swarm_logic.geometry import wrap
 from swarm_logic.iteration import IterationSchedule
 from swarm_logic.rdpso import motion
 from swarm_logic.robot import Robot
@@ -38,11 +39,6 @@ COMMON_DEFAULTS: dict[str, Any] = {
     "n_total": 12,  # N_T, the number of robots (ids travel as one byte: at most 255)
     "log_every": 1,  # iterations between log records (0: none)
 }
-
-
-def wrap(a: float) -> float:
-    """Angle ``a`` folded into (-pi, pi]."""
-    return math.atan2(math.sin(a), math.cos(a))
 
 
 def pso_velocity(v: Vec, x: Vec, w: float, pulls: Iterable[tuple[float, Vec]],
@@ -154,10 +150,7 @@ class Iterated(IterationSchedule, Controller):
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
         """Defaults merged with ``params``, checked; ValueError names the parameter and the reason."""
-        unknown = set(params) - set(cls.defaults)
-        if unknown:
-            raise ValueError(f"{cls.topic}: unknown parameters {sorted(unknown)}")
-        p = {**cls.defaults, **params}
+        p = cls.with_defaults(params)
         positive(p, "iteration_s", "dx_max_m", "speed_mps")
         finite(p, "iteration_s", "dx_max_m", "speed_mps")
         within(p, "comm_window_s", 0.0, p["iteration_s"], lo_open=True, hi_open=True)

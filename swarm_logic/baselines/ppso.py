@@ -37,8 +37,8 @@ from swarm_logic.baselines.common import (
     pso_velocity,
     wire,
     within,
-    wrap,
 )
+from swarm_logic.geometry import wrap
 from swarm_logic.rdpso import motion
 
 MAGIC = 0x50  # "P"

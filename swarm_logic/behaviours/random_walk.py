@@ -31,10 +31,7 @@ class RandomWalk(Controller):
 
     def init(self, robot: Robot) -> None:
         super().init(robot)
-        unknown = set(robot.params) - set(self.defaults)
-        if unknown:
-            raise ValueError(f"random_walk: unknown parameters {sorted(unknown)}; known: {sorted(self.defaults)}")
-        self.p = {**self.defaults, **robot.params}
+        self.p = self.with_defaults(robot.params)
         self.period_s = float(self.p["period_s"])
         self.reset()
 

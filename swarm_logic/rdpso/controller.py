@@ -130,10 +130,7 @@ class Rdpso(IterationSchedule, Controller):
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
         """Defaults merged with ``params``, checked; ValueError names the parameter and the reason."""
-        unknown = set(params) - set(cls.defaults)
-        if unknown:
-            raise ValueError(f"rdpso: unknown parameters {sorted(unknown)}")
-        p = {**cls.defaults, **params}
+        p = cls.with_defaults(params)
         motion.validate_parameters(p["alpha"], (p["rho1"], p["rho2"], p["rho3"], p["rho4"]))
         if p["fractional_form"] not in ("thesis", "exact_gl"):
             raise ValueError(f"fractional_form: {p['fractional_form']!r} is not one of thesis, exact_gl")

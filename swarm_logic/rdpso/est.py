@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from swarm_logic.controller import Controller
+from swarm_logic.geometry import wrap
 from swarm_logic.rdpso.deployment import est_next, k_first_threshold_dbm
 from swarm_logic.robot import Robot
 
@@ -105,7 +106,7 @@ class ScoutDeployment:
             elif m.kind == START and self.state == "beacon" and m.ranger == self.ranger:
                 self.state = "started"
                 r.xbee.send_nowait(None, encode(Msg(START, m.ranger, hops=min(255, m.hops + 1))))  # relay once
-                r.log("deployment", event="start", ranger=m.ranger, hops=m.hops)
+                r.log("deployment", event="start", ranger=m.ranger, hops=m.hops, malformed=self.malformed)
                 return
         if self.state == "beacon" and now >= self.next_beacon:
             self.next_beacon = now + self.BEACON_S
@@ -136,7 +137,7 @@ class EstRanger(Controller):
 
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
-        p = {**cls.defaults, **params}
+        p = cls.with_defaults(params)
         if p["mode"] not in ("est", "random"):
             raise ValueError(f"mode: 'est' or 'random', got {p['mode']!r}")
         if p["k"] not in (1, 2, 3, 4, 5):
@@ -189,7 +190,7 @@ class EstRanger(Controller):
             self.next_log = now + 1.0
             r.log("ranger", state=self.state, x=round(st.x, 3), y=round(st.y, 3), dropped=len(self.dropped),
                   target=None if self.target is None else [round(v, 3) for v in self.target],
-                  heading=round(self.heading, 3), blocked_s=round(self.blocked_s, 1))
+                  heading=round(self.heading, 3), blocked_s=round(self.blocked_s, 1), malformed=self.malformed)
         if self.state == "leg":
             self._drive(now)
         elif self.state == "dropping":
@@ -236,7 +237,7 @@ class EstRanger(Controller):
         if self.leg_start is None:
             self.leg_start = (x, y)
         travelled = math.hypot(x - self.leg_start[0], y - self.leg_start[1])
-        if self._leg_done(x, y, travelled, now):
+        if self._leg_done(travelled):
             self._drop()
             return
         if now < self.avoid_until:  # turning away from an obstacle, toward the side with more room
@@ -258,18 +259,21 @@ class EstRanger(Controller):
             return
         if self.target is not None:
             self.heading = math.atan2(self.target[1] - y, self.target[0] - x)
-        err = math.atan2(math.sin(self.heading - st.theta), math.cos(self.heading - st.theta))
+        err = wrap(self.heading - st.theta)
         if abs(err) > 0.3:
             r.llc.drive(0.0, math.copysign(p["turn_rate_rps"], err))
         else:
             r.llc.drive(p["speed_mps"], 2.0 * err)
 
-    def _leg_done(self, x: float, y: float, travelled: float, now: float) -> bool:
+    def _landing(self) -> tuple[float, float]:
+        """Where a scout dropped now would land: behind the ranger (the points to reach are the scouts')."""
+        st, back = self.robot.llc.state, self.p["drop_back_m"]
+        return st.x - back * math.cos(st.theta), st.y - back * math.sin(st.theta)
+
+    def _leg_done(self, travelled: float) -> bool:
         p = self.p
         n = len(self.dropped)
-        # where a scout would land now: behind the ranger (the points to reach are for the scouts, not the ranger)
-        th = self.robot.llc.state.theta
-        x, y = x - p["drop_back_m"] * math.cos(th), y - p["drop_back_m"] * math.sin(th)
+        x, y = self._landing()
         if n and math.hypot(x - self.dropped[-1][1], y - self.dropped[-1][2]) < p["min_leg_m"]:
             # never drop a scout onto the last one
             if self.blocked_s > 6.0:  # boxed in right after a drop: give up the point, turn back the way it came
@@ -304,8 +308,7 @@ class EstRanger(Controller):
         r, p = self.robot, self.p
         st = r.llc.state
         scout = r.payload[len(self.dropped)]
-        x = st.x - p["drop_back_m"] * math.cos(st.theta)
-        y = st.y - p["drop_back_m"] * math.sin(st.theta)
+        x, y = self._landing()
         self.dropped.append((scout, x, y, st.theta))
         r.log("deployment", event="dropped", scout=scout, x=x, y=y, theta=st.theta, t=now - self.t0,
               rssi=[round(self.rssi[s], 1) for s, *_ in self.dropped[-int(p["k"]) - 1:-1] if s in self.rssi])
