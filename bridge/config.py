@@ -47,6 +47,8 @@ class SessionCfg(_Model):
     hang_timeout_s: float = Field(20.0, gt=0, description="wall seconds a process may take for one quantum")
     startup_timeout_s: float = Field(120.0, gt=0)
     poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
+    end_after_deployment: bool = Field(False, description="end the session 1 s after the last ranger has deployed "
+                                                          "its scouts (deployment studies need no mission)")
     listen: str | None = Field(None, description="tcp/HOST:PORT: the world also listens here (besides its private "
                                                  "unix socket), so the swarm logic of robots with logic = \"remote\" "
                                                  "joins from another computer (swarm-sitl join); HOST is an address of "
@@ -115,6 +117,27 @@ class CylinderObstacle(_Model):
 Obstacle = Annotated[BoxObstacle | CylinderObstacle, Field(discriminator="type")]
 
 
+class RandomObstaclesCfg(_Model):
+    """Boxes scattered at random (the thesis' pavilion trials moved their obstacles): drawn from the session seed
+    when the config is loaded and added to ``obstacles``, so one seed gives one layout and the world sees
+    ordinary boxes."""
+
+    count: int = Field(ge=1, le=1000)
+    side_m: tuple[float, float] = Field((0.3, 1.0), description="range of each box side (x and y drawn apart)")
+    height_m: float = Field(0.5, gt=0)
+    clearance_m: float = Field(0.8, ge=0, description="free gap kept to the robots' start poses, the walls and "
+                                                      "the other obstacles")
+    keep_clear: list[tuple[float, float, float]] = Field([], description="(x, y, radius) discs kept free of boxes, "
+                                                                         "e.g. the rangers' entrance")
+
+    @field_validator("side_m")
+    @classmethod
+    def _sides(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0 < v[0] <= v[1]:
+            raise ValueError(f"need 0 < min <= max, got {list(v)}")
+        return v
+
+
 class LightSource(_Model):
     """A light spot: illuminance adds a Gaussian of ``peak_lux`` and ``sigma_m`` to the ambient."""
 
@@ -134,6 +157,31 @@ class LightCfg(_Model):
         for s in self.sources:
             total = total + s.peak_lux * np.exp(-((x - s.x) ** 2 + (y - s.y) ** 2) / (2 * s.sigma_m * s.sigma_m))
         return total
+
+
+class ObjectiveCfg(_Model):
+    """What the robots' light sensor reads: the light field, or the chapter 8 mapping objective (bridge/mapping.py):
+    eq. 8.1 on an entropy map the world keeps from the robots' true poses, as lux from ``lux_min`` (nothing to map
+    nearby) to ``lux_max`` (the best frontier)."""
+
+    kind: Literal["light", "mapping"] = "light"
+    r_w_m: float = Field(1.0, gt=0, description="mapping: sensing radius R_w of each robot's scan")
+    cell_m: float = Field(0.1, gt=0, description="mapping: occupancy-grid cell size")
+    sigma_m: float | None = Field(None, gt=0, description="mapping: entropy smoothing for the gradient (R_w / 2)")
+    scan_period_s: float = Field(0.5, gt=0, description="mapping: simulated seconds between the robots' scans")
+    lux_min: float = Field(10.0, ge=0, description="mapping: lux read where the objective is 0")
+    lux_max: float = Field(200.0, gt=0, description="mapping: lux read where the objective is 1")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ObjectiveCfg:
+        if self.kind == "light":
+            self._only_for_kind(self.kind, set(), {"kind"})
+            return self
+        if self.r_w_m < self.cell_m:
+            raise ValueError(f"r_w_m = {self.r_w_m} is smaller than one cell (cell_m = {self.cell_m})")
+        if self.lux_max <= self.lux_min:
+            raise ValueError(f"lux_max = {self.lux_max} must exceed lux_min = {self.lux_min}")
+        return self
 
 
 class Placement(_Model):
@@ -298,6 +346,8 @@ class RobotGroup(_Model):
     vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
                                                          "over MAVLink (state the body's motion)")
     motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
+    conveyor_slots: int | None = Field(None, ge=1, le=255, description="scouts each robot of this group carries "
+                                        "(overrides its profile's conveyor, e.g. 20 to put 60 scouts on 3 rangers)")
     carried_by: int | None = Field(None, ge=0, description="index of the robot group whose robots carry these on "
                                                            "their conveyor (TraxBot rangers): they start on board, "
                                                            "filled ranger by ranger in robot order, and are "
@@ -347,6 +397,8 @@ class RobotGroup(_Model):
                              "ranger's to decide")
         if self.carried_by is not None and not simulated_llc:
             raise ValueError("carried_by: a carried robot is a simulated one")
+        if self.conveyor_slots is not None and not PROFILES[self.profile].conveyor_slots:
+            raise ValueError(f"conveyor_slots: a {self.profile} has no conveyor to resize")
         if self.motion.kind == "scripted" and self.count > 1:
             raise ValueError("motion: scripted waypoints are one body's path: give the robot a group of its own "
                              "(count = 1)")
@@ -468,7 +520,10 @@ class Config(_Model):
     world: WorldCfg = WorldCfg()
     arena: ArenaCfg = ArenaCfg()
     obstacles: list[Obstacle] = []
+    random_obstacles: RandomObstaclesCfg | None = Field(None, description="boxes drawn from the session seed at "
+                                                                          "load, added to obstacles")
     light: LightCfg = LightCfg()
+    objective: ObjectiveCfg = Field(ObjectiveCfg(), description="what the light sensor reads (bridge/mapping.py)")
     radio: RadioCfg = Field(RadioCfg(), description="the 2.4 GHz channel the XBees share (docs/radio.md)")
     uwb: UwbCfg = Field(UwbCfg(), description="UWB ranging noise and TDMA budget (docs/uwb.md)")
     robots: list[RobotGroup] = Field(min_length=1)
@@ -507,7 +562,7 @@ class Config(_Model):
                 raise ValueError(f"robots[{i}].carried_by = {c}: not another robot group (there are "
                                  f"{len(self.robots)})")
             carrier = self.robots[c]
-            slots = PROFILES[carrier.profile].conveyor_slots
+            slots = self.profile(carrier).conveyor_slots
             if not slots or carrier.carried_by is not None:
                 raise ValueError(f"robots[{i}].carried_by = {c}: robots[{c}] ({carrier.profile}) has no conveyor "
                                  "to carry robots on")
@@ -529,7 +584,11 @@ class Config(_Model):
         return sum(g.count for g in self.robots)
 
     def profile(self, group: RobotGroup) -> RobotProfile:
-        return PROFILES[group.profile]
+        """The group's robot profile, with its own conveyor size if it sets one."""
+        prof = PROFILES[group.profile]
+        if group.conveyor_slots is not None:
+            return prof.model_copy(update={"conveyor_slots": group.conveyor_slots})
+        return prof
 
 
 def _loc(loc: tuple[Any, ...]) -> str:
@@ -588,6 +647,7 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
             occupancy(cfg.arena)
         except Exception as e:
             raise ConfigError(f"{p}: arena.map: cannot read {mp.name} as an image: {e}") from None
+    expand_random_obstacles(str(p), cfg)
     _check_geometry(str(p), cfg)
     _check_behaviours(str(p), cfg)
     return cfg
@@ -648,6 +708,62 @@ def config_warnings(cfg: Config) -> list[str]:
         if warn is not None:
             out += [f"robots[{i}].params: {w}" for w in warn(dict(g.params))]
     return out
+
+
+def expand_random_obstacles(path: str, cfg: Config) -> None:
+    """Draw ``random_obstacles`` from the session seed (bridge.rng) and append them to ``obstacles`` as boxes, each
+    inside the arena and, by its circumscribed disc, at least ``clearance_m`` from the walls, the other obstacles
+    and the explicit and grid start poses, and outside the ``keep_clear`` discs."""
+    ro = cfg.random_obstacles
+    if ro is None:
+        return
+    from bridge.rng import stream
+
+    w, length = cfg.arena.width_m, cfg.arena.length_m
+    lo, hi = ro.side_m
+    gap = ro.clearance_m
+    if math.hypot(lo, lo) / 2 + gap >= min(w, length) / 2:
+        raise ConfigError(f"{path}: random_obstacles.side_m: a box of side {lo} m with clearance_m {gap} does not fit "
+                          f"the {w} x {length} m arena")
+    for j, (x, y, r) in enumerate(ro.keep_clear):
+        if not (0 <= x <= w and 0 <= y <= length and r >= 0):
+            raise ConfigError(f"{path}: random_obstacles.keep_clear[{j}]: ({x}, {y}) is outside the arena or the "
+                              f"radius {r} is negative")
+    discs = [(x, y, r) for x, y, r in ro.keep_clear]
+    for g in cfg.robots:  # the start poses the config fixes (random placements keep clear of obstacles themselves)
+        radius = PROFILES[g.profile].radius_m + gap
+        if g.placement.kind == "explicit":
+            discs += [(x, y, radius) for x, y, _ in g.placement.poses]
+        elif g.placement.kind == "grid" and g.carried_by is None:
+            pl = g.placement
+            discs += [(pl.origin[0] + (i % pl.columns) * pl.spacing_m, pl.origin[1] + (i // pl.columns) * pl.spacing_m,
+                       radius) for i in range(g.count)]
+    discs += [(gw.pose[0], gw.pose[1], gap) for gw in cfg.xbee_gateways]
+    placed = [(ob.x, ob.y, ob.radius if isinstance(ob, CylinderObstacle) else math.hypot(*ob.size[:2]) / 2)
+              for ob in cfg.obstacles]
+    rng = stream(cfg.session.seed, "random_obstacles")
+    new: list[Obstacle] = []
+    tries = 0
+    while len(new) < ro.count:
+        tries += 1
+        if tries > 5000:  # in a row without a place for the next box
+            raise ConfigError(f"{path}: random_obstacles.count: placed only {len(new)} of {ro.count} boxes clear of "
+                              f"the start poses, keep_clear discs and each other (lower count, side_m or "
+                              "clearance_m)")
+        sx, sy = (float(v) for v in rng.uniform(lo, hi, 2))
+        yaw = float(rng.uniform(0.0, 180.0))
+        rb = math.hypot(sx, sy) / 2
+        if rb + gap >= min(w, length) / 2:
+            continue
+        x, y = float(rng.uniform(rb + gap, w - rb - gap)), float(rng.uniform(rb + gap, length - rb - gap))
+        if any(math.hypot(x - cx, y - cy) < rb + cr for cx, cy, cr in discs) or \
+                any(math.hypot(x - cx, y - cy) < rb + cr + gap for cx, cy, cr in placed):
+            continue
+        tries = 0
+        placed.append((x, y, rb))
+        new.append(BoxObstacle(type="box", x=round(x, 3), y=round(y, 3),
+                               size=(round(sx, 3), round(sy, 3), ro.height_m), yaw_deg=round(yaw, 1)))
+    cfg.obstacles = [*cfg.obstacles, *new]
 
 
 def _check_geometry(path: str, cfg: Config) -> None:

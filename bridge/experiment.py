@@ -36,7 +36,8 @@ import numpy as np
 from bridge.rng import stream_seed
 
 # modules that define experiments: imported by experiments(); one not written yet is skipped
-EXPERIMENT_MODULES: list[str] = ["bridge.rdpso_experiments"]
+EXPERIMENT_MODULES: list[str] = ["bridge.rdpso_experiments", "bridge.field_experiments", "bridge.benchmark_experiments",
+                                 "bridge.comm_experiments"]
 RESERVED_COLUMNS = ("index", "seed", "error")
 _RESULT_FILES = ("trials.csv", "timings.csv", "report.md")
 _RESULT_DIRS = ("plots", "curves")
@@ -322,7 +323,11 @@ def _abort(pool: ProcessPoolExecutor, grace_s: float = 5.0) -> None:
         pool.shutdown(wait=True)
 
 
+_STOP = threading.Event()  # set by Ctrl-C or SIGTERM during a run: a trial that swallows the interrupt still ends it
+
+
 def _terminate_as_interrupt(signum: int, frame: Any) -> None:
+    _STOP.set()
     raise KeyboardInterrupt
 
 
@@ -337,9 +342,14 @@ def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress) -> tuple
     """Run the trials; returns what finished by position in `trials`, and whether Ctrl-C cut the run short."""
     done: dict[int, _Done] = {}
     if jobs == 1:
+        # in-process, a trial's session may catch the interrupt to shut down cleanly and end as a failed trial:
+        # the flag stops the run all the same, and that trial, cut short, is not kept
         try:
             for k, t in enumerate(trials):
-                done[k] = _run_trial(ref, t)
+                res = _run_trial(ref, t)
+                if _STOP.is_set():
+                    return done, True
+                done[k] = res
                 bar.advance(done[k][1] is not None)
         except KeyboardInterrupt:
             return done, True
@@ -589,15 +599,18 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     ref = _ref(cls)
     _INSTANCES.setdefault(ref, exp)
     bar = _Progress(name, len(plan), progress)
-    old_term = None
+    old_term = old_int = None
+    _STOP.clear()
     if threading.current_thread() is threading.main_thread():  # SIGTERM ends a run as Ctrl-C does: no orphans
         old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+        old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
     try:
         done, interrupted = _execute(ref, plan, jobs, bar)
     finally:
         bar.close()
         if old_term is not None:
             signal.signal(signal.SIGTERM, old_term)
+            signal.signal(signal.SIGINT, old_int)
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
             d.rmdir()

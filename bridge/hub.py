@@ -44,8 +44,9 @@ from bridge.can_medium import (
     error_frame,
     frame_fault,
 )
+from bridge.comm_stats import comm_report
 from bridge.config import Config
-from bridge.deployment import covered_share, dispersion
+from bridge.deployment import covered_share, dispersion, link_stats, mean_sd
 from bridge.plan import Plan, entity, robot_of, uwb_addr16
 from bridge.profiles import PROFILES
 from bridge.radio_medium import RadioMedium
@@ -143,6 +144,7 @@ class Hub:
         self.swarm_radios = [r for r, rp in enumerate(robots) if rp.sim_xbee and rp.gateway is None]
         self.releases: list[dict[str, Any]] = []
         self.deployed: dict[int, dict[str, Any]] = {}  # ranger -> its deployment as it ended (deployment_report)
+        self.comm: dict[int, dict[str, Any]] = {}  # robot -> its RDPSO routing layer's latest counters (comm_report)
         self.rssi_pwm = [0.0] * self.n
         self.ideal_pose = {r for r, rp in enumerate(robots) if rp.pose_source == "ground_truth"}
         self.uwb_log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
@@ -152,6 +154,10 @@ class Hub:
         self.group_of = {rp.id: rp.carrier for rp in robots if rp.carrier is not None}  # scout -> its ranger
         self.carriers = set(self.group_of.values())  # robots with scouts on board
         self.group_pieces: dict[int, list[int]] = defaultdict(list)
+        # each deployed subgroup's radio graph after its START, per sample (Table 5.2; link_stats)
+        self.mission_links: list[dict[str, Any]] = []
+        self.q_min = {rp.carrier: float(rp.params["q_min_dbm"]) for rp in robots if rp.carrier is not None
+                      and rp.params.get("link_mode") == "rssi" and "q_min_dbm" in rp.params}  # ranger -> its scouts'
         # battery deaths to come: (time, robot)
         self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
         self.module_stats: dict[str, dict] = {}
@@ -587,6 +593,12 @@ class Hub:
                 members = [idx[r] for r, c in self.group_of.items() if c == g and r in idx
                            and r not in self.world.carried]
                 self.group_pieces[g].append(graph.components(adj[np.ix_(members, members)]) if members else 0)
+                if g in self.deployed and members:  # the mission has begun for this subgroup (its START)
+                    rssi = self.radio.mean_rssi()[np.ix_(live, live)][np.ix_(members, members)]
+                    # links as the scouts judge them: the mean RSSI clears their q_min both ways (else: any link)
+                    q = self.q_min.get(g)
+                    sub = adj[np.ix_(members, members)] if q is None else (rssi >= q) & (rssi >= q).T
+                    self.mission_links.append({"group": g, **link_stats(sub, rssi)})
 
     def _route(self, e: str, r: int, t: int, item: list) -> None:
         """One output item other than a CAN frame: UART bytes, an air frame, a node setting, a ranging request,
@@ -668,6 +680,8 @@ class Hub:
                     self._uwb_log(r, values)
                 elif topic == "deployment" and values.get("event") == "done" and r in self.carriers:
                     self._deployed(r, t)
+                elif topic == "rdpso" and isinstance(values.get("comm"), dict):
+                    self.comm[r] = values["comm"]
             else:
                 raise ValueError
         except (ValueError, TypeError, KeyError, IndexError, OverflowError):
@@ -679,6 +693,8 @@ class Hub:
         pts = self.world.pos[scouts] if scouts else np.zeros((0, 2))
         self.deployed[carrier] = {"t_s": t / 1e9, "scouts": scouts, "dispersion_m": round(dispersion(pts), 3),
                                   "positions": np.round(pts, 3).tolist()}
+        if self.cfg.session.end_after_deployment and len(self.deployed) == len(self.carriers):
+            self.end_ns = min(self.end_ns, t + 1_000_000_000)
 
     def deployment_report(self) -> dict[str, Any] | None:
         """Per ranger: when it was done, its scouts' dispersion (eq. 5.11) and positions then; over all, the share
@@ -868,6 +884,13 @@ class Hub:
             if self.group_pieces:
                 out["connectivity"]["subgroups"] = {str(g): {"partition_events": _splits(v), "pieces_max": max(v)}
                                                     for g, v in sorted(self.group_pieces.items())}
+            if self.mission_links:  # each ranger's live scouts after its START, once a second (mean, sd)
+                ml = self.mission_links
+                out["connectivity"]["mission"] = {
+                    "q_min_dbm": {str(g): q for g, q in sorted(self.q_min.items())},
+                    **{k: mean_sd([s[k] for s in ml]) for k in ("rssi_dbm", "hops", "relays", "lambda2")},
+                    "partition_events": sum(_splits([s["pieces"] for s in ml if s["group"] == g])
+                                            for g in sorted({s["group"] for s in ml}))}
             out["totals"] = stats.get("totals", {})
             out["rssi_hist_bins_dbm"] = [stats.get("rssi_hist_lo_dbm"), stats.get("rssi_hist_bin_db")]
             for r in range(self.n):
@@ -915,6 +938,8 @@ class Hub:
             "can_events": self.can_events,
             "releases": self.releases if self.carriers else None,
             "deployment": self.deployment_report(),
+            "comm": comm_report(self.comm, self.sim_end_ns / 1e9) if self.comm else None,
+            "mapping": self.world.mapping.summary() if self.world.mapping is not None else None,
             "mavlink": self.mavlink.stats() if self.mavlink is not None else None,
             "startup_s": getattr(self, "startup_wall_s", None),
             "failures": self.failures,

@@ -346,6 +346,8 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "can_events": world_res.get("can_events", []),
         "releases": world_res.get("releases"),  # scouts dropped off carriers' conveyors (sessions with carriers)
         "deployment": world_res.get("deployment"),  # the rangers' deployments: time, dispersion, coverage
+        "comm": world_res.get("comm"),  # the RDPSO routing layer (comm = regular | optimised): bridge/comm_stats.py
+        "mapping": world_res.get("mapping"),  # [objective] kind = "mapping": eta_exp and its AUC (bridge/mapping.py)
         "mavlink": world_res.get("mavlink"),
         "cpu_s_total": round(cpu_total, 3),
         "cpu_s_per_robot_per_sim_s": round(cpu_total / n / sim_t, 5) if sim_t and n else None,

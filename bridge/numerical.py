@@ -29,6 +29,17 @@ from swarm_logic.llc_client import LlcState
 from swarm_logic.robot import Robot
 
 
+@dataclass(slots=True, frozen=True)
+class PointTxStatus:
+    """A unicast's delivery report (``Radio.tx_result``): ok when the destination was in range."""
+
+    ok: bool
+
+    @property
+    def status(self) -> int:
+        return 0 if self.ok else 0x21  # the Series 2 codes: success, network ACK failure
+
+
 @dataclass(slots=True)
 class Packet:
     src64: int
@@ -71,10 +82,17 @@ class PointRadio:
         self.world = world
         self.i = i
         self.inbox: deque[Packet] = deque()
+        self.fid = 0
+        self.done: dict[int, PointTxStatus] = {}
 
     def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
-        self.world.outbox.append((self.i, dest64, bytes(data)))
-        return 0
+        self.fid = self.fid % 255 + 1
+        self.world.outbox.append((self.i, dest64, bytes(data), self.fid))
+        return self.fid
+
+    def tx_result(self, frame_id: int) -> PointTxStatus | None:
+        """The report of a ``send_nowait``, once the round that carried it has ended (taken: returned once)."""
+        return self.done.pop(frame_id, None)
 
     def recv(self, timeout: float | None = 0.0) -> Packet | None:
         return self.inbox.popleft() if self.inbox else None
@@ -109,7 +127,7 @@ class NumericalWorld:
     pos: np.ndarray
     theta: np.ndarray
     pending: dict[int, tuple[float, float]] = field(default_factory=dict)
-    outbox: list[tuple[int, int | None, bytes]] = field(default_factory=list)
+    outbox: list[tuple[int, int | None, bytes, int]] = field(default_factory=list)  # (sender, dest, data, frame id)
     collisions: int = 0
     packets: int = 0
     deliveries: int = 0
@@ -204,6 +222,9 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
                       xbee=PointRadio(world, i), log_sink=sink_for(i),
                       start_pose=(float(start[i][0]), float(start[i][1]), float(theta[i])))
         robots.append(robot)
+    observe = getattr(objective, "observe", None)  # a map the robots build (bridge.mapping): they scan, then sense
+    if observe is not None:
+        observe(world.pos[:, 0], world.pos[:, 1], 0)
     _sense(world, robots)
     t_next = np.zeros(n)
     for i, robot in enumerate(robots):
@@ -240,8 +261,10 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
         _deliver(world, robots, deaths, t)
         if world.pending:
             _apply_moves(world)
-            f = _sense(world, robots)
             k = round((t - it_s * k0) / it_s - 0.5) if it_s else 0
+            if observe is not None and 0 <= k < iterations:
+                observe(world.pos[:, 0], world.pos[:, 1], k + 1)
+            f = _sense(world, robots)
             if 0 <= k < iterations:
                 running_best = max(running_best, float(f.max()))
                 best[k], cur[k], mean[k] = running_best, f.max(), f.mean()
@@ -301,7 +324,7 @@ def _deliver(world: NumericalWorld, robots: list[Robot], deaths: dict[int, float
         return
     pos = world.pos
     link = world.link
-    senders = np.array([s for s, _, _ in world.outbox])
+    senders = np.array([s for s, _, _, _ in world.outbox])
     d = np.hypot(pos[senders, None, 0] - pos[None, :, 0], pos[senders, None, 1] - pos[None, :, 1])
     if link.mode == "distance":
         reach = d <= link.range_m
@@ -309,9 +332,12 @@ def _deliver(world: NumericalWorld, robots: list[Robot], deaths: dict[int, float
     else:
         rssi = link.rssi(d)
         reach = rssi >= link.sensitivity_dbm
-    for row, (s, dest, data) in enumerate(world.outbox):
+    for row, (s, dest, data, fid) in enumerate(world.outbox):
         world.packets += 1
         targets = np.flatnonzero(reach[row]) if dest is None else [dest] if reach[row, dest] else []
+        # the sender's report: a broadcast always goes out; a unicast is acknowledged by a live destination in range
+        ok = dest is None or (bool(len(targets)) and not (deaths and t >= deaths.get(int(dest), math.inf)))
+        robots[s].xbee.done[fid] = PointTxStatus(ok)
         for j in targets:
             if j == s or (deaths and t >= deaths.get(int(j), math.inf)):
                 continue

@@ -21,6 +21,7 @@ import pybullet as pb
 
 from bridge.arena_map import occupancy
 from bridge.config import ArenaCfg, BoxObstacle, Config
+from bridge.mapping import SessionMap
 from bridge.plan import RobotPlan
 from bridge.profiles import PROFILES, RobotProfile
 from bridge.rng import stream
@@ -68,6 +69,9 @@ class World:
         if cfg.arena.map:
             self._load_map(cfg.arena)
         self._build_robots(robots)
+        # the chapter 8 mapping objective: the light sensors read it instead of the light field (bridge/mapping.py)
+        self.mapping = SessionMap(cfg) if cfg.objective.kind == "mapping" else None
+        self.mapping_scanned = False  # a scan happened in the last quantum
 
     # -- scene ------------------------------------------------------------------------------------
     def _box(self, x: float, y: float, size: tuple[float, float, float], yaw: float = 0.0) -> None:
@@ -291,6 +295,8 @@ class World:
             self._update_sonar()
             while self._next_sonar_ns <= t_end:
                 self._next_sonar_ns += self._sonar_period_ns
+        if self.mapping is not None:
+            self.mapping_scanned = self.mapping.tick(t_end, self.pos, self.alive)
 
     def _follow_paths(self, t_s: float) -> None:
         """Put every body with a stated motion where its path says at ``t_s``, moving as the path moves (so what
@@ -435,7 +441,10 @@ class World:
     def _sample_all(self) -> None:
         """Noise-free encoder counts and illuminance of every robot, once per physics state."""
         counts = np.floor(self.angle * (self.cpr / (2 * math.pi))[:, None]).astype(np.int64)
-        lux = self.cfg.light.illuminance(self.pos[:, 0], self.pos[:, 1])
+        if self.mapping is not None:
+            lux = self.mapping.lux(self.pos[:, 0], self.pos[:, 1])
+        else:
+            lux = self.cfg.light.illuminance(self.pos[:, 0], self.pos[:, 1])
         self._sampled = (counts.tolist(), lux.tolist(), self.sonar_m.tolist(), self.battery_v.tolist())
 
     def sensors(self, robot: int) -> Sensors:

@@ -70,7 +70,7 @@ class IterationSchedule:
         in ``self.dropped["late"]``; both are dropped."""
         r = self.robot
         k16 = self.k & 0xFFFF
-        while (pkt := r.xbee.recv(timeout=0)) is not None:
+        while (pkt := self._receive()) is not None:
             msg = decode(bytes(pkt.data))
             if msg is None:  # another application's frame, or a damaged one
                 self.dropped[unknown] += 1
@@ -81,6 +81,10 @@ class IterationSchedule:
                 self.dropped["late"] += 1
                 continue
             yield msg, pkt
+
+    def _receive(self) -> Any:
+        """The next received packet, or None: the radio's, unless a routing layer sits in between."""
+        return self.robot.xbee.recv(timeout=0)
 
     def _phase_a(self) -> None:
         raise NotImplementedError

@@ -96,6 +96,21 @@ class Sleepy(Experiment):
         return TrialResult(metrics={"slept": 0.4})
 
 
+@register
+class Swallowing(Sleepy):
+    name = "test-swallowing"
+    title = "Slow trials that catch Ctrl-C themselves, as a session does to shut down cleanly"
+    description = "For interrupting in-process."
+
+    def run(self, trial: Trial) -> TrialResult:
+        (Path(trial.workdir) / "pid").write_text(str(os.getpid()))
+        try:
+            time.sleep(0.4)
+        except KeyboardInterrupt:
+            raise RuntimeError("session interrupted") from None
+        return TrialResult(metrics={"slept": 0.4})
+
+
 def _rows(path: Path) -> list[dict[str, str]]:
     with open(path, newline="") as f:
         return list(csv.DictReader(f))
@@ -212,3 +227,22 @@ def test_ctrl_c_keeps_what_finished_and_leaves_no_process(tmp_path: Path) -> Non
     while any(psutil.pid_exists(pid) for pid in pids) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not [pid for pid in pids if psutil.pid_exists(pid)]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_in_process_interrupt_ends_the_run_even_when_a_trial_catches_it(tmp_path: Path, sig: int) -> None:
+    out = tmp_path / "swallowing"
+    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.test_experiment; "
+            f"from bridge.cli import main; main(['experiment', 'test-swallowing', '--jobs', '1', '--quiet', "
+            f"'--out', {str(out)!r}])")
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while len(list(out.glob("work/*/*/pid"))) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.kill(p.pid, sig)
+    stdout, stderr = p.communicate(timeout=30)
+    assert p.returncode == 130, stderr
+    done = _rows(out / "trials.csv")
+    assert 2 <= len(done) < 40 and "interrupted" in stdout
+    assert not [r for r in done if r["error"]]  # the trial cut short is not reported as a failure

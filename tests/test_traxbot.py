@@ -214,3 +214,19 @@ def test_the_conveyor_command_is_checked_and_advances_whole_slots() -> None:
     assert board.stepper_steps == round(2 * 150 / 0.5)
     assert status[-1] == {"seq": 2, "moving": 0, "position_slots": 2, "pending_slots": 0}
     assert any(s["position_slots"] == 1 and s["moving"] for s in status)
+
+
+def test_the_deployment_area_keeps_the_rangers_points_inside() -> None:
+    from swarm_logic.rdpso.est import EstRanger
+
+    with pytest.raises(ValueError, match="area_m"):
+        EstRanger.resolve({"area_m": [0, 0, 10]})
+    with pytest.raises(ValueError, match="area_m"):
+        EstRanger.resolve({"area_m": [0, 0, 0.5, 20], "area_margin_m": 0.4})
+    ranger = EstRanger()
+    ranger.p = EstRanger.resolve({"area_m": [0.0, 0.0, 10.0, 20.0]})
+    assert ranger._clip((-3.0, 25.0)) == (0.4, 19.6)
+    assert ranger._clip((5.0, 5.0)) == (5.0, 5.0)
+    assert ranger._inside((5.0, 5.0)) and not ranger._inside((9.9, 5.0))
+    ranger.p = EstRanger.resolve({})
+    assert ranger._clip((-3.0, 25.0)) == (-3.0, 25.0)  # no area: unbounded

@@ -41,6 +41,37 @@ COMMON_DEFAULTS: dict[str, Any] = {
 }
 
 
+class WindowBest:
+    """The best (value, position) recorded in the last ``window`` iterations, or ever when ``window`` is 0.
+
+    For an objective that changes as the robots act (the chapter 8 mapping task: a place's information gain falls once
+    it is mapped), a PSO's memory of a best goes stale; the dynamic-PSO remedy is to forget it (Carlisle & Dozier
+    2000; Blackwell 2007). Ties go to the newer record."""
+
+    def __init__(self, window: int) -> None:
+        self.window = int(window)
+        self.records: list[tuple[int, float, Vec]] = []  # (iteration, value, position), oldest first
+
+    def add(self, k: int, value: float, at: Vec) -> None:
+        if self.window == 0:
+            if not self.records or value > self.records[0][1]:
+                self.records = [(k, value, at)]
+            return
+        self.records.append((k, value, at))
+        self.forget(k)
+
+    def forget(self, k: int) -> None:
+        """Drop records older than ``window`` iterations before ``k`` (nothing when the window is 0)."""
+        if self.window:
+            self.records = [r for r in self.records if r[0] > k - self.window]
+
+    def best(self) -> tuple[float, Vec] | None:
+        if not self.records:
+            return None
+        _, value, at = max(self.records, key=lambda r: (r[1], r[0]))
+        return value, at
+
+
 def pso_velocity(v: Vec, x: Vec, w: float, pulls: Iterable[tuple[float, Vec]],
                  rand: Callable[[], float]) -> Vec:
     """v' = w v + sum_i c_i r_i o (chi_i - x): the PSO velocity update with one uniform draw per attractor and axis

@@ -25,8 +25,10 @@ from typing import Any, ClassVar
 from swarm_logic.baselines.common import (
     COMMON_DEFAULTS,
     Iterated,
+    WindowBest,
     braitenberg,
     finite,
+    integer,
     positive,
     pso_stability_warnings,
     pso_velocity,
@@ -79,6 +81,7 @@ class Epso(Iterated):
         "range_m": math.inf,  # R_r: neighbours farther than this (by the positions they send) are ignored
         "avoid_m": 0.3,  # Braitenberg reaction radius on the sonar
         "avoid_turn_deg": 90.0,  # deflection of a move when the echo is at contact (scaled by proximity)
+        "memory_iterations": 0,  # the personal best is the best of the last this many iterations (0: ever)
     }
 
     @classmethod
@@ -90,6 +93,7 @@ class Epso(Iterated):
             if p[name] < 0:
                 raise ValueError(f"{name}: must be >= 0 (an attraction coefficient), got {p[name]!r}")
         positive(p, "range_m", "avoid_m")
+        integer(p, 0, 1 << 30, "memory_iterations")
         if not 0.0 <= p["avoid_turn_deg"] <= 180.0:
             raise ValueError(f"avoid_turn_deg: must lie in [0, 180], got {p['avoid_turn_deg']!r}")
 
@@ -105,13 +109,17 @@ class Epso(Iterated):
         self.pbest_at = (0.0, 0.0)
         self.nbest = -math.inf  # the neighbourhood best of the last iteration (logged)
         self.nbest_at = (0.0, 0.0)
+        self.memory = WindowBest(int(self.p["memory_iterations"]))
 
     def telemetry(self) -> dict[str, float | int]:
         """Iteration, neighbours heard, personal and neighbourhood bests (-3e38: none yet)."""
         return {"k": self.k, "heard": len(self.heard), "pbest": wire(self.pbest), "nbest": wire(self.nbest)}
 
     def tell(self) -> bytes:
-        if self.h > self.pbest:
+        if self.memory.window:  # a changing objective: the best of the last memory_iterations readings
+            self.memory.add(self.k, self.h, (self.x, self.y))
+            self.pbest, self.pbest_at = self.memory.best()  # type: ignore[misc]
+        elif self.h > self.pbest:
             self.pbest, self.pbest_at = self.h, (self.x, self.y)
         return encode(Frame(self.robot.id, self.k, self.x, self.y, self.pbest, *self.pbest_at))
 

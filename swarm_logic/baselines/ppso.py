@@ -31,7 +31,9 @@ from typing import Any, ClassVar
 from swarm_logic.baselines.common import (
     COMMON_DEFAULTS,
     Iterated,
+    WindowBest,
     finite,
+    integer,
     positive,
     pso_stability_warnings,
     pso_velocity,
@@ -101,6 +103,7 @@ class Ppso(Iterated):
         "collide_m": 0.1,  # sonar range that counts as a collision
         "back_m": 0.05,  # go_back_turn_right: how far to back off
         "turn_deg": 90.0,  # go_back_turn_right: then turn right (clockwise) by this
+        "memory_iterations": 0,  # h_best and H_best are the bests of the last this many iterations (0: ever)
     }
 
     @classmethod
@@ -114,6 +117,7 @@ class Ppso(Iterated):
         within(p, "cone_deg", 0.0, 180.0, lo_open=True)
         within(p, "turn_deg", 0.0, 180.0)
         positive(p, "collide_m", "back_m")
+        integer(p, 0, 1 << 30, "memory_iterations")
 
     @classmethod
     def warnings(cls, params: dict[str, Any]) -> list[str]:
@@ -130,6 +134,8 @@ class Ppso(Iterated):
         self.was_best: tuple[float, float, float] | None = None  # (h, x, y) to share in the next frame
         self.reference: float | None = None  # heading the cone is centred on; None: the robot's own heading
         self.is_best = False
+        self.own = WindowBest(int(self.p["memory_iterations"]))  # h_best, chi_1 (used when the window is set)
+        self.social = WindowBest(int(self.p["memory_iterations"]))  # H_best, chi_2 (same)
 
     def telemetry(self) -> dict[str, float | int]:
         """Iteration, neighbours heard, local best (1/0), personal and swarm bests (-3e38: none yet)."""
@@ -137,7 +143,10 @@ class Ppso(Iterated):
                 "H_best": wire(self.H_best)}
 
     def tell(self) -> bytes:
-        if self.h > self.hbest:
+        if self.own.window:  # a changing objective: the best of the last memory_iterations readings
+            self.own.add(self.k, self.h, (self.x, self.y))
+            self.hbest, self.chi1 = self.own.best()  # type: ignore[misc]
+        elif self.h > self.hbest:
             self.hbest, self.chi1 = self.h, (self.x, self.y)
         return encode(Frame(self.robot.id, self.k, self.h, self.was_best))
 
@@ -149,6 +158,13 @@ class Ppso(Iterated):
         offers = [f.best for f in self.heard.values() if f.best is not None]
         if self.is_best:
             offers.append(here)
+        if self.social.window:  # the best heard of in the last memory_iterations iterations
+            for h, x, y in offers:
+                self.social.add(self.k, h, (x, y))
+            self.social.forget(self.k)
+            best = self.social.best()
+            self.H_best, self.chi2 = best if best is not None else (-math.inf, self.chi2)
+            return
         for h, x, y in offers:
             if h > self.H_best:
                 self.H_best, self.chi2 = h, (x, y)

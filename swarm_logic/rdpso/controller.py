@@ -34,6 +34,7 @@ from typing import Any, ClassVar
 from swarm_logic.controller import Controller
 from swarm_logic.iteration import IterationSchedule
 from swarm_logic.rdpso import fuzzy, graph, motion
+from swarm_logic.rdpso.aodv import Router
 from swarm_logic.rdpso.est import ScoutDeployment
 from swarm_logic.rdpso.messages import (
     F_CALL,
@@ -77,6 +78,7 @@ def half(v: float) -> float:
 
 
 _HALF = struct.Struct("<e")
+SHARE = struct.Struct("<HHfB")  # a data packet's payload: subgroup, iteration, personal best, improved
 
 
 class Rdpso(IterationSchedule, Controller):
@@ -121,6 +123,16 @@ class Rdpso(IterationSchedule, Controller):
         "payload_max": 92,  # bytes per hello: a ZigBee broadcast's limit (more members than fit: nearest sent)
         "first_id": 0,  # the robot id of the swarm's first scout (rangers or other robots may come before)
         "deployed": False,  # dropped by a ranger (swarm_logic.rdpso.est): start at its START, from its pose
+        # information sharing (chapter 6): gossip (one hello per iteration, subgroup state spreads hop by hop),
+        # regular (the hello, and position and solution to every mate every iteration, routed multi-hop) or
+        # optimised (the hello; position and solution to every mate only when the personal best improved)
+        "comm": "gossip",
+        "routing": "rdpso",  # rdpso (geographic next hop, eq. 6.3, AODV as fallback) | aodv
+        "route_buffer": 16,  # packets the routing layer holds for the radio; more are dropped
+        "route_ttl": 10,  # hops a route request or data packet may travel
+        "discovery_timeout_s": 1.0,  # wait for a route reply (doubled on each of two retries)
+        "poll_s": 0.02,  # with routing: how often the radio is served (forwarding, TX statuses)
+        "pause_on_radio": True,  # with routing: do not move until the radio has sent this iteration's packets
     }
     # read only at init and reset: the iteration clock every robot shares, the swarm's size and its initial split
     static_params = frozenset({"iteration_s", "n_total", "subgroups_init", "n_init", "n_min", "n_max", "fuzzy",
@@ -144,6 +156,16 @@ class Rdpso(IterationSchedule, Controller):
         if not 0 < p["comm_window_s"] < p["iteration_s"]:
             raise ValueError(f"comm_window_s: must lie in (0, iteration_s = {p['iteration_s']}), "
                              f"got {p['comm_window_s']!r}")
+        if p["comm"] not in ("gossip", "regular", "optimised"):
+            raise ValueError(f"comm: {p['comm']!r} is not one of gossip, regular, optimised")
+        if p["routing"] not in ("aodv", "rdpso"):
+            raise ValueError(f"routing: {p['routing']!r} is not one of aodv, rdpso")
+        for name in ("route_buffer", "route_ttl"):
+            if int(p[name]) != p[name] or p[name] < 1:
+                raise ValueError(f"{name}: must be a positive integer, got {p[name]!r}")
+        for name in ("discovery_timeout_s", "poll_s"):
+            if not p[name] > 0:
+                raise ValueError(f"{name}: must be > 0, got {p[name]!r}")
         if not 0 <= p["send_jitter_s"] < p["comm_window_s"]:
             raise ValueError(f"send_jitter_s: must lie in [0, comm_window_s = {p['comm_window_s']}), "
                              f"got {p['send_jitter_s']!r}")
@@ -239,6 +261,15 @@ class Rdpso(IterationSchedule, Controller):
         self.led: tuple[int, int, int] | None = None
         self.events: list[str] = []
         self.dropped = {"late": 0, "foreign": 0}  # received frames not used, by cause (logged)
+        # chapter 6 information sharing over a routing layer (None: gossip only)
+        self.router = None if p["comm"] == "gossip" else Router(
+            rid, self.robot.xbee, self.robot.clock, mode=p["routing"], buffer=int(p["route_buffer"]),
+            ttl=int(p["route_ttl"]), miss_limit=int(p["miss_limit"]), discovery_timeout_s=p["discovery_timeout_s"],
+            predict=self._predict)
+        self.data_heard: dict[int, tuple[float, float, float, bool]] = {}  # this iteration's data: x, y, best, improved
+        self.paused_s = 0.0  # time this robot waited for its radio before moving
+        self._src64: dict[int, int | None] = {}  # each robot's radio address, from its hellos
+        self.pause_from: float | None = None
 
     def destroy(self) -> None:
         self.robot.llc.stop()
@@ -266,7 +297,28 @@ class Rdpso(IterationSchedule, Controller):
             if self.deployment.started:
                 self._begin()
             return
+        router = self.router
+        if router is None:
+            self._iterate()
+            return
+        router.poll()
+        now = self.robot.clock.now()
+        poll = self.p["poll_s"]
+        due_b = self.phase == "B" and now >= self.next_t - 1e-6
+        if due_b and router.busy and self.p["pause_on_radio"] and now < (self.k + 1) * self.p["iteration_s"] - 2 * poll:
+            if self.pause_from is None:
+                self.pause_from = self.next_t  # paused: the move waits until the radio has sent everything
+            self.period_s = poll
+            return
+        if due_b and self.pause_from is not None:
+            self.paused_s += now - self.pause_from
+            self.pause_from = None
         self._iterate()
+        router.poll()  # hand what this phase queued to the radio now
+        self.period_s = min(self.period_s, poll)
+
+    def _receive(self) -> Any:
+        return self.router.recv() if self.router is not None else self.robot.xbee.recv(timeout=0)
 
     # -- phase A: sense and tell --------------------------------------------------------------------------------
     def _phase_a(self) -> None:
@@ -302,7 +354,18 @@ class Rdpso(IterationSchedule, Controller):
         self.offer_target = 0
 
     def _send(self) -> None:
-        self.robot.xbee.send_nowait(None, self.outgoing)
+        router = self.router
+        if router is None:
+            self.robot.xbee.send_nowait(None, self.outgoing)
+            return
+        router.hello(self.outgoing)
+        # regular: position and solution to every mate every iteration; optimised: only on an improvement, or
+        # (excluded) when applying for a CALL/SPAWN, as the thesis' rules (section 6.1)
+        applying = self.candidate is not None and self.candidate[2] == self.k
+        if self.p["comm"] == "regular" or self.improved or applying:
+            payload = SHARE.pack(self.sid, self.k & 0xFFFF, _f(self.hbest), int(self.improved))
+            for m in sorted(self.table):
+                router.send(m, payload, self.x, self.y)
 
     # -- phase B: listen, decide, move ---------------------------------------------------------------------------
     def _phase_b(self) -> None:
@@ -321,7 +384,7 @@ class Rdpso(IterationSchedule, Controller):
                            improved=self.improved, ledger_h=_f(self.ledger_h), chi2=self.chi2, sc=self.sc,
                            n_kill=self.n_kill, n_s=self._group_size(), heard=len(self.heard), chosen=self.chosen,
                            alpha=self.alpha, rho=self.rho, events=self.events, worst=self.worst,
-                           dropped=self.dropped)
+                           dropped=self.dropped, **({"comm": self.comm_stats()} if self.router else {}))
 
     def _listen(self) -> None:
         """Drain the radio; keep this iteration's hellos, refresh the group table (direct and relayed)."""
@@ -329,11 +392,14 @@ class Rdpso(IterationSchedule, Controller):
         heard: dict[int, Hello] = {}
         for msg, pkt in self._frames_of_iteration(decode, "foreign"):
             heard[msg.robot] = msg
+            self._src64[msg.robot] = pkt.src64
             if pkt.rssi_dbm is not None:
                 self.rssi[msg.robot] = float(pkt.rssi_dbm)
         self.heard = heard
         table = self.table
         k = self.k
+        if self.router is not None:
+            self._take_data(heard)
         for rid, msg in heard.items():
             if msg.sid != self.sid:
                 table.pop(rid, None)  # it says it is elsewhere now
@@ -380,11 +446,15 @@ class Rdpso(IterationSchedule, Controller):
         for h in mates:  # the previous best as anyone knew it
             if h.ledger_h > prev_best:
                 prev_best, self.chi2 = h.ledger_h, (h.ledger_x, h.ledger_y)
-        # this iteration's solutions H: mine and the mates' (improvements carry the position they were sensed at)
+        # this iteration's solutions H: mine and the mates' (improvements carry the position they were sensed at),
+        # from their hellos and, with routing, from their data packets (members beyond one hop)
         best, where = self.h, (self.x, self.y)
         for h in mates:
             if h.flags & F_IMPROVED and h.hbest > best:
                 best, where = h.hbest, (h.x, h.y)
+        for dx, dy, dbest, improved in self.data_heard.values():
+            if improved and dbest > best:
+                best, where = dbest, (dx, dy)
         # the worst personal best in the group (ties: the higher id), from the member table, which holds each
         # member's value as of its newest hello heard of
         worst = min([(half(self.hbest), -self.robot.id)] + [(v[2], -m) for m, v in self.table.items()])
@@ -496,6 +566,51 @@ class Rdpso(IterationSchedule, Controller):
                 self.offer_flags = F_SPAWN | F_FOUNDER
                 self.offer_target = sid
                 self.events.append("founded")
+
+    def _take_data(self, heard: dict[int, Hello]) -> None:
+        """With routing: tell the router who was heard (its hellos), read the data packets that reached this robot:
+        a mate's packet of this iteration counts in this iteration's solutions and refreshes the member table."""
+        router = self.router
+        k = self.k
+        for rid, msg in heard.items():
+            router.heard(rid, self._src64.get(rid), k, msg.x, msg.y, (msg.ledger_x, msg.ledger_y))
+        router.tick(k)
+        self.data_heard = {}
+        for src, hops, x, y, payload in router.take_delivered():
+            if len(payload) != SHARE.size:
+                self.dropped["foreign"] += 1
+                continue
+            sid, k16, best, improved = SHARE.unpack(payload)
+            if improved:
+                router.note_best(src, x, y)
+            if k16 != k & 0xFFFF:
+                self.dropped["late"] += 1
+                continue
+            if sid != self.sid or src in heard:
+                continue
+            self.data_heard[src] = (x, y, best, bool(improved))
+            self.table[src] = (k, hops - 1, half(best))
+            self.departed.pop(src, None)
+
+    def _predict(self, track: Any, chi1: tuple[float, float] | None,
+                 chi2: tuple[float, float] | None) -> tuple[float, float]:
+        """A neighbour's next position (section 6.2): one deterministic RDPSO step (r = 1/2) from its last
+        positions (newest first), with only the cognitive and social terms."""
+        x, y = track[0]
+        history = [(track[j][0] - track[j + 1][0], track[j][1] - track[j + 1][1]) for j in range(len(track) - 1)]
+        vx, vy = motion.memory_term(self.weights, history)
+        for rho, c in ((self.rho[0], chi1), (self.rho[1], chi2)):
+            if c is not None:
+                vx += 0.5 * rho * (c[0] - x)
+                vy += 0.5 * rho * (c[1] - y)
+        vx, vy = motion.clamp(vx, vy, self.p["dx_max_m"])
+        return (x + vx, y + vy)
+
+    def comm_stats(self) -> dict[str, float | int]:
+        """The routing layer's counters, with the time the radio was busy and the time this robot paused."""
+        if self.router is None:
+            return {}
+        return {**self.router.stats, "busy_s": round(self.router.blocked_s, 3), "paused_s": round(self.paused_s, 3)}
 
     # -- motion ---------------------------------------------------------------------------------------------
     def _velocity(self) -> tuple[float, float]:

@@ -133,6 +133,10 @@ class EstRanger(Controller):
         "rssi_smoothing": 0.5,  # weight of the newest beacon RSSI
         "max_leg_m": 8.0,  # a leg longer than this ends with a drop anyway (a scout out of range never fades)
         "min_leg_m": 0.4,  # a leg shorter than this never ends with a drop (the scouts would land on each other)
+        # the area to deploy in, [x_min, y_min, x_max, y_max] in the arena frame (the building's plan, as a rescue
+        # team would give it): points to drive to are kept inside it, area_margin_m from its edges; None: unbounded
+        "area_m": None,
+        "area_margin_m": 0.4,
     }
 
     @classmethod
@@ -150,6 +154,13 @@ class EstRanger(Controller):
             raise ValueError("first_leg_min_m: must lie in [0, first_leg_max_m]")
         if not 0 < p["rssi_smoothing"] <= 1:
             raise ValueError(f"rssi_smoothing: must lie in (0, 1], got {p['rssi_smoothing']!r}")
+        if p["area_m"] is not None:
+            a = p["area_m"]
+            if not (isinstance(a, list | tuple) and len(a) == 4 and all(isinstance(v, int | float) for v in a)):
+                raise ValueError(f"area_m: [x_min, y_min, x_max, y_max] expected, got {a!r}")
+            m = p["area_margin_m"]
+            if not (m >= 0 and a[2] - a[0] > 2 * m and a[3] - a[1] > 2 * m):
+                raise ValueError(f"area_m: {list(a)} leaves no room inside area_margin_m = {m!r}")
         return p
 
     def init(self, robot: Robot) -> None:
@@ -332,18 +343,33 @@ class EstRanger(Controller):
         self.leg_start = None
         self.target = None
         self.blocked_s = 0.0
-        if p["mode"] == "random":  # the baseline: uniformly within d_max of the last scout
+        if p["mode"] == "random":  # the baseline: uniformly within d_max of the last scout (and inside the area)
             _, lx, ly, _ = self.dropped[-1]
-            rad = p["d_max_m"] * math.sqrt(float(r.rng.random()))
-            ang = float(r.rng.uniform(-math.pi, math.pi))
-            self.target = (lx + rad * math.cos(ang), ly + rad * math.sin(ang))
+            for _ in range(100):
+                rad = p["d_max_m"] * math.sqrt(float(r.rng.random()))
+                ang = float(r.rng.uniform(-math.pi, math.pi))
+                self.target = (lx + rad * math.cos(ang), ly + rad * math.sin(ang))
+                if self._inside(self.target):
+                    break
+            self.target = self._clip(self.target)
         elif n == 1:  # away at a random bearing, until scout 1's beacons fade to k q_min
             self.heading = float(r.rng.uniform(-math.pi, math.pi))
         else:  # the spiral point of eq. 5.3-5.5 from the last two scouts, with their measured leg
             (_, x1, y1, _), (_, x2, y2, th2) = self.dropped[-2], self.dropped[-1]
             d = math.hypot(x2 - x1, y2 - y1)
-            self.target = est_next((x1, y1), (x2, y2), th2, max(d, p["min_leg_m"]), n - 1,
-                                   self.sigma)
+            self.target = self._clip(est_next((x1, y1), (x2, y2), th2, max(d, p["min_leg_m"]), n - 1,
+                                              self.sigma))
+
+    def _inside(self, pt: tuple[float, float]) -> bool:
+        a, m = self.p["area_m"], self.p["area_margin_m"]
+        return a is None or (a[0] + m <= pt[0] <= a[2] - m and a[1] + m <= pt[1] <= a[3] - m)
+
+    def _clip(self, pt: tuple[float, float]) -> tuple[float, float]:
+        """``pt`` moved to the nearest point inside the deployment area (unchanged without one)."""
+        a, m = self.p["area_m"], self.p["area_margin_m"]
+        if a is None:
+            return pt
+        return (min(max(pt[0], a[0] + m), a[2] - m), min(max(pt[1], a[1] + m), a[3] - m))
 
     def telemetry(self) -> dict[str, float | int]:
         return {"dropped": len(self.dropped), "carried": len(self.robot.payload) - len(self.dropped),
