@@ -367,8 +367,8 @@ def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress) -> tuple
         _abort(pool)
         if not isinstance(e, KeyboardInterrupt):
             raise
-        for f, k in futures.items():
-            if k not in done and f.done() and not f.cancelled() and f.exception() is None:
+        for f, k in futures.items():  # finished as the interrupt came; a trial the interrupt cut short is not kept
+            if k not in done and f.done() and not f.cancelled() and f.exception() is None and f.result()[1] is None:
                 done[k] = f.result()
         return done, True
     pool.shutdown(wait=True)

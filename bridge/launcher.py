@@ -138,10 +138,12 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         return p
 
     stop_requests = 0
+    last_signal: int | None = None
 
     def on_signal(signum, frame):
-        nonlocal stop_requests
+        nonlocal stop_requests, last_signal
         stop_requests += 1
+        last_signal = signum
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     children: list[Child] = []
@@ -234,8 +236,19 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     wall = time.monotonic() - t_launch
     if world_code is None and children:
         world_code = children[0].exit_code  # the world, reaped during teardown
-    return _finish(cfg, plan, out, children, world_code, interrupted, wall, t_started, t_launch, prog, plot,
-                   startup_error)
+    res = _finish(cfg, plan, out, children, world_code, interrupted, wall, t_started, t_launch, prog, plot,
+                  startup_error)
+    _pass_on(last_signal, old)
+    return res
+
+
+def _pass_on(signum: int | None, handlers: dict[int, Any]) -> None:
+    """A session run inside another program (an experiment's trial) took that program's Ctrl-C or SIGTERM to stop
+    itself: now that the session is over and written, hand the signal to the handler the program had installed,
+    so the program stops too. A default handler is left alone: the command line reports exit code 130 itself."""
+    h = handlers.get(signum) if signum is not None else None
+    if callable(h) and h is not signal.default_int_handler:
+        h(signum, None)
 
 
 class _Abort(Exception):

@@ -221,6 +221,7 @@ def test_ctrl_c_keeps_what_finished_and_leaves_no_process(tmp_path: Path) -> Non
     assert p.returncode == 130, stderr
     done = _rows(out / "trials.csv")
     assert 2 <= len(done) < 40 and "interrupted" in stdout
+    assert not [r for r in done if r["error"]]  # trials cut short are not reported as failures
     assert "**Interrupted**" in (out / "report.md").read_text()
     pids = {int(f.read_text()) for f in out.glob("work/*/*/pid")}
     deadline = time.monotonic() + 5
@@ -246,3 +247,15 @@ def test_in_process_interrupt_ends_the_run_even_when_a_trial_catches_it(tmp_path
     done = _rows(out / "trials.csv")
     assert 2 <= len(done) < 40 and "interrupted" in stdout
     assert not [r for r in done if r["error"]]  # the trial cut short is not reported as a failure
+
+
+def test_a_session_hands_a_caught_signal_on_to_the_program_that_ran_it() -> None:
+    from bridge.launcher import _pass_on
+
+    got = []
+    _pass_on(signal.SIGTERM, {signal.SIGTERM: lambda s, f: got.append(s)})
+    assert got == [signal.SIGTERM]
+    _pass_on(signal.SIGINT, {signal.SIGINT: signal.default_int_handler})  # the command line: nothing raised here
+    _pass_on(signal.SIGTERM, {signal.SIGTERM: signal.SIG_DFL})
+    _pass_on(None, {signal.SIGTERM: lambda s, f: got.append(s)})
+    assert got == [signal.SIGTERM]
