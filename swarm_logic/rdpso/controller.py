@@ -268,7 +268,6 @@ class Rdpso(IterationSchedule, Controller):
             predict=self._predict)
         self.data_heard: dict[int, tuple[float, float, float, bool]] = {}  # this iteration's data: x, y, best, improved
         self.paused_s = 0.0  # time this robot waited for its radio before moving
-        self._src64: dict[int, int | None] = {}  # each robot's radio address, from its hellos
         self.pause_from: float | None = None
 
     def destroy(self) -> None:
@@ -390,16 +389,17 @@ class Rdpso(IterationSchedule, Controller):
         """Drain the radio; keep this iteration's hellos, refresh the group table (direct and relayed)."""
         r = self.robot
         heard: dict[int, Hello] = {}
+        addrs: dict[int, int | None] = {}  # each hello's sender's radio address
         for msg, pkt in self._frames_of_iteration(decode, "foreign"):
             heard[msg.robot] = msg
-            self._src64[msg.robot] = pkt.src64
+            addrs[msg.robot] = pkt.src64
             if pkt.rssi_dbm is not None:
                 self.rssi[msg.robot] = float(pkt.rssi_dbm)
         self.heard = heard
         table = self.table
         k = self.k
         if self.router is not None:
-            self._take_data(heard)
+            self._take_data(heard, addrs)
         for rid, msg in heard.items():
             if msg.sid != self.sid:
                 table.pop(rid, None)  # it says it is elsewhere now
@@ -567,13 +567,13 @@ class Rdpso(IterationSchedule, Controller):
                 self.offer_target = sid
                 self.events.append("founded")
 
-    def _take_data(self, heard: dict[int, Hello]) -> None:
+    def _take_data(self, heard: dict[int, Hello], addrs: dict[int, int | None]) -> None:
         """With routing: tell the router who was heard (its hellos), read the data packets that reached this robot:
         a mate's packet of this iteration counts in this iteration's solutions and refreshes the member table."""
         router = self.router
         k = self.k
         for rid, msg in heard.items():
-            router.heard(rid, self._src64.get(rid), k, msg.x, msg.y, (msg.ledger_x, msg.ledger_y))
+            router.heard(rid, addrs[rid], k, msg.x, msg.y, (msg.ledger_x, msg.ledger_y))
         router.tick(k)
         self.data_heard = {}
         for src, hops, x, y, payload in router.take_delivered():
