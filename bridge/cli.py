@@ -156,6 +156,15 @@ def cmd_radio_fit(a: argparse.Namespace) -> int:
     return 0
 
 
+def _cell_choice(text: str) -> tuple[str, list[str]]:
+    """``KEY=V1,V2`` of ``experiment --only``."""
+    key, sep, values = text.partition("=")
+    chosen = [v.strip() for v in values.split(",") if v.strip()]
+    if not sep or not key.strip() or not chosen:
+        raise argparse.ArgumentTypeError(f"{text!r}: write KEY=V1[,V2...], e.g. n=15,30")
+    return key.strip(), chosen
+
+
 def cmd_experiment(a: argparse.Namespace) -> int:
     from bridge.experiment import UnknownExperimentError, execute_experiment, experiments
 
@@ -168,10 +177,13 @@ def cmd_experiment(a: argparse.Namespace) -> int:
     if not a.name:
         print("swarm-sitl experiment: name an experiment (--list shows them)", file=sys.stderr)
         return 2
+    only: dict[str, list[str]] = {}
+    for key, values in a.only:  # --only n=15 --only n=30 is --only n=15,30
+        only.setdefault(key, []).extend(v for v in values if v not in only.get(key, []))
     try:
         run = execute_experiment(a.name, trials=a.trials, jobs=a.jobs, out=a.out, smoke=a.smoke, seed=a.seed,
-                                 progress=not a.quiet)
-    except UnknownExperimentError as e:
+                                 progress=not a.quiet, only=only or None)
+    except (UnknownExperimentError, ValueError) as e:
         print(f"swarm-sitl experiment: {e}", file=sys.stderr)
         return 2
     for t, ours, ok, _note in run.verdicts:
@@ -296,6 +308,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--smoke", action="store_true", help="a few short trials per cell (for CI)")
     p.add_argument("--seed", type=int, default=0, help="base seed; each trial's seed derives from it (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--only", type=_cell_choice, action="append", default=[], metavar="KEY=V1[,V2...]",
+                   help="run only the cells whose KEY is one of the values (repeat for more keys; e.g. "
+                        "--only n=15,30); trial seeds stay those of the full run")
     p.set_defaults(fn=cmd_experiment)
 
     p = sub.add_parser("digest", help="recompute the digest of a recording")

@@ -561,21 +561,57 @@ class ExperimentRun:
 
 
 def _command(name: str, trials: int | None, out: str | Path | None, default_out: Path, smoke: bool,
-             seed: int) -> str:
+             seed: int, only: dict[str, list[str]] | None = None) -> str:
     cmd = ["swarm-sitl", "experiment", name]
     if smoke:
         cmd.append("--smoke")
     if trials is not None:
         cmd += ["--trials", str(trials)]
     cmd += ["--seed", str(seed)]
+    for k, vs in (only or {}).items():
+        cmd += ["--only", f"{k}={','.join(vs)}"]
     if out is not None and Path(out) != default_out:
         cmd += ["--out", str(out)]
     return shlex.join(cmd)
 
 
+def _matches(value: Any, wanted: str) -> bool:
+    """Whether a cell's value is the text given on the command line (``15`` matches 15 and 15.0, ``true`` True)."""
+    if isinstance(value, bool) or value is None:
+        return wanted.lower() == str(value).lower()
+    if isinstance(value, int | float):
+        try:
+            return float(wanted) == float(value)
+        except ValueError:
+            return False
+    return wanted == str(value)
+
+
+def select_cells(cells: list[dict[str, Any]], only: dict[str, list[str]] | None) -> list[dict[str, Any]]:
+    """The cells whose value of every key in `only` is one of the values given for it (all cells if `only` is
+    empty). A key no cell has, or a choice that leaves no cell, is an error naming what there is."""
+    if not only:
+        return cells
+    keys = list(dict.fromkeys(k for c in cells for k in c))
+    kept = cells
+    for key, wanted in only.items():
+        if key not in keys:
+            raise ValueError(f"--only {key}: no cell has the key {key!r} (the cells' keys: {', '.join(keys)})")
+        if not wanted:
+            raise ValueError(f"--only {key}: give one or more values, {key}=V1,V2")
+        kept = [c for c in kept if key in c and any(_matches(c[key], w) for w in wanted)]
+    if not kept:
+        have = {k: sorted({str(c[k]) for c in cells if k in c}) for k in only}
+        raise ValueError("--only leaves no cell; the values there are: "
+                         + "; ".join(f"{k} in {', '.join(v)}" for k, v in have.items()))
+    return kept
+
+
 def execute_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
-                       smoke: bool = False, seed: int = 0, progress: bool = True) -> ExperimentRun:
-    """Run experiment `name` and write its outputs; see run_experiment. Ctrl-C keeps what finished."""
+                       smoke: bool = False, seed: int = 0, progress: bool = True,
+                       only: dict[str, list[str]] | None = None) -> ExperimentRun:
+    """Run experiment `name` and write its outputs; see run_experiment. Ctrl-C keeps what finished. `only` runs
+    the cells whose values match (key to accepted values); a trial's seed does not depend on which cells run."""
     t_start = time.monotonic()
     cls = get_experiment(name)
     exp = cls()
@@ -583,6 +619,9 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     jobs = jobs if jobs is not None else (os.cpu_count() or 1)
     if n < 1 or jobs < 1:
         raise ValueError(f"trials and jobs must be >= 1 (got {n}, {jobs})")
+    all_cells = [dict(c) for c in exp.cells(smoke)]
+    _check_cells(all_cells)
+    cells = select_cells(all_cells, only)
     default_out = Path("runs/experiments") / (f"{name}-smoke" if smoke else name)
     out_dir = Path(out) if out is not None else default_out
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -591,8 +630,6 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     for d in _RESULT_DIRS:
         shutil.rmtree(out_dir / d, ignore_errors=True)
 
-    cells = [dict(c) for c in exp.cells(smoke)]
-    _check_cells(cells)
     work = (out_dir / "work").absolute()
     plan = [Trial(name, dict(c), i, trial_seed(seed, name, c, i), smoke, str(work / _slug(c) / str(i)))
             for c in cells for i in range(n)]
@@ -655,11 +692,15 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     failed = sum(o.error is not None for o in outcomes)
     wall = time.monotonic() - t_start
     walls = [d[2] for d in done.values()]
+    chosen = ""
+    if only:
+        which = "; ".join(f"{k} in {', '.join(v)}" for k, v in only.items())
+        chosen = f" (the cells with {which}: {len(cells)} of {len(all_cells)})"
     lines = [f"# {exp.title}", "", " ".join(exp.description.split()), "",
-             f"Reproduce: `{_command(name, trials, out, default_out, smoke, seed)}` (any `--jobs` gives the same "
-             f"trials.csv).", "",
+             f"Reproduce: `{_command(name, trials, out, default_out, smoke, seed, only)}` (any `--jobs` gives the "
+             f"same trials.csv).", "",
              f"- experiment `{name}`{' (smoke run)' if smoke else ''}: {_count(len(cells), 'cell')} x "
-             f"{_count(n, 'trial')}, seed {seed}",
+             f"{_count(n, 'trial')}, seed {seed}{chosen}",
              f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"]
     if interrupted:
         lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
@@ -702,8 +743,9 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
 
 
 def run_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
-                   smoke: bool = False, seed: int = 0, progress: bool = True) -> Path:
+                   smoke: bool = False, seed: int = 0, progress: bool = True,
+                   only: dict[str, list[str]] | None = None) -> Path:
     """Run experiment `name`: `trials` per cell (default its own), on `jobs` processes (default: one per CPU;
-    1 runs in this process), into `out` (default runs/experiments/NAME[-smoke]). Returns the output directory;
-    execute_experiment() also returns the outcomes, failures and verdicts."""
-    return execute_experiment(name, trials, jobs, out, smoke, seed, progress).out
+    1 runs in this process), into `out` (default runs/experiments/NAME[-smoke]), the cells `only` selects (default
+    all). Returns the output directory; execute_experiment() also returns the outcomes, failures and verdicts."""
+    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only).out

@@ -307,11 +307,12 @@ class B9Coverage(Experiment):
             if len(e) and len(r):
                 gaps[n] = float(np.mean(e) - np.mean(r))
                 parts.append(f"{n}: EST {np.mean(e):.1%} vs random {np.mean(r):.1%} ({gaps[n] * 100:+.1f} pp)")
-        if len(gaps) < len(self.SIZES):
-            return "; ".join(parts) or "no trials", None, ""
+        if len(gaps) < 2:
+            return "; ".join(parts) or "no trials", None, "needs two N_T or more"
         good = all(g >= 0.05 for g in gaps.values()) and gaps[max(gaps)] > gaps[min(gaps)]
-        return "; ".join(parts), bool(good), ("means over trials; the scouts of the rangers that finished, where "
-                                              "they stood then")
+        missing = ", ".join(str(n) for n in self.SIZES if n not in gaps)
+        note = "means over trials; the scouts of the rangers that finished, where they stood then"
+        return "; ".join(parts), bool(good), note + (f"; judged without N_T = {missing} (not run)" if missing else "")
 
 
 # -- B8: dispersion of one subgroup, EST vs random, N_s 5..25 (numerical) ------------------------------------

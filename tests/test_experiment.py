@@ -175,6 +175,33 @@ def test_a_failing_trial_is_reported_and_the_others_run(tmp_path: Path, capsys: 
     assert "6/6 trials ran, 2 failed" in capsys.readouterr().out
 
 
+def test_only_runs_the_chosen_cells_with_the_full_runs_seeds(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    full = _rows(ex.run_experiment("test-pi", trials=2, jobs=1, out=tmp_path / "all", progress=False) / "trials.csv")
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "test-pi", "--trials", "2", "--jobs", "1", "--quiet", "--out", str(tmp_path / "some"),
+              "--only", "n=1000"])
+    assert e.value.code == 0
+    some = _rows(tmp_path / "some" / "trials.csv")
+    assert some == [r for r in full if r["n"] == "1000"]  # the same trials, seeds and figures as in the full run
+    report = (tmp_path / "some" / "report.md").read_text()
+    assert "--only n=1000" in report and "(the cells with n in 1000: 1 of 2)" in report
+    assert "### n=100\n" not in report and "### n=1000" in report
+    assert ex.select_cells([{"n": 100}, {"n": 1000}], {"n": ["100.0", "1000"]}) == [{"n": 100}, {"n": 1000}]
+    assert ex.select_cells([{"d": "est", "k": 1}, {"d": "est", "k": 2}, {"d": "random", "k": 1}],
+                           {"d": ["est"], "k": ["1"]}) == [{"d": "est", "k": 1}]
+    assert ex.select_cells([{"on": True}, {"on": False}], {"on": ["true"]}) == [{"on": True}]
+    capsys.readouterr()
+    for bad, says in ((["--only", "m=5"], "no cell has the key 'm' (the cells' keys: n)"),
+                      (["--only", "n=7"], "--only leaves no cell; the values there are: n in 100, 1000")):
+        with pytest.raises(SystemExit) as e:
+            main(["experiment", "test-pi", "--out", str(tmp_path / "bad"), *bad])
+        assert e.value.code == 2 and says in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "test-pi", "--only", "n"])
+    assert e.value.code == 2 and "write KEY=V1[,V2...]" in capsys.readouterr().err
+
+
 def test_unknown_names_and_listing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(ex.UnknownExperimentError, match="test-pi"):
         ex.run_experiment("no-such-thing", out=tmp_path)
