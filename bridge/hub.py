@@ -769,6 +769,8 @@ class Hub:
                 self.robot_failed(r, t, "battery_depleted", f"battery exhausted at {at / 1e9:g} s: motors stopped, "
                                                             "radio silent")
             self._deliver(t)
+            if world.mapping is not None and world.mapping.tick(t, world.pos, world.alive):  # scan, then sense
+                rec.write(t, "/world/mapping", "swarm_sitl.Mapping", world.mapping.record())
             self._lines(t)
             if self.mavlink is not None:
                 self._ground_station(t)

@@ -188,6 +188,11 @@ class EntropyMap:
         return self._p.reshape(self.ny, self.nx)
 
     @property
+    def explored_free(self) -> int:
+        """Truly free cells explored so far (the numerator of eta_exp)."""
+        return self._explored_free
+
+    @property
     def entropy(self) -> np.ndarray:
         return entropy(self.p)
 
@@ -373,7 +378,8 @@ class SessionMap:
         self.eta: list[float] = []
 
     def tick(self, t_ns: int, pos: np.ndarray, alive: np.ndarray) -> bool:
-        """At the end of a quantum ending at ``t_ns``: scan if a scan is due; returns whether one was."""
+        """At the start of the quantum at ``t_ns``, before the sensors are read: scan if a scan is due (the first at
+        t = 0, from the start poses); returns whether one was."""
         if t_ns < self.next_ns:
             return False
         live = np.asarray(alive, bool)
@@ -384,6 +390,13 @@ class SessionMap:
         while self.next_ns <= t_ns:
             self.next_ns += self.period_ns
         return True
+
+    def record(self) -> dict[str, Any]:
+        """The last scan, as ``/world/mapping`` records it: eta_exp (eq. 8.3), the explored free cells and the map's
+        total entropy in bits (what the swarm minimises, eq. 8.2 summed)."""
+        return {"eta_exp": round(self.eta[-1], 6) if self.eta else 0.0, "scans": len(self.eta),
+                "explored_free_cells": self.map.explored_free, "free_cells": self.map.free_cells,
+                "entropy_bits": round(float(self.map.entropy.sum()), 3)}
 
     def lux(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """What the light sensors read at (x, y): eq. 8.1's value mapped onto [lux_min, lux_max]."""

@@ -79,6 +79,17 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "properties": {"robot": {"type": "integer"}, "carrier": {"type": "integer"}, "slot": {"type": "integer"},
                        "pose": {"type": "array", "items": {"type": "number"}}},
     },
+    "swarm_sitl.Mapping": {
+        "type": "object",
+        "description": "The chapter 8 mapping objective after a scan of all live robots (objective kind mapping)",
+        "properties": {
+            "eta_exp": {"type": "number", "description": "exploration ratio: explored free cells / free cells"},
+            "scans": {"type": "integer", "description": "scans so far, this one included"},
+            "explored_free_cells": {"type": "integer"},
+            "free_cells": {"type": "integer"},
+            "entropy_bits": {"type": "number", "description": "the map's total entropy, eq. 8.2 summed over cells"},
+        },
+    },
     "swarm_sitl.Uart": {
         "type": "object",
         "description": "Bytes on a robot's serial line to one of its modules (to_module: as handed to the host's "

@@ -71,7 +71,6 @@ class World:
         self._build_robots(robots)
         # the chapter 8 mapping objective: the light sensors read it instead of the light field (bridge/mapping.py)
         self.mapping = SessionMap(cfg) if cfg.objective.kind == "mapping" else None
-        self.mapping_scanned = False  # a scan happened in the last quantum
 
     # -- scene ------------------------------------------------------------------------------------
     def _box(self, x: float, y: float, size: tuple[float, float, float], yaw: float = 0.0) -> None:
@@ -295,8 +294,6 @@ class World:
             self._update_sonar()
             while self._next_sonar_ns <= t_end:
                 self._next_sonar_ns += self._sonar_period_ns
-        if self.mapping is not None:
-            self.mapping_scanned = self.mapping.tick(t_end, self.pos, self.alive)
 
     def _follow_paths(self, t_s: float) -> None:
         """Put every body with a stated motion where its path says at ``t_s``, moving as the path moves (so what

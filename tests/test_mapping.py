@@ -3,6 +3,7 @@ field, the windowed bests of EPSO/PPSO, B13's smoke cells, and a short co-simula
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from pathlib import Path
@@ -13,6 +14,7 @@ import pytest
 from bridge import numerical
 from bridge.config import ConfigError, load_config, to_toml
 from bridge.mapping import EntropyMap, MappingField, config_occupancy, entropy, normalised_auc
+from bridge.recorder import iter_messages
 from swarm_logic.baselines.common import WindowBest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -129,7 +131,7 @@ def test_objective_config_is_checked(tmp_path: Path) -> None:
 
 
 def test_a_mapping_session_grows_eta_and_reports_it(tmp_path: Path) -> None:
-    from tests.test_session import run
+    from tests.test_session import _check_messages_match_their_schemas, run
 
     raw = tomllib.loads((ROOT / "hil_configs" / "mapping_arena.toml").read_text())
     raw["session"] |= {"duration_s": 8.0, "name": "mapping-smoke"}
@@ -138,6 +140,16 @@ def test_a_mapping_session_grows_eta_and_reports_it(tmp_path: Path) -> None:
     code, s = run(cfg, tmp_path / "run", "--duration", "8", timeout=300)
     assert code == 0, s.get("error")
     m = s["mapping"]
-    assert m["scans"] == 17  # every 0.5 s from the first quantum to 8 s
+    assert m["scans"] == 16  # every 0.5 s from t = 0 (the start poses) to 7.5 s
     assert 0 < m["eta_exp_every_10_scans"][0] < m["eta_exp"] <= 1
     assert 0 < m["auc"] < m["eta_exp"]
+    rec = [(t, json.loads(payload)) for topic, t, payload in iter_messages(tmp_path / "run" / "session.mcap")
+           if topic == "/world/mapping"]
+    assert len(rec) == m["scans"] and rec[-1][1]["scans"] == m["scans"]  # one message a scan, at its time
+    assert [round(t / 1e9, 3) for t, _ in rec[:3]] == [0.0, 0.5, 1.0]
+    eta = [r["eta_exp"] for _, r in rec]
+    assert eta[-1] == pytest.approx(m["eta_exp"], abs=1e-5) and eta == sorted(eta)  # the map only gains
+    assert all(r["explored_free_cells"] == round(r["eta_exp"] * r["free_cells"]) for _, r in rec)
+    bits = [r["entropy_bits"] for _, r in rec]
+    assert bits == sorted(bits, reverse=True) and bits[-1] < bits[0]  # what the swarm minimises, going down
+    _check_messages_match_their_schemas(tmp_path / "run" / "session.mcap")
