@@ -185,6 +185,9 @@ def test_the_random_baseline_drops_each_scout_within_d_max_of_the_last(tmp_path:
     gaps = [math.hypot(b["x"] - a["x"], b["y"] - a["y"]) for a, b in itertools.pairwise(drops)]
     # where the ranger believed it dropped them: each within d_max (+ reach) of the last, never on top of it
     assert len(gaps) == 4 and all(0.4 - 1e-6 <= g <= 2.0 + 0.15 + 0.05 for g in gaps), gaps
+    # the ranger steers the landing spot behind it onto each point: every leg after the first ends there
+    assert [d["why"] for d in drops] == ["first_leg"] + ["reached"] * 4, drops
+    assert all(math.hypot(d["x"] - d["target"][0], d["y"] - d["target"][1]) <= 0.15 for d in drops[1:])
 
 
 def test_the_conveyor_command_is_checked_and_advances_whole_slots() -> None:
@@ -223,6 +226,10 @@ def test_the_deployment_area_keeps_the_rangers_points_inside() -> None:
         EstRanger.resolve({"area_m": [0, 0, 10]})
     with pytest.raises(ValueError, match="area_m"):
         EstRanger.resolve({"area_m": [0, 0, 0.5, 20], "area_margin_m": 0.4})
+    with pytest.raises(ValueError, match="d_max_m: must exceed min_leg_m"):
+        EstRanger.resolve({"mode": "random", "d_max_m": 0.3})
+    with pytest.raises(ValueError, match="max_leg_s"):
+        EstRanger.resolve({"max_leg_s": 0})
     ranger = EstRanger()
     ranger.p = EstRanger.resolve({"area_m": [0.0, 0.0, 10.0, 20.0]})
     assert ranger._clip((-3.0, 25.0)) == (0.4, 19.6)

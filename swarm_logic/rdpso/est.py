@@ -132,6 +132,7 @@ class EstRanger(Controller):
         "drop_back_m": 0.193,  # where a dropped scout lands, behind the ranger's centre (ranger + scout radius + gap)
         "rssi_smoothing": 0.5,  # weight of the newest beacon RSSI
         "max_leg_m": 8.0,  # a leg longer than this ends with a drop anyway (a scout out of range never fades)
+        "max_leg_s": 60.0,  # a leg that takes longer than this (circling an obstacle) ends with a drop anyway
         "min_leg_m": 0.4,  # a leg shorter than this never ends with a drop (the scouts would land on each other)
         # the area to deploy in, [x_min, y_min, x_max, y_max] in the arena frame (the building's plan, as a rescue
         # team would give it): points to drive to are kept inside it, area_margin_m from its edges; None: unbounded
@@ -146,12 +147,15 @@ class EstRanger(Controller):
             raise ValueError(f"mode: 'est' or 'random', got {p['mode']!r}")
         if p["k"] not in (1, 2, 3, 4, 5):
             raise ValueError(f"k: 1 to 5 (the ranger listens to the last k scouts), got {p['k']!r}")
-        for name in ("d_max_m", "speed_mps", "turn_rate_rps", "reach_m", "max_leg_m", "first_leg_max_m",
-                     "min_leg_m"):
+        for name in ("d_max_m", "speed_mps", "turn_rate_rps", "reach_m", "max_leg_m", "max_leg_s",
+                     "first_leg_max_m", "min_leg_m"):
             if not p[name] > 0:
                 raise ValueError(f"{name}: must be > 0, got {p[name]!r}")
         if not 0 <= p["first_leg_min_m"] <= p["first_leg_max_m"]:
             raise ValueError("first_leg_min_m: must lie in [0, first_leg_max_m]")
+        if p["mode"] == "random" and not p["d_max_m"] > p["min_leg_m"]:
+            raise ValueError(f"d_max_m: must exceed min_leg_m = {p['min_leg_m']!r} (random points lie between "
+                             f"the two), got {p['d_max_m']!r}")
         if not 0 < p["rssi_smoothing"] <= 1:
             raise ValueError(f"rssi_smoothing: must lie in (0, 1], got {p['rssi_smoothing']!r}")
         if p["area_m"] is not None:
@@ -180,6 +184,8 @@ class EstRanger(Controller):
         self.state = "leg" if robot.payload else "done"
         self.target: tuple[float, float] | None = None
         self.leg_start: tuple[float, float] | None = None
+        self.leg_t0 = 0.0  # when this leg began
+        self.why: str | None = None  # why the last leg ended: first_leg, reached, rssi, blocked, max_leg, timeout
         self.releasing_from: int | None = None  # the conveyor position when a drop was asked for
         self.avoid_until = 0.0
         self.turn_dir = 1.0
@@ -246,9 +252,9 @@ class EstRanger(Controller):
         st = r.llc.state
         x, y = st.x, st.y
         if self.leg_start is None:
-            self.leg_start = (x, y)
+            self.leg_start, self.leg_t0 = (x, y), now
         travelled = math.hypot(x - self.leg_start[0], y - self.leg_start[1])
-        if self._leg_done(travelled):
+        if self._leg_done(travelled, now - self.leg_t0):
             self._drop()
             return
         if now < self.avoid_until:  # turning away from an obstacle, toward the side with more room
@@ -268,8 +274,9 @@ class EstRanger(Controller):
                 self.heading = st.theta
             r.llc.drive(p["speed_mps"], 0.0)
             return
-        if self.target is not None:
-            self.heading = math.atan2(self.target[1] - y, self.target[0] - x)
+        if self.target is not None:  # the point is the scout's: aim from where a scout dropped now would land
+            lx, ly = self._landing()
+            self.heading = math.atan2(self.target[1] - ly, self.target[0] - lx)
         err = wrap(self.heading - st.theta)
         if abs(err) > 0.3:
             r.llc.drive(0.0, math.copysign(p["turn_rate_rps"], err))
@@ -281,7 +288,12 @@ class EstRanger(Controller):
         st, back = self.robot.llc.state, self.p["drop_back_m"]
         return st.x - back * math.cos(st.theta), st.y - back * math.sin(st.theta)
 
-    def _leg_done(self, travelled: float) -> bool:
+    def _leg_done(self, travelled: float, took_s: float) -> bool:
+        """Whether to drop the next scout now; ``self.why`` says why (logged with the drop)."""
+        self.why = self._drop_reason(travelled, took_s)
+        return self.why is not None
+
+    def _drop_reason(self, travelled: float, took_s: float) -> str | None:
         p = self.p
         n = len(self.dropped)
         x, y = self._landing()
@@ -291,21 +303,23 @@ class EstRanger(Controller):
                 self.blocked_s = 0.0
                 self.target = None
                 self.heading = self.robot.llc.state.theta + math.pi
-            return False
-        if travelled >= p["max_leg_m"] or self.blocked_s > 6.0:  # blocked: drop it here
-            return True
+            return None
+        if self.blocked_s > 6.0:  # blocked: drop it here
+            return "blocked"
+        if travelled >= p["max_leg_m"]:
+            return "max_leg"
+        if took_s >= p["max_leg_s"]:
+            return "timeout"
         if n == 0:  # the first leg: to a random spot
-            return travelled >= self.leg_left
+            return "first_leg" if travelled >= self.leg_left else None
         if self.target is not None and math.hypot(self.target[0] - x, self.target[1] - y) <= p["reach_m"]:
-            return True
+            return "reached"
         if p["mode"] == "random":
-            return False
+            return None
         last = [s for s, *_ in self.dropped[-int(p["k"]):]]
         rssi = [self.rssi[s] for s in last if s in self.rssi]
-        if not rssi:
-            return False
         threshold = k_first_threshold_dbm(p["q_min_dbm"], int(p["k"])) if n == 1 else p["q_min_dbm"]
-        return min(rssi) <= threshold
+        return "rssi" if rssi and min(rssi) <= threshold else None
 
     # -- dropping a scout ------------------------------------------------------------------------------------
     def _drop(self) -> None:
@@ -321,7 +335,8 @@ class EstRanger(Controller):
         scout = r.payload[len(self.dropped)]
         x, y = self._landing()
         self.dropped.append((scout, x, y, st.theta))
-        r.log("deployment", event="dropped", scout=scout, x=x, y=y, theta=st.theta, t=now - self.t0,
+        r.log("deployment", event="dropped", scout=scout, x=x, y=y, theta=st.theta, t=now - self.t0, why=self.why,
+              target=None if self.target is None else [round(self.target[0], 3), round(self.target[1], 3)],
               rssi=[round(self.rssi[s], 1) for s, *_ in self.dropped[-int(p["k"]) - 1:-1] if s in self.rssi])
         self.state = "telling"
         self._tell(scout)
@@ -343,10 +358,11 @@ class EstRanger(Controller):
         self.leg_start = None
         self.target = None
         self.blocked_s = 0.0
-        if p["mode"] == "random":  # the baseline: uniformly within d_max of the last scout (and inside the area)
-            _, lx, ly, _ = self.dropped[-1]
+        if p["mode"] == "random":  # the baseline: uniformly within d_max of the last scout (and inside the area),
+            _, lx, ly, _ = self.dropped[-1]  # but not nearer than min_leg_m, where no scout may be dropped
+            lo, hi = p["min_leg_m"] ** 2, p["d_max_m"] ** 2
             for _ in range(100):
-                rad = p["d_max_m"] * math.sqrt(float(r.rng.random()))
+                rad = math.sqrt(lo + (hi - lo) * float(r.rng.random()))
                 ang = float(r.rng.uniform(-math.pi, math.pi))
                 self.target = (lx + rad * math.cos(ang), ly + rad * math.sin(ang))
                 if self._inside(self.target):
