@@ -114,7 +114,7 @@ class E4Pavilion(Experiment):
         "hil_configs/pavilion_sar.toml, 3 TraxBot rangers (est_ranger, 0.2 m/s) carry 5 eSwarBot scouts each from"
         " the entrance, drop them along the EST (scout 2 where scout 1's beacon fades to k q_min, -75 dBm for k ="
         " 1 and -71.99 dBm for k = 2, eq. 5.13; then the spiral point, the weakest of the last k beacons at "
-        "q_min, or a blocked ranger) or at random within d_max = 3 m of the last, broadcast START; the scouts run"
+        "q_min, or a blocked ranger) or at random 0.4-3 m from the last, broadcast START; the scouts run"
         " the RDPSO (k_conn = k in chi_4, links by RSSI, q_min -75 dBm, dx_max 0.3 m) for the rest of the 360 s. "
         "Six random boxes (0.4-1.2 m, drawn from the trial's seed) and two pillars; two light spots. Death cells:"
         " two scouts' batteries die, robots and times (160-320 s, after the rangers' START in our runs) drawn "
@@ -270,7 +270,7 @@ class B9Coverage(Experiment):
     description = (
         "Thesis section 5.3.2 (digest E5, target B9), in the full co-simulation of hil_configs/pavilion_sar.toml "
         "(the thesis used MRSim with a multi-wall WiFi model): 3 rangers carry N_T / 3 scouts each (conveyors "
-        "sized with conveyor_slots to N_T / 3) and deploy them by EST (k = 1) or at random within d_max = 3 m; "
+        "sized with conveyor_slots to N_T / 3) and deploy them by EST (k = 1) or at random 0.4-3 m from the last; "
         "sessions end 1 s after the last ranger's START (end_after_deployment), with a cap of 300 / 600 / 1200 s "
         "simulated for 15 / 30 / 60 scouts. Covered share: the part of the 200 m^2 pavilion within 1 m of a "
         "deployed scout (each where it stood when its ranger was done), on a 5 cm grid.")
