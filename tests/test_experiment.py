@@ -25,7 +25,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _median_error(outcomes: list[Outcome], n: int) -> float:
-    return float(np.median([o.result.metrics["abs_error"] for o in outcomes if o.result and o.trial.cell["n"] == n]))
+    errors = [o.result.metrics["abs_error"] for o in outcomes if o.result and o.trial.cell["n"] == n]
+    return float(np.median(errors)) if errors else math.nan
 
 
 @register
@@ -57,6 +58,8 @@ class MonteCarloPi(Experiment):
 
         def strict(outs: list[Outcome]) -> tuple[str, bool | None, str]:
             e = _median_error(outs, 100)
+            if math.isnan(e):
+                return "no trials", None, "n = 100 did not run"
             return f"{e:.3f}", e < 1e-9, "n = 100 cannot be that close"
 
         return [Target("PI1", "median |error|, 1000 points", "0", "< 0.2", loose),
@@ -187,6 +190,7 @@ def test_only_runs_the_chosen_cells_with_the_full_runs_seeds(tmp_path: Path,
     report = (tmp_path / "some" / "report.md").read_text()
     assert "--only n=1000" in report and "(the cells with n in 1000: 1 of 2)" in report
     assert "### n=100\n" not in report and "### n=1000" in report
+    assert "| no trials |" in next(s for s in report.splitlines() if s.startswith("| PI2 |"))  # its cell did not run
     assert ex.select_cells([{"n": 100}, {"n": 1000}], {"n": ["100.0", "1000"]}) == [{"n": 100}, {"n": 1000}]
     assert ex.select_cells([{"d": "est", "k": 1}, {"d": "est", "k": 2}, {"d": "random", "k": 1}],
                            {"d": ["est"], "k": ["1"]}) == [{"d": "est", "k": 1}]
