@@ -179,7 +179,8 @@ def cmd_experiment(a: argparse.Namespace) -> int:
         return 2
     only: dict[str, list[str]] = {}
     for key, values in a.only:  # --only n=15 --only n=30 is --only n=15,30
-        only.setdefault(key, []).extend(v for v in values if v not in only.get(key, []))
+        chosen = only.setdefault(key, [])
+        chosen += [v for v in values if v not in chosen]
     try:
         run = execute_experiment(a.name, trials=a.trials, jobs=a.jobs, out=a.out, smoke=a.smoke, seed=a.seed,
                                  progress=not a.quiet, only=only or None)

@@ -392,9 +392,9 @@ class SessionMap:
         return True
 
     def record(self) -> dict[str, Any]:
-        """The last scan, as ``/world/mapping`` records it: eta_exp (eq. 8.3), the explored free cells and the map's
-        total entropy in bits (what the swarm minimises, eq. 8.2 summed)."""
-        return {"eta_exp": round(self.eta[-1], 6) if self.eta else 0.0, "scans": len(self.eta),
+        """The last scan (call after a ``tick`` that scanned), as ``/world/mapping`` records it: eta_exp (eq. 8.3),
+        the explored free cells and the map's total entropy in bits (what the swarm minimises, eq. 8.2 summed)."""
+        return {"eta_exp": round(self.eta[-1], 6), "scans": len(self.eta),
                 "explored_free_cells": self.map.explored_free, "free_cells": self.map.free_cells,
                 "entropy_bits": round(float(self.map.entropy.sum()), 3)}
 

@@ -254,7 +254,8 @@ class EstRanger(Controller):
         if self.leg_start is None:
             self.leg_start, self.leg_t0 = (x, y), now
         travelled = math.hypot(x - self.leg_start[0], y - self.leg_start[1])
-        if self._leg_done(travelled, now - self.leg_t0):
+        self.why = self._drop_reason(travelled, now - self.leg_t0)
+        if self.why is not None:
             self._drop()
             return
         if now < self.avoid_until:  # turning away from an obstacle, toward the side with more room
@@ -288,12 +289,8 @@ class EstRanger(Controller):
         st, back = self.robot.llc.state, self.p["drop_back_m"]
         return st.x - back * math.cos(st.theta), st.y - back * math.sin(st.theta)
 
-    def _leg_done(self, travelled: float, took_s: float) -> bool:
-        """Whether to drop the next scout now; ``self.why`` says why (logged with the drop)."""
-        self.why = self._drop_reason(travelled, took_s)
-        return self.why is not None
-
     def _drop_reason(self, travelled: float, took_s: float) -> str | None:
+        """Why to drop the next scout now (logged with the drop), or None to drive on."""
         p = self.p
         n = len(self.dropped)
         x, y = self._landing()
