@@ -1,4 +1,4 @@
-"""Run a behaviour on a real robot: ``python -m swarm_logic --hal hil_configs/eswarbot_real.toml``.
+"""Run a behaviour on a real robot: ``python -m swarm_logic --hal hil_configs/robots/eswarbot_real.toml``.
 
 This is the program a robot's companion computer runs. It is the same ``run_controller`` loop a SITL
 session runs, with the wall clock and the devices the HAL config names (any python-can interface).
@@ -26,7 +26,7 @@ def load_hal(path: str) -> dict[str, Any]:
         raise SystemExit(f"{p}: no such file") from None
     except tomllib.TOMLDecodeError as e:
         raise SystemExit(f"{p}: not valid TOML: {e}") from None
-    if isinstance(hal.get("llc_mavlink"), dict):  # a vehicle that only speaks MAVLink (swarm_logic.mavlink_llc)
+    if isinstance(hal.get("llc_mavlink"), dict):  # a vehicle that only speaks MAVLink (swarm_logic.mavlink.low_level)
         if "llc_can" in hal:
             raise SystemExit(f"{p}: llc_can and llc_mavlink: name one low level, not both")
     elif not isinstance(hal.get("llc_can"), dict) or "interface" not in hal["llc_can"]:

@@ -3,7 +3,7 @@
 A controller sees only its ``Robot`` (devices, clock, parameters, random stream); it knows nothing of
 the simulator. The runner calls ``step()`` every ``period_s`` of the robot's clock.
 
-Two hooks serve a ground station (``swarm_logic.mavlink``): ``set_param`` changes a parameter while the robot
+Two hooks serve a ground station (``swarm_logic.mavlink.face``): ``set_param`` changes a parameter while the robot
 runs, ``telemetry`` names a few numbers of the behaviour's state.
 """
 

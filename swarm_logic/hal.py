@@ -1,7 +1,7 @@
 """The devices a controller talks to, as protocols: one per device, several implementations.
 
 ``LlcClient`` (python-can, SITL or a real adapter) and the numerical runner's point robot both satisfy
-``LowLevel``; ``swarm_logic.xbee.XBee`` (pyserial, SITL or a real module) and the numerical runner's link model
+``LowLevel``; ``swarm_logic.drivers.xbee.XBee`` (pyserial, SITL or a real module) and the numerical runner's link model
 both satisfy ``Radio``. A controller written against these cannot tell which one drives it.
 """
 

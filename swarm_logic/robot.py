@@ -11,11 +11,11 @@ and on the robot ``{"llc_can": {"interface": "socketcan", "channel": "can0"}, "x
 without them has ``xbee`` / ``uwb`` set to None. ``start_pose`` (x, y, yaw in the arena frame) is where the robot
 was put down, as the operator or the deploying robot tells it; a session fills it in from the placement.
 
-``mavlink`` (optional) gives the robot its MAVLink face (``swarm_logic.mavlink``; ``robot.mavlink``, else None):
+``mavlink`` (optional) gives the robot its MAVLink face (``swarm_logic.mavlink.face``; ``robot.mavlink``, else None):
 ``{"port": "sitl://mavlink"}`` (any pyserial URL or device, ``baudrate``) or ``{"url": "udpout:127.0.0.1:14550"}``
 (a pymavlink connection), with ``system_id`` (default robot id + 1), ``boot`` ("auto", "hold" or "disarmed") and
 ``rates`` (message name -> Hz). ``llc_mavlink`` instead of ``llc_can`` drives a vehicle that speaks only MAVLink
-(``swarm_logic.mavlink_llc``): ``{"url": "udpin:0.0.0.0:14551", "target_system": 1}``.
+(``swarm_logic.mavlink.low_level``): ``{"url": "udpin:0.0.0.0:14551", "target_system": 1}``.
 """
 
 from __future__ import annotations
@@ -29,14 +29,14 @@ import numpy as np
 import serial
 
 from swarm_logic.clock import Clock
-from swarm_logic.llc_client import LlcClient
+from swarm_logic.drivers.llc_client import LlcClient
 from swarm_logic.log import JsonlLog, Sink
 
 if TYPE_CHECKING:
+    from swarm_logic.drivers.uwb import Uwb
+    from swarm_logic.drivers.xbee import XBee
     from swarm_logic.hal import LowLevel, Radio
-    from swarm_logic.mavlink import MavlinkFace
-    from swarm_logic.uwb import Uwb
-    from swarm_logic.xbee import XBee
+    from swarm_logic.mavlink.face import MavlinkFace
 
 
 @dataclass
@@ -67,7 +67,7 @@ class Robot:
             if hal.get("llc_can"):
                 raise ValueError("HAL config llc_mavlink: the robot has one low-level controller; give llc_can or "
                                  "llc_mavlink, not both")
-            from swarm_logic.mavlink_llc import open_low_level
+            from swarm_logic.mavlink.low_level import open_low_level
 
             llc: LowLevel = open_low_level(hal["llc_mavlink"], clock)
             buses: list[can.BusABC] = []
@@ -88,7 +88,7 @@ class Robot:
             robot.payload = tuple(int(v) for v in hal["payload"])
         try:
             if hal.get("xbee"):
-                from swarm_logic.xbee import XBee
+                from swarm_logic.drivers.xbee import XBee
 
                 x = dict(hal["xbee"])
                 port = _open_port(x, "xbee", 9600)
@@ -96,14 +96,14 @@ class Robot:
                 robot.xbee = XBee(port, clock, api_mode=int(x.get("api_mode", 1)),
                                   rssi_from_db=bool(x.get("rssi_from_db", False)))
             if hal.get("uwb"):
-                from swarm_logic.uwb import Uwb
+                from swarm_logic.drivers.uwb import Uwb
 
                 u = dict(hal["uwb"])
                 port = _open_port(u, "uwb", 115200)
                 robot.ports.append(port)
                 robot.uwb = Uwb(port, clock)
             if hal.get("mavlink") is not None:
-                from swarm_logic.mavlink import open_face
+                from swarm_logic.mavlink.face import open_face
 
                 robot.mavlink = open_face(hal["mavlink"], robot_id, clock)
             if log_sink is None and (hal.get("log") or {}).get("path"):

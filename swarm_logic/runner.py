@@ -1,7 +1,7 @@
 """Runs a controller on a robot at its fixed period: the same loop on a real robot and in SITL.
 
 Without a MAVLink face (``robot.mavlink`` None) the loop is ``poll devices -> step -> sleep`` every
-``controller.period_s``, nothing more. With one, ``swarm_logic.supervisor`` runs the robot as a ground station
+``controller.period_s``, nothing more. With one, ``swarm_logic.mavlink.supervisor`` runs the robot as a ground station
 expects a rover to behave (arming, modes, go-to); it is imported only then, so a robot without MAVLink does not
 load pymavlink.
 """
@@ -16,7 +16,7 @@ def run_controller(controller: Controller, robot: Robot, duration_s: float | Non
     """``init``, then ``poll devices -> step -> sleep`` every ``controller.period_s`` until ``duration_s``; with
     ``robot.mavlink``, the ``Supervisor``'s loop instead."""
     if robot.mavlink is not None:
-        from swarm_logic.supervisor import supervise
+        from swarm_logic.mavlink.supervisor import supervise
 
         supervise(controller, robot, duration_s)
         return

@@ -19,4 +19,4 @@ def demo_config() -> Path:
 
 
 def swarm_sitl_cmd(*args: str) -> list[str]:
-    return [sys.executable, "-m", "bridge.cli", *args]
+    return [sys.executable, "-m", "bridge.tools.cli", *args]

@@ -1,0 +1,853 @@
+"""Session configuration: TOML files in ``hil_configs/``, validated with pydantic.
+
+Every error names the file, the field and the reason, e.g.
+``hil_configs/demo.toml: robots[0].count: Input should be greater than 0``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from bridge.core.profile import RobotProfile
+from bridge.core.registry import PluginError, robot_profile, robot_spec
+from bridge.media.radio import RadioCfg
+from bridge.media.uwb import UwbCfg
+
+
+class ConfigError(Exception):
+    """A config that cannot be used; the message names file, field and reason."""
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=False)
+
+    def _only_for_kind(self, kind: str, applies: set[str], always: set[str]) -> None:
+        """Refuse fields set away from their defaults that ``kind`` does not use (a config meant for another kind)."""
+        fields = type(self).model_fields
+        stray = sorted(f for f in self.model_fields_set - applies - always if getattr(self, f) != fields[f].default)
+        if stray:
+            raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {kind!r}")
+
+
+class SessionCfg(_Model):
+    name: str = "session"
+    duration_s: float = Field(60.0, gt=0, le=30 * 24 * 3600)
+    seed: int = Field(1, ge=0, lt=2**63)
+    quantum_ms: float = Field(10.0, gt=0, le=1000)
+    speed: float | Literal["max"] = "max"
+    robots_per_process: int = Field(1, ge=1)
+    on_robot_failure: Literal["continue", "stop"] = "continue"
+    hang_timeout_s: float = Field(20.0, gt=0, description="wall seconds a process may take for one quantum")
+    startup_timeout_s: float = Field(120.0, gt=0)
+    poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
+    end_after_deployment: bool = Field(False, description="end the session 1 s after the last ranger has deployed "
+                                                          "its scouts (deployment studies need no mission)")
+    listen: str | None = Field(None, description="tcp/HOST:PORT: the world also listens here (besides its private "
+                                                 "unix socket), so the swarm logic of robots with logic = \"remote\" "
+                                                 "joins from another computer (swarm-sitl join); HOST is an address of "
+                                                 "this machine, 127.0.0.1 to stay on it")
+
+    @field_validator("listen")
+    @classmethod
+    def _tcp_endpoint(cls, v: str | None) -> str | None:
+        if v is not None:
+            host, _, port = v.removeprefix("tcp/").rpartition(":")
+            if not v.startswith("tcp/") or not host or not port.isdigit() or not 0 < int(port) < 65536:
+                raise ValueError(f"{v!r} is not tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447, or tcp/192.168.1.10:7447 "
+                                 "for a logic on another computer)")
+        return v
+
+    @field_validator("speed")
+    @classmethod
+    def _speed_positive(cls, v: float | str) -> float | str:
+        if v != "max" and not (isinstance(v, float | int) and v > 0):
+            raise ValueError('must be a positive number or "max"')
+        return v
+
+    @property
+    def quantum_ns(self) -> int:
+        return round(self.quantum_ms * 1e6)
+
+
+class WorldCfg(_Model):
+    physics_hz: float = Field(240.0, gt=0, le=10000)
+    solver_iterations: int = Field(10, ge=1, le=200)
+
+
+class ArenaCfg(_Model):
+    width_m: float = Field(10.0, gt=0, le=1000, description="extent along x")
+    length_m: float = Field(20.0, gt=0, le=1000, description="extent along y")
+    wall_height_m: float = Field(0.5, gt=0)
+    wall_thickness_m: float = Field(0.1, gt=0)
+    map: str | None = Field(None, description="monochrome bitmap, dark pixels are obstacles")
+    map_resolution_m: float = Field(0.05, gt=0, description="metres per map pixel")
+    map_threshold: int = Field(128, ge=1, le=255)
+
+
+class BoxObstacle(_Model):
+    type: Literal["box"]
+    x: float
+    y: float
+    size: tuple[float, float, float] = Field(description="full extents x, y, z in metres")
+    yaw_deg: float = 0.0
+
+    @field_validator("size")
+    @classmethod
+    def _positive(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if min(v) <= 0:
+            raise ValueError("all extents must be > 0")
+        return v
+
+
+class CylinderObstacle(_Model):
+    type: Literal["cylinder"]
+    x: float
+    y: float
+    radius: float = Field(gt=0)
+    height: float = Field(0.5, gt=0)
+
+
+Obstacle = Annotated[BoxObstacle | CylinderObstacle, Field(discriminator="type")]
+
+
+class RandomObstaclesCfg(_Model):
+    """Boxes scattered at random (the thesis' pavilion trials moved their obstacles): drawn from the session seed
+    when the config is loaded and added to ``obstacles``, so one seed gives one layout and the world sees
+    ordinary boxes."""
+
+    count: int = Field(ge=1, le=1000)
+    side_m: tuple[float, float] = Field((0.3, 1.0), description="range of each box side (x and y drawn apart)")
+    height_m: float = Field(0.5, gt=0)
+    clearance_m: float = Field(0.8, ge=0, description="free gap kept to the robots' start poses, the walls and "
+                                                      "the other obstacles")
+    keep_clear: list[tuple[float, float, float]] = Field([], description="(x, y, radius) discs kept free of boxes, "
+                                                                         "e.g. the rangers' entrance")
+
+    @field_validator("side_m")
+    @classmethod
+    def _sides(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0 < v[0] <= v[1]:
+            raise ValueError(f"need 0 < min <= max, got {list(v)}")
+        return v
+
+
+class LightSource(_Model):
+    """A light spot: illuminance adds a Gaussian of ``peak_lux`` and ``sigma_m`` to the ambient."""
+
+    x: float
+    y: float
+    peak_lux: float = Field(gt=0)
+    sigma_m: float = Field(gt=0)
+
+
+class LightCfg(_Model):
+    ambient_lux: float = Field(50.0, ge=0)
+    sources: list[LightSource] = []
+
+    def illuminance(self, x: Any, y: Any) -> Any:
+        """Illuminance (lux) at (x, y): floats or numpy arrays of any shape."""
+        total = np.zeros(np.broadcast(x, y).shape) + self.ambient_lux
+        for s in self.sources:
+            total = total + s.peak_lux * np.exp(-((x - s.x) ** 2 + (y - s.y) ** 2) / (2 * s.sigma_m * s.sigma_m))
+        return total
+
+
+class ObjectiveCfg(_Model):
+    """What the robots' light sensor reads: the light field, or the chapter 8 mapping objective
+    (bridge/studies/rdpso/mapping.py):
+    eq. 8.1 on an entropy map the world keeps from the robots' true poses, as lux from ``lux_min`` (nothing to map
+    nearby) to ``lux_max`` (the best frontier)."""
+
+    kind: Literal["light", "mapping"] = "light"
+    r_w_m: float = Field(1.0, gt=0, description="mapping: sensing radius R_w of each robot's scan")
+    cell_m: float = Field(0.1, gt=0, description="mapping: occupancy-grid cell size")
+    sigma_m: float | None = Field(None, gt=0, description="mapping: entropy smoothing for the gradient (R_w / 2)")
+    scan_period_s: float = Field(0.5, gt=0, description="mapping: simulated seconds between the robots' scans")
+    lux_min: float = Field(10.0, ge=0, description="mapping: lux read where the objective is 0")
+    lux_max: float = Field(200.0, gt=0, description="mapping: lux read where the objective is 1")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ObjectiveCfg:
+        if self.kind == "light":
+            self._only_for_kind(self.kind, set(), {"kind"})
+            return self
+        if self.r_w_m < self.cell_m:
+            raise ValueError(f"r_w_m = {self.r_w_m} is smaller than one cell (cell_m = {self.cell_m})")
+        if self.lux_max <= self.lux_min:
+            raise ValueError(f"lux_max = {self.lux_max} must exceed lux_min = {self.lux_min}")
+        return self
+
+
+class Placement(_Model):
+    kind: Literal["grid", "random", "explicit", "spiral"] = "grid"
+    origin: tuple[float, float] = (1.0, 1.0)
+    spacing_m: float = Field(0.5, gt=0)
+    columns: int = Field(5, ge=1)
+    region: tuple[float, float, float, float] | None = Field(
+        None, description="x_min, y_min, x_max, y_max for random placement (default: whole arena)"
+    )
+    min_separation_m: float = Field(0.3, gt=0)
+    poses: list[tuple[float, float, float]] = Field([], description="explicit [x, y, yaw_deg] per robot")
+    centres: list[tuple[float, float]] = Field([], description="spiral: one spiral of Theodorus per centre; the "
+                                               "robots are split into as many consecutive blocks (as the RDPSO "
+                                               "splits them into initial subgroups), spacing_m apart")
+    yaw_deg: float | Literal["random"] = "random"
+
+    @model_validator(mode="after")
+    def _fields_fit_kind(self) -> Placement:
+        applies = {"grid": {"origin", "spacing_m", "columns", "yaw_deg"},
+                   "random": {"region", "min_separation_m", "yaw_deg"},
+                   "explicit": {"poses"},
+                   "spiral": {"centres", "spacing_m", "yaw_deg"}}[self.kind]
+        self._only_for_kind(self.kind, applies, {"kind"})
+        if self.kind == "spiral" and not self.centres:
+            raise ValueError("centres: a spiral placement needs at least one centre")
+        return self
+
+
+XBEE_BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)  # the BD table of the XBee modules
+
+
+def _xbee_baud(v: int) -> int:
+    if v not in XBEE_BAUDS:
+        raise ValueError(f"{v} is not an XBee BD rate; one of {', '.join(map(str, XBEE_BAUDS))}")
+    return v
+
+
+XBeeBaud = Annotated[int, AfterValidator(_xbee_baud)]
+
+
+class XBeeCfg(_Model):
+    """A robot's XBee module: which firmware it runs and how its UART is set up (as configured with XCTU)."""
+
+    series: Literal[1, 2] = Field(2, description="1: 802.15.4 firmware (frames 0x00/0x01/0x80/0x81/0x89); "
+                                                 "2: ZigBee firmware (0x10/0x8B/0x90), the eSwarBot's module")
+    api_mode: Literal[1, 2] = Field(1, description="AP: 1 plain API frames, 2 API frames with escaped bytes")
+    baud: XBeeBaud = Field(9600, description="BD: UART rate in bit/s (the modules' default is 9600)")
+    power_level: int = Field(4, ge=0, le=4, description="PL: transmit power level, 4 is the highest")
+    pan_id: int = Field(0x3332, ge=0, le=0xFFFF, description="ID: PAN id; modules hear only their own PAN")
+    channel: int = Field(0x0C, ge=0x0B, le=0x1A, description="CH: 802.15.4 channel 11-26")
+    pty: str | None = Field(None, description="expose this XBee's UART on a pseudo-terminal, linked at this path "
+                                              "(relative to the session's output directory; '{id}' is replaced by "
+                                              "the robot id); the robot's own logic then cannot open sitl://xbee")
+    device: str | None = Field(None, description="a real XBee on this serial device (or pyserial URL) is the robot's "
+                                                 "radio: its logic talks to it at series/api_mode/baud as set here, it "
+                                                 "transmits on the real air, and the simulated radio channel does not "
+                                                 "include it")
+
+    @model_validator(mode="after")
+    def _one_way_out(self) -> XBeeCfg:
+        if self.pty and self.device:
+            raise ValueError("pty and device exclude each other: the module is either simulated (its UART on a pty) or "
+                             "real (on the device)")
+        return self
+
+
+
+def _check_times(waypoints: list[tuple[float, ...]], field: str = "") -> None:
+    """A path's waypoints are in time order, from 0 on."""
+    times = [w[0] for w in waypoints]
+    if times and (times[0] < 0 or any(b <= a for a, b in itertools.pairwise(times))):
+        raise ValueError(f"{field}times must start at 0 or later and increase strictly")
+
+
+class MotionCfg(_Model):
+    """How a robot body moves that the session does not drive: its LLC is a real board (``can.device``) or it is a
+    MAVLink vehicle. The session cannot know where the real thing goes, so the config states it."""
+
+    kind: Literal["simulated", "fixed", "scripted"] = Field(
+        "simulated", description="simulated: the world drives the body from the LLC's motor outputs; fixed: the body "
+                                 "stays at its placement; scripted: it follows waypoints")
+    waypoints: list[tuple[float, float, float, float]] = Field(
+        [], description="scripted: [t_s, x, y, yaw_deg] in increasing time; the pose is interpolated linearly "
+                        "between them, the first holds before and the last after")
+
+    @model_validator(mode="after")
+    def _fields_fit_kind(self) -> MotionCfg:
+        self._only_for_kind(self.kind, {"waypoints"} if self.kind == "scripted" else set(), {"kind"})
+        if self.kind == "scripted":
+            if not self.waypoints:
+                raise ValueError("waypoints: a scripted motion needs at least one [t_s, x, y, yaw_deg]")
+            _check_times(self.waypoints, "waypoints: ")
+        return self
+
+
+class RobotCanCfg(_Model):
+    """A robot's CAN bus: outside access to the simulated bus, or the real board the bus bridges to."""
+
+    slcan_pty: str | None = Field(
+        None, description="expose the robot's CAN bus on a pseudo-terminal as a LAWICEL (slcan) USB-CAN adapter, "
+                          "linked at this path (relative to the session's output directory; '{id}' is replaced by the "
+                          "robot id): python-can's slcan interface, candump-style tools and a real robot's logic "
+                          "open it")
+    device: dict[str, Any] | None = Field(
+        None, description="the robot's real LLC board is on this CAN interface, given as python-can Bus arguments, "
+                          "e.g. { interface = \"socketcan\", channel = \"can0\" } or { interface = \"slcan\", "
+                          "channel = \"/dev/ttyACM0\", bitrate = 500000 }: the session bridges the robot's bus to it "
+                          "and does not simulate the LLC (state the body's motion)")
+
+    @field_validator("device")
+    @classmethod
+    def _python_can_args(cls, v: dict[str, Any] | None) -> dict[str, Any] | None:
+        if v is not None:
+            from can.interfaces import VALID_INTERFACES
+
+            if not isinstance(v.get("interface"), str) or "channel" not in v:
+                raise ValueError("needs interface and channel, e.g. { interface = \"socketcan\", channel = \"can0\" }")
+            if v["interface"] == "sitl":
+                raise ValueError("interface 'sitl' is the session's own simulated bus; name the interface of the "
+                                 "real board's adapter")
+            if v["interface"] not in VALID_INTERFACES:
+                raise ValueError(f"interface {v['interface']!r} is not a python-can interface; one of "
+                                 f"{', '.join(sorted(VALID_INTERFACES))}")
+        return v
+
+
+class VehicleCfg(_Model):
+    """A vehicle that speaks only MAVLink (an ArduPilot Rover, another swarm's robot) stands in the swarm for this
+    robot: the session's swarm logic drives it through ``swarm_logic.mavlink.low_level`` instead of an LLC."""
+
+    url: str = Field(description="where the vehicle is: a pymavlink connection (udpin:0.0.0.0:14551, "
+                                 "udpout:192.168.4.1:14550, tcp:HOST:PORT) or a serial device (/dev/ttyUSB1)")
+    target_system: int = Field(1, ge=1, le=255, description="the vehicle's MAVLink system id")
+    target_component: int = Field(1, ge=0, le=255)
+    baudrate: int = Field(57600, gt=0, description="serial devices: the telemetry radio's rate")
+    timeout_s: float = Field(10.0, gt=0, description="how long the logic waits for the vehicle's first heartbeat")
+
+
+class RobotGroup(_Model):
+    profile: str = "eswarbot"
+    count: int = Field(1, ge=1, le=10000)
+    behaviour: str = "random_walk"
+    params: dict[str, Any] = {}
+    placement: Placement = Placement()
+    xbee: XBeeCfg | None = Field(None, description="the robot's XBee radio module (none: no radio)")
+    uwb: bool = Field(False, description="fit a DWM1001-class UWB ranging module")
+    pose_source: Literal["odometry", "ground_truth"] = Field(
+        "odometry", description="odometry: the LLC reports its dead-reckoned pose in ODOMETRY (from (0, 0, 0) at "
+                                "power-up, or ODOM_SET); ground_truth: the LLC reports the true pose in ODOMETRY, "
+                                "as if a motion-capture system fed it; an idealisation for algorithm tests, "
+                                "flagged in STATUS and summary.json")
+
+    logic: Literal["session", "external", "remote"] = Field(
+        "session", description="session: the session runs the robot's swarm logic (in simulated time); external: "
+                               "a program outside the session (a real robot's companion computer, a test) runs it in "
+                               "wall time and reaches the robot's devices only through their ports (xbee.pty, "
+                               "can.slcan_pty); remote: the session's own logic process for the robot runs on "
+                               "another computer, joining over zenoh (session.listen, swarm-sitl join), still in "
+                               "simulated time")
+    can: RobotCanCfg = RobotCanCfg()
+    vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
+                                                         "over MAVLink (state the body's motion)")
+    motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
+    conveyor_slots: int | None = Field(None, ge=1, le=255, description="scouts each robot of this group carries "
+                                        "(overrides its profile's conveyor, e.g. 20 to put 60 scouts on 3 rangers)")
+    carried_by: int | None = Field(None, ge=0, description="index of the robot group whose robots carry these on "
+                                                           "their conveyor (TraxBot rangers): they start on board, "
+                                                           "filled ranger by ranger in robot order, and are "
+                                                           "released when the carrier's belt advances")
+
+    @model_validator(mode="after")
+    def _pty_per_robot(self) -> RobotGroup:
+        for what, link in (("xbee.pty", self.xbee.pty if self.xbee else None), ("can.slcan_pty", self.can.slcan_pty)):
+            if link and self.count > 1 and "{id}" not in link:
+                raise ValueError(f"{what}: a group of several robots needs '{{id}}' in the link path")
+        if self.logic == "external":
+            if not self.can.slcan_pty:
+                raise ValueError("can.slcan_pty: an external logic reaches the robot's LLC through its CAN bus: "
+                                 "expose it, e.g. can = { slcan_pty = \"r{id}-can\" }")
+            if self.xbee is not None and not (self.xbee.pty or self.xbee.device):
+                raise ValueError("xbee.pty: an external logic reaches the robot's XBee through a pseudo-terminal: give "
+                                 "it one, e.g. xbee = { pty = \"r{id}-xbee\" }")
+            if self.uwb:
+                raise ValueError("uwb: a UWB module cannot be reached from an external logic (it has no port); "
+                                 "drop it")
+        if self.vehicle is not None:
+            if self.can.device is not None:
+                raise ValueError("vehicle: a MAVLink vehicle has no LLC on a CAN bus: drop can.device")
+            if self.logic == "external":
+                raise ValueError("vehicle: the session's logic drives a MAVLink vehicle; an external program talks to "
+                                 "it directly, without the session")
+        if self.logic == "remote":
+            for what, on in (("xbee.device", bool(self.xbee and self.xbee.device)), ("vehicle", self.vehicle)):
+                if on:
+                    raise ValueError(f"{what}: a remote logic would open it on its own computer, where the session "
+                                     "cannot check it before the start; run that robot's logic in the session")
+        simulated_llc = self.can.device is None and self.vehicle is None
+        if simulated_llc and self.motion.kind != "simulated":
+            raise ValueError(f"motion.kind = {self.motion.kind!r}: the session drives this robot's wheels through its "
+                             "simulated LLC; a stated motion is for a robot whose LLC is real (can.device) or that "
+                             "is a MAVLink vehicle (vehicle)")
+        if not simulated_llc:
+            what = "can.device" if self.vehicle is None else "vehicle"
+            if self.motion.kind == "simulated":
+                raise ValueError(f"motion: with {what} the robot moves in the real world, where the session cannot "
+                                 "see it: state where its body is, motion = { kind = \"fixed\" } (at its placement) "
+                                 "or { kind = \"scripted\", waypoints = [[t_s, x, y, yaw_deg], ...] }")
+            if self.pose_source == "ground_truth":
+                raise ValueError(f"pose_source: with {what} the LLC that would report the true pose is not simulated")
+        if self.carried_by is not None and self.placement != Placement():
+            raise ValueError("placement: robots carried by a ranger start on board; where they go down is the "
+                             "ranger's to decide")
+        if self.carried_by is not None and not simulated_llc:
+            raise ValueError("carried_by: a carried robot is a simulated one")
+        if self.conveyor_slots is not None and not robot_profile(self.profile).conveyor_slots:
+            raise ValueError(f"conveyor_slots: a {self.profile} has no conveyor to resize")
+        if self.motion.kind == "scripted" and self.count > 1:
+            raise ValueError("motion: scripted waypoints are one body's path: give the robot a group of its own "
+                             "(count = 1)")
+        return self
+
+    def real_ports(self) -> list[str]:
+        """The fields that open this group to the outside world (wall time): what makes a session real-time."""
+        return [f for f, on in (("xbee.pty", bool(self.xbee and self.xbee.pty)),
+                                ("xbee.device", bool(self.xbee and self.xbee.device)),
+                                ("can.slcan_pty", bool(self.can.slcan_pty)),
+                                ("can.device", self.can.device is not None), ("vehicle", self.vehicle is not None),
+                                ("logic", self.logic == "external")) if on]
+
+    @field_validator("profile")
+    @classmethod
+    def _known_profile(cls, v: str) -> str:
+        try:
+            robot_spec(v)
+        except PluginError as e:
+            raise ValueError(str(e).replace("unknown robot", "unknown robot profile")) from None
+        return v
+
+
+class XBeeGatewayCfg(_Model):
+    """A real XBee on this machine joined to the simulated radio channel: the gateway is a simulated module at a
+    stated pose, wired back to back to the real one (as two radios and a relay board would be). What the
+    simulated module hears it sends on the real air; what the real one hears it sends into the simulation."""
+
+    device: str = Field(description="the real XBee's serial device (or pyserial URL), e.g. /dev/ttyUSB0")
+    baud: XBeeBaud = Field(9600, description="BD of the real module, as configured with XCTU")
+    api_mode: Literal[1, 2] = Field(1, description="AP of the real module")
+    series: Literal[1, 2] = Field(2, description="firmware of both modules (the real one's and its simulated "
+                                                 "twin's): the desk radio's and the swarm's")
+    pose: tuple[float, float] = Field(description="x, y of the gateway's simulated antenna in the arena (m)")
+    waypoints: list[tuple[float, float, float]] = Field(
+        [], description="or a path: [t_s, x, y] in increasing time, interpolated linearly (pose is where it starts)")
+    pan_id: int = Field(0x3332, ge=0, le=0xFFFF, description="ID of the simulated twin: the swarm's PAN")
+    channel: int = Field(0x0C, ge=0x0B, le=0x1A, description="CH of the simulated twin: the swarm's channel")
+    power_level: int = Field(4, ge=0, le=4, description="PL of the simulated twin")
+    peer: str | None = Field(None, description="64-bit address (16 hex digits) of the desk radio: what the swarm "
+                                               "sends goes to it as a unicast; none: as a broadcast")
+
+    @field_validator("peer")
+    @classmethod
+    def _addr64(cls, v: str | None) -> str | None:
+        if v is not None and not (len(v) == 16 and all(c in "0123456789abcdefABCDEF" for c in v)):
+            raise ValueError(f"{v!r} is not a 64-bit address of 16 hex digits (e.g. 0013A20041A7B2C3)")
+        return v
+
+    @field_validator("waypoints")
+    @classmethod
+    def _increasing(cls, v: list[tuple[float, float, float]]) -> list[tuple[float, float, float]]:
+        _check_times(v)
+        return v
+
+
+class FaultCfg(_Model):
+    """An injected fault, from ``at_s`` on.
+
+    ``battery_depleted``: the robot's battery is exhausted: its motors stop and its radio falls silent, for good
+    (the thesis' battery deaths). ``firmware_crash``: the robot's firmware crashes and the robot is dead from then on
+    (as a battery death in the
+    thesis: motors stop, its radio goes silent, its logic stops). ``can_bus_off``: every frame the robot's CAN node
+    ``node`` transmits is destroyed (a failing transceiver, a loose CAN_H/CAN_L wire at its connector), so its
+    error counter climbs to bus-off within a few milliseconds and again after each recovery, for ``duration_s``.
+    ``can_noise``: every frame on the robot's bus is destroyed with ``probability`` (EMI), for ``duration_s``.
+    """
+
+    robot: int = Field(ge=0, description="robot id")
+    at_s: float = Field(gt=0, description="simulated time the fault starts")
+    kind: Literal["firmware_crash", "battery_depleted", "can_bus_off", "can_noise"] = "firmware_crash"
+    node: Literal["host", "llc", "slcan"] = Field(
+        "host", description="can_bus_off: whose transmissions fail: host (the companion computer's CAN adapter), llc "
+                            "or slcan")
+    duration_s: float | None = Field(None, gt=0, description="can faults: how long it lasts (none: to the end)")
+    probability: float = Field(0.01, gt=0, le=1, description="can_noise: share of frames destroyed")
+
+    @model_validator(mode="after")
+    def _fields_fit_kind(self) -> FaultCfg:
+        applies = {"firmware_crash": set(), "battery_depleted": set(), "can_bus_off": {"node", "duration_s"},
+                   "can_noise": {"duration_s", "probability"}}[self.kind]
+        self._only_for_kind(self.kind, applies, {"robot", "at_s", "kind"})
+        return self
+
+
+class CanCfg(_Model):
+    """Every robot's CAN bus: the LLC's controller (MCP2515) and the companion computer's adapter (docs/models.md)."""
+
+    bitrate: Literal[125_000, 250_000, 500_000, 1_000_000] = Field(500_000, description="bit/s, as the nodes are "
+                                                                                        "set up")
+    host_restart_ms: float | None = Field(100.0, ge=0, description="after bus-off, the companion computer's adapter "
+                                                                   "restarts this long after the bus allows it "
+                                                                   "(socketcan restart-ms); none: it stays bus-off")
+
+
+class MavlinkCfg(_Model):
+    """Every robot's MAVLink face behind one UDP endpoint for ground stations (docs/hil.md)."""
+
+    endpoint: str | None = Field(None, description="udpout:HOST:PORT (send to a ground station listening there, e.g. "
+                                                   "udpout:127.0.0.1:14550) or udpin:HOST:PORT (listen there; port 0: "
+                                                   "any free port); none: the robots have no MAVLink face")
+    per_robot: bool = Field(False, description="one endpoint per robot, at the endpoint's port + robot id")
+    system_id_base: int = Field(1, ge=1, le=255, description="robot r is MAVLink system system_id_base + r")
+    boot: Literal["auto", "hold", "disarmed"] = Field(
+        "auto", description="auto: armed, the swarm behaviour runs from the start (as without a ground station); "
+                            "hold: armed, waiting in HOLD; disarmed: waiting to be armed and set to AUTO or GUIDED")
+    rates: dict[str, float] = Field({}, description="telemetry rates in Hz by message name, e.g. { ATTITUDE = 5 }")
+
+    @field_validator("endpoint")
+    @classmethod
+    def _endpoint(cls, v: str | None) -> str | None:
+        if v is not None:
+            from bridge.hil.mavlink_gateway import parse_endpoint
+
+            parse_endpoint(v)
+        return v
+
+
+class Config(_Model):
+    session: SessionCfg = SessionCfg()
+    world: WorldCfg = WorldCfg()
+    arena: ArenaCfg = ArenaCfg()
+    obstacles: list[Obstacle] = []
+    random_obstacles: RandomObstaclesCfg | None = Field(None, description="boxes drawn from the session seed at "
+                                                                          "load, added to obstacles")
+    light: LightCfg = LightCfg()
+    objective: ObjectiveCfg = Field(ObjectiveCfg(), description="what the light sensor reads "
+                                                                "(bridge/studies/rdpso/mapping.py)")
+    radio: RadioCfg = Field(RadioCfg(), description="the 2.4 GHz channel the XBees share (docs/radio.md)")
+    uwb: UwbCfg = Field(UwbCfg(), description="UWB ranging noise and TDMA budget (docs/uwb.md)")
+    robots: list[RobotGroup] = Field(min_length=1)
+    faults: list[FaultCfg] = Field([], description="injected faults (a firmware crash, CAN bus-off or noise)")
+    can: CanCfg = Field(CanCfg(), description="the robots' CAN buses")
+    mavlink: MavlinkCfg = Field(MavlinkCfg(), description="the robots' MAVLink faces and the ground-station endpoint")
+    xbee_gateways: list[XBeeGatewayCfg] = Field([], description="real XBees joined to the simulated radio channel")
+
+    @model_validator(mode="after")
+    def _quantum_fits_physics(self) -> Config:
+        steps = self.session.quantum_ms * 1e-3 * self.world.physics_hz
+        if steps < 1 - 1e-9:
+            raise ValueError(
+                f"session.quantum_ms = {self.session.quantum_ms} is shorter than one physics step "
+                f"(world.physics_hz = {self.world.physics_hz})"
+            )
+        m = self.mavlink
+        if m.endpoint is not None and m.system_id_base + self.robot_count - 1 > 255:
+            raise ValueError(f"mavlink.system_id_base = {m.system_id_base}: {self.robot_count} robots need system "
+                             f"ids up to {m.system_id_base + self.robot_count - 1}, beyond MAVLink's 255")
+        real = [f"robots[{i}].{f}" for i, g in enumerate(self.robots) for f in g.real_ports()]
+        real += [f"xbee_gateways[{i}]" for i in range(len(self.xbee_gateways))]
+        remote = [f"robots[{i}].logic" for i, g in enumerate(self.robots) if g.logic == "remote"]
+        if remote and self.session.listen is None:
+            raise ValueError(f"session.listen: {', '.join(remote)} = \"remote\" joins over zenoh from another "
+                             "computer: give the world an endpoint to listen on, e.g. listen = \"tcp/0.0.0.0:7447\"")
+        if real and self.session.speed != 1:
+            raise ValueError(f"session.speed = {self.session.speed!r}: a session with ports to the outside world "
+                             f"({', '.join(real)}) runs paced to wall time: set speed = 1 (or --speed 1)")
+        capacity: dict[int, int] = {}
+        for i, g in enumerate(self.robots):
+            c = g.carried_by
+            if c is None:
+                continue
+            if c >= len(self.robots) or c == i:
+                raise ValueError(f"robots[{i}].carried_by = {c}: not another robot group (there are "
+                                 f"{len(self.robots)})")
+            carrier = self.robots[c]
+            slots = self.profile(carrier).conveyor_slots
+            if not slots or carrier.carried_by is not None:
+                raise ValueError(f"robots[{i}].carried_by = {c}: robots[{c}] ({carrier.profile}) has no conveyor "
+                                 "to carry robots on")
+            capacity[c] = capacity.get(c, 0) + g.count
+            if capacity[c] > carrier.count * slots:
+                raise ValueError(f"robots[{i}].count: robots[{c}] carries at most {carrier.count} x {slots} = "
+                                 f"{carrier.count * slots} robots, {capacity[c]} would ride on them")
+        for g in self.robots:
+            period_ms = 1000.0 / robot_profile(g.profile).llc_loop_hz
+            if self.session.quantum_ms > period_ms + 1e-9:
+                raise ValueError(
+                    f"session.quantum_ms = {self.session.quantum_ms} is longer than the {g.profile} LLC loop "
+                    f"period ({period_ms:g} ms): a board cannot run its loop more than once per quantum"
+                )
+        return self
+
+    @property
+    def robot_count(self) -> int:
+        return sum(g.count for g in self.robots)
+
+    def profile(self, group: RobotGroup) -> RobotProfile:
+        """The group's robot profile, with its own conveyor size if it sets one."""
+        prof = robot_profile(group.profile)
+        if group.conveyor_slots is not None:
+            return prof.model_copy(update={"conveyor_slots": group.conveyor_slots})
+        return prof
+
+
+def _loc(loc: tuple[Any, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("box", "cylinder", "function-after[_positive(), tuple[float, float, float]]"):
+            continue  # discriminator tags add nothing for a reader
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def _format(path: str, err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        msg = e["msg"].removeprefix("Value error, ")
+        lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+    return "\n".join(lines)
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
+    """Read and validate ``path``; ``overrides`` are command-line values (``session.seed`` etc.)."""
+    p = Path(path)
+    try:
+        raw = tomllib.loads(p.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{p}: not valid TOML: {e}") from None
+    for dotted, value in (overrides or {}).items():
+        if value is None:
+            continue
+        if dotted == "robots.count":
+            groups = raw.get("robots", [])
+            if len(groups) != 1:
+                raise ConfigError(f"{p}: robots: --robots needs exactly one [[robots]] group, found {len(groups)}")
+            groups[0]["count"] = value
+            continue
+        section, key = dotted.split(".")
+        raw.setdefault(section, {})[key] = value
+    try:
+        cfg = Config.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(_format(str(p), e)) from None
+    base = p.parent
+    if cfg.arena.map is not None:
+        mp = (base / cfg.arena.map).resolve()
+        if not mp.is_file():
+            raise ConfigError(f"{p}: arena.map: no such file {cfg.arena.map!r} (relative to the config)")
+        cfg.arena.map = str(mp)
+        try:
+            from bridge.core.arena_map import occupancy
+
+            occupancy(cfg.arena)
+        except Exception as e:
+            raise ConfigError(f"{p}: arena.map: cannot read {mp.name} as an image: {e}") from None
+    expand_random_obstacles(str(p), cfg)
+    _check_geometry(str(p), cfg)
+    _check_behaviours(str(p), cfg)
+    return cfg
+
+
+def _check_behaviours(path: str, cfg: Config) -> None:
+    """Each group's behaviour must load, and its params must be ones it declares, of the declared kind."""
+    from swarm_logic.behaviours import load_behaviour
+
+    for i, g in enumerate(cfg.robots):
+        try:
+            cls = load_behaviour(g.behaviour)
+        except Exception as e:
+            raise ConfigError(f"{path}: robots[{i}].behaviour: {e}") from None
+        declared = getattr(cls, "defaults", None)
+        if not declared:
+            continue
+        unknown = sorted(set(g.params) - set(declared))
+        if unknown:
+            raise ConfigError(f"{path}: robots[{i}].params: unknown parameters {unknown} for {g.behaviour}; "
+                              f"known: {sorted(declared)}")
+        for k, v in g.params.items():
+            d = declared[k]
+            if isinstance(d, int | float) and not isinstance(d, bool) and (
+                    isinstance(v, bool) or not isinstance(v, int | float)):
+                raise ConfigError(f"{path}: robots[{i}].params.{k}: expected a number, got {v!r}")
+        if getattr(cls, "needs_radio", False) and g.xbee is None:
+            raise ConfigError(f"{path}: robots[{i}].xbee: {g.behaviour} talks over the radio: give the group an "
+                              "XBee, e.g. xbee = { series = 2, baud = 115200 }")
+        resolve = getattr(cls, "resolve", None)  # a controller that checks the meaning of its parameters
+        if resolve is not None:
+            try:
+                resolve(dict(g.params))
+            except ValueError as e:
+                raise ConfigError(f"{path}: robots[{i}].params: {e}") from None
+
+
+def config_warnings(cfg: Config) -> list[str]:
+    """What is allowed but unwise: e.g. controller parameters outside their stable region (each names the bound)."""
+    from swarm_logic.behaviours import load_behaviour
+
+    out = []
+    if cfg.mavlink.endpoint is not None:
+        from bridge.hil.mavlink_gateway import is_loopback, parse_endpoint
+
+        if not is_loopback(parse_endpoint(cfg.mavlink.endpoint).host):
+            out.append(f"mavlink.endpoint: {cfg.mavlink.endpoint} is not on this machine: MAVLink traffic leaves it")
+    if cfg.session.listen is not None:
+        from bridge.hil.mavlink_gateway import is_loopback
+
+        host = cfg.session.listen.removeprefix("tcp/").rpartition(":")[0].removeprefix("[").removesuffix("]")
+        if not is_loopback(host):
+            out.append(f"session.listen: {cfg.session.listen} is reachable from other machines: the session's traffic "
+                       "(ticks, frames, the plan with the whole config) leaves this one unencrypted, and anyone who "
+                       "can reach the port can join or disturb the session (use a trusted network or a firewall)")
+    for i, g in enumerate(cfg.robots):
+        warn = getattr(load_behaviour(g.behaviour), "warnings", None)
+        if warn is not None:
+            out += [f"robots[{i}].params: {w}" for w in warn(dict(g.params))]
+    return out
+
+
+def expand_random_obstacles(path: str, cfg: Config) -> None:
+    """Draw ``random_obstacles`` from the session seed (bridge.core.rng) and append them to ``obstacles`` as boxes, each
+    inside the arena and, by its circumscribed disc, at least ``clearance_m`` from the walls, the other obstacles
+    and the explicit and grid start poses, and outside the ``keep_clear`` discs."""
+    ro = cfg.random_obstacles
+    if ro is None:
+        return
+    from bridge.core.rng import stream
+
+    w, length = cfg.arena.width_m, cfg.arena.length_m
+    lo, hi = ro.side_m
+    gap = ro.clearance_m
+    if math.hypot(lo, lo) / 2 + gap >= min(w, length) / 2:
+        raise ConfigError(f"{path}: random_obstacles.side_m: a box of side {lo} m with clearance_m {gap} does not fit "
+                          f"the {w} x {length} m arena")
+    for j, (x, y, r) in enumerate(ro.keep_clear):
+        if not (0 <= x <= w and 0 <= y <= length and r >= 0):
+            raise ConfigError(f"{path}: random_obstacles.keep_clear[{j}]: ({x}, {y}) is outside the arena or the "
+                              f"radius {r} is negative")
+    discs = [(x, y, r) for x, y, r in ro.keep_clear]
+    for g in cfg.robots:  # the start poses the config fixes (random placements keep clear of obstacles themselves)
+        radius = robot_profile(g.profile).radius_m + gap
+        if g.placement.kind == "explicit":
+            discs += [(x, y, radius) for x, y, _ in g.placement.poses]
+        elif g.placement.kind == "grid" and g.carried_by is None:
+            pl = g.placement
+            discs += [(pl.origin[0] + (i % pl.columns) * pl.spacing_m, pl.origin[1] + (i // pl.columns) * pl.spacing_m,
+                       radius) for i in range(g.count)]
+    discs += [(gw.pose[0], gw.pose[1], gap) for gw in cfg.xbee_gateways]
+    placed = [(ob.x, ob.y, ob.radius if isinstance(ob, CylinderObstacle) else math.hypot(*ob.size[:2]) / 2)
+              for ob in cfg.obstacles]
+    rng = stream(cfg.session.seed, "random_obstacles")
+    new: list[Obstacle] = []
+    tries = 0
+    while len(new) < ro.count:
+        tries += 1
+        if tries > 5000:  # in a row without a place for the next box
+            raise ConfigError(f"{path}: random_obstacles.count: placed only {len(new)} of {ro.count} boxes clear of "
+                              f"the start poses, keep_clear discs and each other (lower count, side_m or "
+                              "clearance_m)")
+        sx, sy = (float(v) for v in rng.uniform(lo, hi, 2))
+        yaw = float(rng.uniform(0.0, 180.0))
+        rb = math.hypot(sx, sy) / 2
+        if rb + gap >= min(w, length) / 2:
+            continue
+        x, y = float(rng.uniform(rb + gap, w - rb - gap)), float(rng.uniform(rb + gap, length - rb - gap))
+        if any(math.hypot(x - cx, y - cy) < rb + cr for cx, cy, cr in discs) or \
+                any(math.hypot(x - cx, y - cy) < rb + cr + gap for cx, cy, cr in placed):
+            continue
+        tries = 0
+        placed.append((x, y, rb))
+        new.append(BoxObstacle(type="box", x=round(x, 3), y=round(y, 3),
+                               size=(round(sx, 3), round(sy, 3), ro.height_m), yaw_deg=round(yaw, 1)))
+    cfg.obstacles = [*cfg.obstacles, *new]
+
+
+def _check_geometry(path: str, cfg: Config) -> None:
+    w, length = cfg.arena.width_m, cfg.arena.length_m
+    for i, ob in enumerate(cfg.obstacles):
+        if not (0 <= ob.x <= w and 0 <= ob.y <= length):
+            raise ConfigError(f"{path}: obstacles[{i}]: centre ({ob.x}, {ob.y}) is outside the {w} x {length} m arena")
+    groups = [g for g in cfg.robots for _ in range(g.count)]
+    for i, f in enumerate(cfg.faults):
+        if f.robot >= cfg.robot_count:
+            raise ConfigError(f"{path}: faults[{i}].robot: no robot {f.robot} (the session has {cfg.robot_count})")
+        if f.kind == "can_bus_off" and f.node == "slcan" and not groups[f.robot].can.slcan_pty:
+            raise ConfigError(f"{path}: faults[{i}].node: robot {f.robot} has no slcan adapter (can.slcan_pty)")
+    for i, light in enumerate(cfg.light.sources):
+        if not (math.isfinite(light.x) and math.isfinite(light.y)):
+            raise ConfigError(f"{path}: light.sources[{i}]: position must be finite")
+    def inside(x: float, y: float) -> bool:
+        return 0 < x < w and 0 < y < length
+
+    for i, g in enumerate(cfg.robots):
+        for j, (_, x, y, _) in enumerate(g.motion.waypoints):
+            if not inside(x, y):
+                raise ConfigError(f"{path}: robots[{i}].motion.waypoints[{j}]: ({x}, {y}) is outside the arena")
+    for i, gw in enumerate(cfg.xbee_gateways):
+        for where, (x, y) in [("pose", gw.pose)] + [(f"waypoints[{j}]", (x, y)) for j, (_, x, y) in
+                                                    enumerate(gw.waypoints)]:
+            if not inside(x, y):
+                raise ConfigError(f"{path}: xbee_gateways[{i}].{where}: ({x}, {y}) is outside the arena")
+    for i, g in enumerate(cfg.robots):
+        pl = g.placement
+        if pl.kind == "explicit":
+            if len(pl.poses) != g.count:
+                raise ConfigError(
+                    f"{path}: robots[{i}].placement.poses: {len(pl.poses)} poses for count = {g.count}"
+                )
+            for j, (x, y, _) in enumerate(pl.poses):
+                if not (0 < x < w and 0 < y < length):
+                    raise ConfigError(f"{path}: robots[{i}].placement.poses[{j}]: ({x}, {y}) is outside the arena")
+        if pl.region is not None:
+            x0, y0, x1, y1 = pl.region
+            if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= length):
+                raise ConfigError(f"{path}: robots[{i}].placement.region: must lie inside the arena with x0<x1, y0<y1")
+
+
+def to_toml(d: dict[str, Any]) -> str:
+    """A minimal TOML writer for config dicts (tables, arrays of tables, scalars, arrays of scalars)."""
+    lines: list[str] = []
+
+    def scalar(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int | float):
+            return repr(v)
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(scalar(x) for x in v) + "]"
+        raise TypeError(f"cannot write {v!r} as TOML")
+
+    def table(prefix: str, t: dict[str, Any], header: str | None) -> None:
+        if header is not None:
+            lines.append(header)
+        subs = []
+        for k, v in t.items():
+            if isinstance(v, dict):
+                subs.append((k, v, False))
+            elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+                subs.append((k, v, True))
+            else:
+                lines.append(f"{k} = {scalar(v)}")
+        for k, v, many in subs:
+            name = f"{prefix}{k}"
+            if many:
+                for item in v:
+                    lines.append("")
+                    table(name + ".", item, f"[[{name}]]")
+            else:
+                lines.append("")
+                table(name + ".", v, f"[{name}]")
+
+    table("", d, None)
+    return "\n".join(lines).lstrip("\n") + "\n"

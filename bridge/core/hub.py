@@ -1,0 +1,646 @@
+"""The world process: clock authority, message router, physics and recorder of a session.
+
+One quantum k (time t = k * q) flows like this:
+
+1. deliver what is due at t: CAN frames that finished on a bus, LLC pin writes of quantum k-1; record
+   each (sim-time order, canonical order within a time);
+2. find the entities due at t: their wake time has come, or a message arrived and they wait on messages;
+3. send each process hosting a due entity one ``tick`` with the entities' inputs (LLC: the physical
+   sensor values at t and the frames delivered to it; logic: the frames delivered to it);
+4. step physics from t to t+q while the processes compute;
+5. wait for every ticked process's ``done`` (a process that dies, hangs or raises becomes a failed
+   robot, handled by the failure policy);
+6. offer the outputs to the media: frames go on the robot's CAN bus and arrive at k+1 or later, pin
+   writes take effect at k+1.
+
+Nothing produced in quantum k is seen before k+1, and every delivery is ordered by time, bus and wire
+order, so the recording does not depend on process packing, speed or machine load.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import queue
+import signal
+import statistics
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bridge.core import transport
+from bridge.core.config import Config
+from bridge.core.entities import entity, robot_of
+from bridge.core.loop_functions import LoopFunctions
+from bridge.core.medium import Medium, route_table
+from bridge.core.plan import Plan
+from bridge.core.recorder import Recorder
+from bridge.core.registry import MEDIA, STUDIES, robot_spec
+from bridge.core.world import World
+
+LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
+
+
+class Hub:
+    def __init__(self, plan: Plan, session_dir: str, out_dir: str, namespace: str) -> None:
+        self.plan = plan
+        self.cfg = cfg = Config.model_validate(plan.config)
+        self.q_ns = cfg.session.quantum_ns
+        self.end_ns = -(-round(cfg.session.duration_s * 1e9) // self.q_ns) * self.q_ns
+        self.out = Path(out_dir)
+        self.endpoint = transport.endpoint_for(session_dir)
+        self.namespace = namespace
+        self.world = World(cfg, plan.robots)
+        self.geometry = _Geometry(self.world)  # what the media ask of the world
+        self.rec = Recorder(self.out / "session.mcap", {"config": json.dumps(plan.config, sort_keys=True),
+                                                        "robots": str(len(plan.robots))})
+        self.n = len(plan.robots)
+        self.procs = {p.name: p for p in plan.procs}
+        self.proc_of: dict[str, str] = {}
+        for p in plan.procs:
+            for e in p.entities(plan.robots):
+                self.proc_of[e] = p.name
+        self.ents = sorted(self.proc_of)
+        # every entity of a robot: its firmware's, and its logic when the session runs it
+        self.roles = {r: rp.modules() + (("logic",) if rp.has_logic else ()) for r, rp in enumerate(plan.robots)}
+        self.next_wake: dict[str, int | None] = dict.fromkeys(self.ents, 0)
+        for r, rp in enumerate(plan.robots):
+            # Robots power up one quantum apart (cyclically), as real ones never boot in the same 10 ms; this
+            # spreads LLC loops and controller steps evenly over quanta instead of waking everyone at once.
+            period = round(1e9 / self.robot_spec(r).profile.llc_loop_hz)
+            boot = (r * self.q_ns) % max(period, self.q_ns) // self.q_ns * self.q_ns
+            for role in rp.modules():
+                self.next_wake[entity(r, role)] = boot
+            if rp.has_logic:
+                self.next_wake[entity(r, "logic")] = (r * self.q_ns) % max(LOGIC_BOOT_SPREAD_NS, self.q_ns)
+        # wake on message: False, True (any input), or the input kinds that wake it (item[0] of inbox items)
+        self.wom: dict[str, Any] = dict.fromkeys(self.ents, False)
+        self.inbox: dict[str, list] = {e: [] for e in self.ents}
+        # what is due at a time: (handler, args), run in the order scheduled (which the schedule fixes)
+        self.deliveries: dict[int, list[tuple]] = defaultdict(list)
+        self._dead_detail: dict[str, str] = {}
+        self.dead: set[int] = set()
+        self.live_procs: set[str] = set(self.procs)
+        self.pids: dict[str, int] = {}
+        self.failures: list[dict[str, Any]] = []
+        self.stop_reason: str | None = None
+        self.abort = False  # the launcher is gone: participants are gone too, do not wait for them
+        self.failed_stop = False
+        self.parent_pid = os.getppid()
+        self.counts: dict[str, int] = defaultdict(int)
+        self.barrier_us: list[float] = []
+        self.lag_s: list[float] = []  # paced sessions: how far the simulated clock is behind wall time, per quantum
+        self.wakeups: dict[str, int] = defaultdict(int)  # entity runs by role (llc, xbee, uwb, logic)
+        self.ticks = 0
+        self.proc_ticks = 0  # tick messages sent (one per due process per quantum)
+        self.k = 0
+        self.q: queue.SimpleQueue = queue.SimpleQueue()
+        self.status_pub: Any = None
+        self._topics = {r: (f"/r{r:03d}/can0", f"/r{r:03d}/llc/pins") for r in range(self.n)}
+        self.pin_inputs: list[dict[str, Any]] = [{} for _ in range(self.n)]  # values media put on an LLC's pins
+        self.ideal_pose = {r for r, rp in enumerate(plan.robots) if rp.pose_source == "ground_truth"}
+        self.releases: list[dict[str, Any]] = []
+        self.carriers = {rp.carrier for rp in plan.robots if rp.carrier is not None}  # robots with scouts on board
+        # battery deaths to come: (time, robot)
+        self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
+        self.module_stats: dict[str, dict] = {}
+        # the studies' loop functions first (a medium may call them), then the media the session uses, in order
+        self.loop_functions: list[LoopFunctions] = [
+            study.loop_functions(self) for _, study in STUDIES.items()
+            if study.loop_functions is not None and study.loop_functions.wanted(cfg)]
+        self.media: dict[str, Medium] = {}
+        for name, cls in sorted(MEDIA.items(), key=lambda kv: (kv[1].order, kv[0])):
+            if cls.wanted(self):
+                self.media[name] = cls(self)
+        self._media = list(self.media.values())
+        self.routes = route_table(self._media)
+        self.routes[("log", "logic")] = self._log
+        self._log_hooks = self._media + self.loop_functions
+
+    def robot_spec(self, r: int) -> Any:
+        """Robot ``r``'s plugin (its profile, its CAN interface)."""
+        return robot_spec(self.plan.robots[r].profile)
+
+    def medium(self, name: str) -> Any:
+        """The session's medium ``name`` (KeyError if this session does not use it)."""
+        return self.media[name]
+
+    def deliver_at(self, t_ns: int, handler: Callable[..., None], *args: Any) -> None:
+        """Run ``handler(t, *args)`` at the start of the quantum at ``t_ns``, after what was scheduled there before."""
+        self.deliveries[t_ns].append((handler, args))
+
+    def to_inbox(self, t: int, e: str, msg: list) -> None:
+        """A delivery: ``msg`` into entity ``e``'s inbox (nothing for a dead robot)."""
+        if robot_of(e) not in self.dead:
+            self.inbox[e].append(msg)
+
+    def record(self, t: int, topic: str, schema: str, payload: Any) -> None:
+        """A delivery: a message to the recording at its time."""
+        self.rec.write(t, topic, schema, payload)
+
+    # -- lifecycle ---------------------------------------------------------------------------------
+    def open(self) -> None:
+        listen = self.cfg.session.listen  # remote logic joins there (swarm-sitl join), besides the unix socket
+        self.session = transport.open_session(self.endpoint, self.namespace, listen=True,
+                                              extra_listen=[listen] if listen else None)
+        s = self.session
+        self._subs = [
+            transport.queue_subscriber(s, "done/*", self.q),
+            transport.queue_subscriber(s, "hello/*", self.q),
+            transport.queue_subscriber(s, "control", self.q),
+        ]
+        self.status_pub = transport.publisher(s, "status")
+        self.tick_pub = {p: transport.publisher(s, f"tick/{p}") for p in self.procs}
+        # the remote procs that may still join (None: started); the plan's answer tells a joiner, who refuses to
+        # join twice or late
+        self.joinable: frozenset[str] | None = frozenset(p for p, pp in self.procs.items() if pp.remote)
+        if listen:
+            from bridge.hil.join import plan_offer
+
+            def offer(query: Any) -> None:  # a zenoh thread: reads the plan and a frozenset (or None)
+                query.reply(transport.PLAN_KEY, plan_offer(self.plan, self.joinable))
+
+            self._subs.append(s.declare_queryable(transport.PLAN_KEY, offer))
+            self._world_token = s.liveliness().declare_token(transport.WORLD_KEY)  # a joiner sees the world go
+
+    def status(self, **msg: Any) -> None:
+        """Tell the launcher (nothing to tell before ``open``, e.g. a hub driven directly by tests)."""
+        if self.status_pub is not None:
+            self.status_pub.put(transport.pack(msg))
+
+    def wait_for_participants(self) -> None:
+        t0 = time.monotonic()
+        timeout = self.cfg.session.startup_timeout_s
+        remote = {p for p, pp in self.procs.items() if pp.remote}  # they join from other computers, maybe later
+        self.status(op="listening", listen=self.cfg.session.listen, remote=sorted(remote))
+        missing = set(self.procs)
+        try:
+            while missing:
+                left = timeout - (time.monotonic() - t0)
+                if left <= 0:
+                    hint = (" (remote logic: run the swarm-sitl join command the launcher printed on the other "
+                            "computer, or raise session.startup_timeout_s)" if missing & remote else "")
+                    raise TimeoutError(f"processes did not join within {timeout:.0f} s: {', '.join(sorted(missing))}"
+                                       + hint)
+                if self.abort or os.getppid() != self.parent_pid:
+                    raise KeyboardInterrupt
+                try:
+                    key, data = self.q.get(timeout=min(left, 0.2))
+                except queue.Empty:
+                    continue
+                msg = _unpack_dict(data)
+                if msg is None:
+                    self.counts["malformed_control"] += 1
+                    continue
+                if key.startswith("hello/"):
+                    p = key.split("/", 1)[1]
+                    if p in missing and isinstance(msg.get("pid"), int):
+                        if p in remote:  # its pid is on another computer: never ours to kill
+                            self.joinable = frozenset((missing & remote) - {p})
+                            self.status(op="notice", joined=p, text=f"robot {self.procs[p].robots[0]}'s logic joined "
+                                                                    f"from another computer ({p})")
+                        else:
+                            self.pids[p] = msg["pid"]
+                        transport.wait_matched(self.tick_pub[p], timeout, f"tick/{p}")
+                        missing.discard(p)
+                elif key == "control":
+                    if msg.get("op") == "dead" and msg.get("proc") in remote:  # a joiner left: it may join again
+                        p = msg["proc"]
+                        missing.add(p)
+                        self.joinable = frozenset(missing & remote)
+                        self.status(op="notice", text=f"{p} left before the start ({msg.get('detail')}); waiting "
+                                                      "for it again")
+                    elif msg.get("op") == "dead":
+                        raise RuntimeError(f"process {msg.get('proc')} exited during start-up ({msg.get('detail')})")
+                    if msg.get("op") == "stop":
+                        raise KeyboardInterrupt
+        except BaseException:
+            self.live_procs -= missing & remote  # they never joined: nobody to say stop to
+            raise
+        self.startup_wall_s = time.monotonic() - t0
+        self.joinable = None  # started: a late joiner is refused
+        info: dict[str, Any] = {}
+        for m in self._media:
+            info.update(m.started())
+        self.status(op="started", startup_s=self.startup_wall_s, **info)
+
+    # -- failures ------------------------------------------------------------------------------------
+    def robot_failed(self, r: int, t_ns: int, kind: str, detail: str, proc: str | None = None) -> None:
+        if r in self.dead:
+            return
+        self.dead.add(r)
+        self.world.kill(r)
+        for role in self.roles[r]:
+            e = entity(r, role)
+            self.next_wake[e] = None
+            self.wom[e] = False
+            self.inbox[e].clear()
+        rec = {"robot": r, "t_s": t_ns / 1e9, "kind": kind, "detail": detail[-2000:]}
+        self.rec.write(t_ns, "/session/events", "swarm_sitl.Event", {"kind": kind, "robot": r, "detail": rec["detail"]})
+        if proc:  # which process is a packing detail: reported, not recorded
+            rec["process"] = proc
+        self.failures.append(rec)
+        self.status(op="event", **rec)
+        if self.cfg.session.on_robot_failure == "stop":
+            self.failed_stop = True
+            self.stop_reason = f"robot {r} failed ({kind}) and on_robot_failure = stop"
+
+    def proc_failed(self, proc: str, t_ns: int, kind: str, detail: str) -> None:
+        if proc not in self.live_procs:
+            return
+        self.live_procs.discard(proc)
+        pid = self.pids.get(proc)
+        if pid and kind == "hung":
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        for r in self.procs[proc].robots:
+            self.robot_failed(r, t_ns, kind, detail, proc)
+
+    # -- one quantum ---------------------------------------------------------------------------------
+    def _deliver(self, t: int) -> None:
+        items = self.deliveries.pop(t, None)
+        if items:
+            for handler, args in items:
+                handler(t, *args)
+
+    def _pins(self, t: int, r: int, pins: dict[str, Any]) -> None:
+        """A delivery: the pin writes of the LLC's previous loop take effect (motors, LEDs, a conveyor's stepper)."""
+        self.counts["pin_writes"] += 1
+        if r in self.dead:
+            return
+        world = self.world
+        world.set_pwm(r, *pins["pwm"])
+        world.set_led(r, tuple(pins["led"]))
+        if "belt_steps" in pins:
+            world.set_belt(r, pins["belt_steps"])
+
+    def _due(self, t: int) -> dict[str, list[str]]:
+        due: dict[str, list[str]] = defaultdict(list)
+        nw, wom, inbox, proc_of = self.next_wake, self.wom, self.inbox, self.proc_of
+        for e in self.ents:
+            w = nw[e]
+            if (w is not None and w <= t) or (wom[e] and inbox[e] and (
+                    wom[e] is True or any(item[0] in wom[e] for item in inbox[e]))):
+                due[proc_of[e]].append(e)
+        return due
+
+    def _collect(self, waiting: set[str], t: int) -> dict[str, dict]:
+        """Wait for every ticked process's answer. Deaths reported meanwhile take effect after the
+        outputs of this quantum are routed, so a late notice never discards answers already in."""
+        results: dict[str, dict] = {}
+        hang = self.cfg.session.hang_timeout_s
+        deadline = time.monotonic() + hang
+        while waiting:
+            if self.abort or os.getppid() != self.parent_pid:
+                self.abort = True
+                break
+            left = deadline - time.monotonic()
+            if left <= 0:
+                for p in sorted(waiting):
+                    self.proc_failed(p, t, "hung", f"no answer for the quantum at t={t / 1e9:.3f} s within {hang} s")
+                break
+            try:
+                key, data = self.q.get(timeout=min(0.2, left))
+            except queue.Empty:
+                continue
+            if key.startswith("done/"):
+                p = key[5:]
+                if p not in waiting:
+                    continue
+                msg = _unpack_dict(data)
+                if msg is None or not isinstance(msg.get("ents"), dict):
+                    self.counts["malformed_done"] += 1
+                    continue
+                if msg.get("k") != self.k:
+                    self.counts["stale_done"] += 1
+                    continue
+                results[p] = msg
+                waiting.discard(p)
+            elif key == "control":
+                dead = self._control(data, t)
+                if dead in waiting:
+                    waiting.discard(dead)
+                    self.proc_failed(dead, t, "died", self._dead_detail.pop(dead, ""))
+        return results
+
+    def _control(self, data: bytes, t: int) -> str | None:
+        """Handle a launcher message; a death is queued (applied at the end of the quantum) and returned."""
+        msg = _unpack_dict(data)
+        if msg is None:
+            self.counts["malformed_control"] += 1
+            return None
+        op = msg.get("op")
+        if op == "stop":
+            self.stop_reason = self.stop_reason or str(msg.get("reason", "stop requested"))
+        elif op == "dead":
+            p = msg.get("proc")
+            if p in self.live_procs:
+                self._dead_detail[str(p)] = str(msg.get("detail", ""))
+                return str(p)
+            # already handled (e.g. the world killed it as hung, then the launcher saw it exit)
+        else:
+            self.counts["malformed_control"] += 1
+        return None
+
+    def _apply_deaths(self, t: int) -> None:
+        for p in sorted(self._dead_detail):
+            self.proc_failed(p, t, "died", self._dead_detail.pop(p))
+
+    def _outputs(self, t: int, results: dict[str, dict], sensed: dict[str, dict],
+                 due: dict[str, list[str]]) -> None:
+        q = self.q_ns
+        merged: dict[str, dict] = {}
+        for p, res in results.items():
+            for e, v in res["ents"].items():
+                if e in due[p] and isinstance(v, dict):
+                    merged[e] = v
+                else:
+                    self.counts["malformed_done"] += 1
+        for e in sorted(merged):
+            r = robot_of(e)
+            if r in self.dead:
+                continue
+            res = merged[e]
+            if not _valid_reply(res):
+                self.counts["malformed_done"] += 1
+                self.robot_failed(r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
+                continue
+            pins = res.get("pins")
+            pins_ok = pins is None or _valid_pins(pins)
+            if e in sensed:  # one record per LLC loop: what its pins read, and what it wrote
+                pins_io = dict(sensed[e])
+                if pins is not None and pins_ok:
+                    pins_io.update(pins)
+                self.rec.write(t, self._topics[r][1], "swarm_sitl.LlcPins", pins_io)
+            if res.get("err"):
+                self.robot_failed(r, t, "raised", res["err"])
+                continue
+            w = res.get("wake")
+            self.next_wake[e] = None if w is None else max(t + q, -(-w // q) * q)
+            wm = res.get("wom")
+            self.wom[e] = wm if isinstance(wm, list) and all(isinstance(x, str) for x in wm) else bool(wm)
+            for item in res.get("out", ()):
+                if not (isinstance(item, list | tuple) and item):
+                    self.counts["malformed_items"] += 1
+                else:
+                    self._route(e, r, t, item)
+            if pins is not None:
+                if pins_ok:
+                    self.deliver_at(t + q, self._pins, r, pins)
+                else:
+                    self.counts["malformed_pins"] += 1
+        for m in self._media:
+            m.end_outputs(t)
+
+    def _route(self, e: str, r: int, t: int, item: list) -> None:
+        """One output item to the medium that carries it, by (kind, sender role), then (kind, any role); an item no
+        medium carries, or one its medium finds malformed, is counted and dropped."""
+        kind = item[0]
+        handler = self.routes.get((kind, e[e.index("/") + 1:])) if isinstance(kind, str) else None
+        if handler is None and isinstance(kind, str):
+            handler = self.routes.get((kind, "*"))
+        if handler is None:
+            self.counts["malformed_items"] += 1
+            return
+        try:
+            handler(e, r, t, item)
+        except (ValueError, TypeError, KeyError, IndexError, OverflowError):
+            self.counts["malformed_items"] += 1
+
+    def _log(self, e: str, r: int, t: int, item: list) -> None:
+        """``["log", topic, {values}]`` from a robot's logic (``Robot.log``): recorded under ``/rNNN/log/<topic>``,
+        then shown to the media and loop functions that score it."""
+        _, topic, values = item
+        if not (isinstance(topic, str) and topic.isidentifier() and isinstance(values, dict)):
+            raise ValueError
+        json.dumps(values, allow_nan=False)  # strict JSON only: NaN would make the recording unreadable
+        self.rec.write(t, f"/r{r:03d}/log/{topic}", "swarm_sitl.Log", values)
+        for hook in self._log_hooks:
+            hook.on_log(r, topic, values, t)
+
+    def run(self) -> dict[str, Any]:
+        q = self.q_ns
+        world, rec = self.world, self.rec
+        speed = self.cfg.session.speed
+        poses_every = self.cfg.session.poses_every_quanta
+        wall0 = time.monotonic()
+        next_status = 0
+        while self.stop_reason is None and not self.abort:
+            t = self.k * q
+            if t >= self.end_ns:
+                break
+            while self.battery_deaths and self.battery_deaths[0][0] <= t:  # injected: the battery is empty
+                at, r = self.battery_deaths.pop(0)
+                self.world.deplete(r)
+                self.robot_failed(r, t, "battery_depleted", f"battery exhausted at {at / 1e9:g} s: motors stopped, "
+                                                            "radio silent")
+            self._deliver(t)
+            for lf in self.loop_functions:
+                lf.pre_step(t)
+            for m in self._media:
+                m.start_quantum(t)
+            due = self._due(t)
+            for p in list(due):
+                if p not in self.live_procs:
+                    del due[p]
+            t_pub = time.perf_counter()
+            sensed: dict[str, dict] = {}
+            for p in sorted(due):
+                run: dict[str, Any] = {}
+                for e in due[p]:
+                    self.wakeups[e[e.index("/") + 1:]] += 1
+                    entry: dict[str, Any] = {"in": self.inbox[e]}
+                    self.inbox[e] = []
+                    if e.endswith("/llc"):
+                        r = robot_of(e)
+                        s = world.sensors(r)
+                        entry["sens"] = {"enc": list(s.encoders), "sonar_m": s.sonar_m, "lux": s.lux,
+                                         "battery_v": s.battery_v}
+                        if s.side_sonars_m:
+                            entry["sens"]["sides"] = list(s.side_sonars_m)
+                        if self.pin_inputs[r]:  # what media put on its pins (an XBee's RSSI PWM output)
+                            entry["sens"].update(self.pin_inputs[r])
+                        sensed[e] = entry["sens"]  # recorded as the pins' values; the pose is in /world/poses
+                        if r in self.ideal_pose:  # its mocap receiver: the true pose in the world frame
+                            entry["sens"] = {**entry["sens"], "pose": [
+                                float(world.pos[r, 0]), float(world.pos[r, 1]), float(world.yaw[r])]}
+                    run[e] = entry
+                self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
+                self.proc_ticks += 1
+            if self.k % poses_every == 0:
+                poses = {"x": np.round(world.pos[:, 0], 5).tolist(), "y": np.round(world.pos[:, 1], 5).tolist(),
+                         "yaw": np.round(world.yaw, 5).tolist(), "alive": world.alive.tolist(),
+                         "led": world.led.tolist()}
+                if self.carriers:
+                    poses["carried"] = [r in world.carried for r in range(self.n)]
+                rec.write(t, "/world/poses", "swarm_sitl.Poses", poses)
+            world.step_quantum(t, q)
+            for ev in world.released:  # scouts that dropped off a carrier's conveyor in this quantum
+                rel = {k: ev[k] for k in ("robot", "carrier", "slot", "pose")}
+                self.deliver_at(ev["t_ns"], self.record, "/world/releases", "swarm_sitl.Release", rel)
+                self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})
+            world.released.clear()
+            if due:
+                results = self._collect(set(due), t)
+                self.barrier_us.append((time.perf_counter() - t_pub) * 1e6)
+                self._outputs(t, results, sensed, due)
+                self._apply_deaths(t)
+                self.ticks += 1
+            else:
+                self._drain_control(t)
+            for m in self._media:
+                m.advance(t)
+            self.k += 1
+            lag = None
+            if speed != "max":
+                ahead = (t + q) / 1e9 / float(speed) - (time.monotonic() - wall0)
+                lag = max(0.0, -ahead)
+                self.lag_s.append(lag)
+            if t >= next_status:
+                next_status += 1_000_000_000
+                self.status(op="progress", t=(t + q) / 1e9, alive=self.n - len(self.dead), ticks=self.k, lag_s=lag)
+            if lag == 0.0:
+                time.sleep(ahead)
+        self.sim_end_ns = self.k * q
+        self.wall_s = time.monotonic() - wall0
+        return self.result()
+
+    def _drain_control(self, t: int) -> None:
+        while True:
+            try:
+                key, data = self.q.get_nowait()
+            except queue.Empty:
+                break
+            if key == "control":
+                self._control(data, t)
+        self._apply_deaths(t)
+
+    def shutdown(self) -> None:
+        """Tell every live process to stop and wait (briefly) for their goodbyes."""
+        stop = transport.pack({"k": self.k, "stop": True})
+        waiting = set() if self.abort else set(self.live_procs)
+        for p in sorted(waiting):
+            self.tick_pub[p].put(stop)
+        deadline = time.monotonic() + 3.0
+        while waiting and time.monotonic() < deadline:
+            try:
+                key, data = self.q.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            if key.startswith("done/"):
+                msg = _unpack_dict(data)
+                if not (msg and msg.get("bye")):  # a late answer to a quantum, not the goodbye
+                    continue
+                waiting.discard(key[5:])
+                if isinstance(msg.get("stats"), dict):  # the modules' own counters
+                    self.module_stats.update({str(k): v for k, v in msg["stats"].items() if isinstance(v, dict)})
+
+    def radio_report(self) -> dict[str, Any]:
+        """The session's radio figures, per robot and over all, from the media. Filled in after ``shutdown`` (the
+        modules report their counters then)."""
+        out: dict[str, Any] = {"per_robot": {}}
+        for m in self._media:
+            m.radio_report(out)
+        return out
+
+    def result(self) -> dict[str, Any]:
+        lat = sorted(self.barrier_us)
+        out = {
+            "sim_time_s": self.sim_end_ns / 1e9,
+            "world_wall_s": self.wall_s,
+            "quanta": self.k,
+            "ticks": self.ticks,
+            "messages": self.rec.count,
+            "message_counts": dict(self.counts),
+            "wakeups": dict(self.wakeups),
+            "process_ticks": self.proc_ticks,
+            "digest": self.rec.digest,
+            "barrier_us_median": statistics.median(lat) if lat else None,
+            "barrier_us_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
+            "wall_lag": _lag_summary(self.lag_s),
+            "releases": self.releases if self.carriers else None,
+            "startup_s": getattr(self, "startup_wall_s", None),
+            "failures": self.failures,
+            "stop_reason": self.stop_reason,
+            "failed_stop": self.failed_stop,
+            "robots": [
+                {"id": r, "alive": bool(self.world.alive[r]), "distance_m": round(float(self.world.odometer[r]), 3),
+                 "final_pose": [round(float(self.world.pos[r, 0]), 3), round(float(self.world.pos[r, 1]), 3),
+                                round(float(self.world.yaw[r]), 3)],
+                 "battery_v": round(float(self.world.battery_v[r]), 3),
+                 "pose_source": self.plan.robots[r].pose_source,
+                 "kind": "xbee_gateway" if self.plan.robots[r].gateway is not None else "robot",
+                 "profile": self.plan.robots[r].profile,
+                 "on_board": self.world.carried[r][0] if r in self.world.carried else None,
+                 "motion": self.plan.robots[r].motion["kind"] if self.plan.robots[r].scripted else "simulated"}
+                for r in range(self.n)
+            ],
+        }
+        for lf in self.loop_functions:
+            out.update(lf.summary())
+        for m in self._media:
+            m.report(out)
+        return out
+
+    def close(self) -> None:
+        """Finish the recording and release the world and the media."""
+        try:
+            self.rec.finish()
+        finally:
+            self.world.close()
+            for m in self._media:
+                m.close()
+
+
+class _Geometry:
+    """What the radio and UWB media ask of the world: where robots are, which live, and walls between them."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+
+    def positions(self) -> np.ndarray:
+        return self.world.pos
+
+    def alive(self) -> np.ndarray:
+        return self.world.alive
+
+    def walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
+        return self.world.walls(src, dsts)
+
+
+def _lag_summary(lag_s: list[float]) -> dict[str, Any] | None:
+    """How far a paced session's simulated clock fell behind wall time: quanta that ended late, and by how much."""
+    if not lag_s:
+        return None
+    a = np.asarray(lag_s)
+    return {"quanta": len(a), "late_share": round(float(np.mean(a > 0)), 4), "max_ms": round(float(a.max()) * 1e3, 2),
+            "p99_ms": round(float(np.quantile(a, 0.99)) * 1e3, 2), "mean_ms": round(float(a.mean()) * 1e3, 3),
+            "final_ms": round(float(a[-1]) * 1e3, 2)}
+
+
+def _unpack_dict(data: bytes) -> dict | None:
+    try:
+        msg = transport.unpack(data)
+    except Exception:
+        return None
+    return msg if isinstance(msg, dict) else None
+
+
+def _valid_reply(res: dict) -> bool:
+    """The shape of one entity's answer: ``out`` a list, ``wake`` an int or None, ``err`` a str or None."""
+    return (isinstance(res.get("out", []), list) and (res.get("wake") is None or type(res.get("wake")) is int)
+            and (res.get("err") is None or isinstance(res.get("err"), str)))
+
+
+def _valid_pins(pins: Any) -> bool:
+    if not isinstance(pins, dict):
+        return False
+    pwm, led, belt = pins.get("pwm"), pins.get("led"), pins.get("belt_steps", 0)
+    return (isinstance(pwm, list) and len(pwm) == 2 and all(isinstance(v, int) and -255 <= v <= 255 for v in pwm)
+            and isinstance(led, list) and len(led) == 3 and all(isinstance(v, int) and 0 <= v <= 255 for v in led)
+            and type(belt) is int and belt >= 0)

@@ -1,0 +1,83 @@
+"""What a session can be made of, found by name: robots, media and studies (swarm behaviours are found the same way
+on the robot's side, ``swarm_logic.behaviours``).
+
+Every plugin, swarm-sitl's own included, comes from an entry point of an installed package (``pyproject.toml``:
+``[project.entry-points."swarm_sitl.robots"]`` and so on) or from a ``register_*`` call in the process; ``swarm-sitl
+list`` shows what was found. The core imports none of them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from swarm_logic.plugins import PluginError, Registry
+
+if TYPE_CHECKING:
+    from bridge.core.loop_functions import LoopFunctions
+    from bridge.core.medium import Medium
+    from bridge.robots.profiles import RobotProfile
+
+__all__ = ["MEDIA", "ROBOTS", "STUDIES", "PluginError", "RobotSpec", "Study", "register_medium", "register_robot",
+           "register_study", "robot_profile", "robot_spec"]
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """A robot model: its body, drive, sensors and firmware figures (``profile``) and the interface its boards speak on
+    the robot's CAN bus (``can_db``: a function returning its cantools database, for names in the recording)."""
+
+    name: str
+    profile: RobotProfile
+    can_db: Callable[[], Any] | None = None
+    title: str = ""
+
+    def frame_names(self) -> dict[int, str]:
+        """CAN id -> frame name, from the robot's DBC (empty without one)."""
+        return {} if self.can_db is None else {m.frame_id: m.name for m in self.can_db().messages}
+
+
+@dataclass(frozen=True)
+class Study:
+    """A thesis' simulation side: its experiments (modules that register them when imported), the loop functions its
+    sessions run, and where its session configs are."""
+
+    name: str
+    title: str
+    experiments: tuple[str, ...] = ()
+    loop_functions: type[LoopFunctions] | None = None
+    configs: str = ""  # its session configs, relative to the repository
+    sections: tuple[str, ...] = field(default=())  # the summary.json sections its loop functions write
+
+
+def _is_medium(obj: Any) -> bool:
+    from bridge.core.medium import Medium
+
+    return isinstance(obj, type) and issubclass(obj, Medium)
+
+
+ROBOTS: Registry[RobotSpec] = Registry("swarm_sitl.robots", "robot", lambda o: isinstance(o, RobotSpec))
+MEDIA: Registry[type[Medium]] = Registry("swarm_sitl.media", "medium", _is_medium)
+STUDIES: Registry[Study] = Registry("swarm_sitl.studies", "study", lambda o: isinstance(o, Study))
+
+
+def register_robot(spec: RobotSpec) -> RobotSpec:
+    return ROBOTS.register(spec.name, spec)
+
+
+def register_medium(cls: type[Medium]) -> type[Medium]:
+    return MEDIA.register(cls.name, cls)
+
+
+def register_study(study: Study) -> Study:
+    return STUDIES.register(study.name, study)
+
+
+def robot_spec(name: str) -> RobotSpec:
+    return ROBOTS.get(name)
+
+
+def robot_profile(name: str) -> RobotProfile:
+    """The profile of robot model ``name`` (a ``PluginError`` names the models there are)."""
+    return ROBOTS.get(name).profile

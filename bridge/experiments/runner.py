@@ -1,0 +1,755 @@
+"""Experiments: a named, seeded set of trials over conditions (cells), run in parallel and reported.
+
+An experiment declares its cells, how one trial runs and which of the thesis' figures it checks (targets). This
+module derives each trial's seed from (seed, experiment, cell, index), runs the trials in worker processes, keeps
+the results in a fixed order whatever order they finish in (so trials.csv does not depend on --jobs), and writes
+trials.csv, curves/, plots/ and report.md. A trial that raises is reported, never dropped, and never stops the
+others.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import importlib
+import math
+import multiprocessing
+import os
+import re
+import shlex
+import shutil
+import signal
+import sys
+import threading
+import time
+import traceback
+import warnings
+from collections import Counter
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from bridge.core.rng import stream_seed
+
+RESERVED_COLUMNS = ("index", "seed", "error")
+_RESULT_FILES = ("trials.csv", "timings.csv", "report.md")
+_RESULT_DIRS = ("plots", "curves")
+
+Scalar = float | int | str | bool
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One run of an experiment: a cell (the condition), its number within the cell and its own seed."""
+
+    experiment: str
+    cell: dict[str, Any]
+    index: int
+    seed: int
+    smoke: bool
+    workdir: str  # scratch directory for this trial (sessions go here); removed afterwards if left empty
+
+
+@dataclass
+class TrialResult:
+    metrics: dict[str, Scalar | None]  # one trials.csv row (None: left empty)
+    curves: dict[str, list[float]] = field(default_factory=dict)  # time series per curve name
+    curve_x: dict[str, list[float]] = field(default_factory=dict)  # x values per curve (default 0..n-1)
+
+
+@dataclass
+class Outcome:
+    """What a target's evaluate() sees, one per trial; error's first line is the exception, then where."""
+
+    trial: Trial
+    result: TrialResult | None
+    error: str | None
+
+
+@dataclass
+class Target:
+    """A figure of the thesis the experiment reproduces, and how ours is judged against it."""
+
+    id: str
+    what: str
+    thesis: str
+    tolerance: str
+    evaluate: Callable[[list[Outcome]], tuple[str, bool | None, str]]  # -> (ours, pass/fail/None, note)
+
+
+class Experiment:
+    """Subclass, set the attributes, implement cells() and run(), decorate with @register.
+
+    Instances are created without arguments, in the parent and in every worker process, so keep the state
+    a trial needs in the class, the cell and the trial.
+    """
+
+    name: str
+    title: str
+    description: str  # a paragraph for report.md: setup, parameters, assumptions
+    trials: int  # trials per cell
+    smoke_trials: int = 2
+    x_label: str = "iteration"
+    curves: ClassVar[Sequence[tuple[str, str]]] = ()  # (curve name, y label): median and IQR band per cell
+    boxes: ClassVar[Sequence[tuple[str, str]]] = ()  # (metric name, y label): a box per cell
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        raise NotImplementedError
+
+    def run(self, trial: Trial) -> TrialResult:
+        raise NotImplementedError
+
+    def targets(self) -> list[Target]:
+        return []
+
+
+class UnknownExperimentError(ValueError):
+    pass
+
+
+_REGISTRY: dict[str, type[Experiment]] = {}
+
+
+def register(cls: type[Experiment]) -> type[Experiment]:
+    """Class decorator: make an experiment known by its name (used in paths and make targets)."""
+    name = getattr(cls, "name", None)
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name):
+        raise ValueError(f"{cls.__qualname__}.name must be a word of letters, digits, '_', '.', '-'; got {name!r}")
+    old = _REGISTRY.get(name)
+    if old is not None and old.__qualname__ != cls.__qualname__:
+        raise ValueError(f"experiment {name!r} is registered twice: {old.__module__}.{old.__qualname__} and "
+                         f"{cls.__module__}.{cls.__qualname__}")
+    _REGISTRY[name] = cls
+    return cls
+
+
+def _import_optional(module: str) -> None:
+    try:
+        importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        if e.name != module:  # the module exists but something it imports does not: a real error
+            raise
+
+
+def experiment_modules() -> list[str]:
+    """The modules that define experiments: every study's (``bridge.core.registry.STUDIES``)."""
+    from bridge.core.registry import STUDIES
+
+    return [m for _, study in STUDIES.items() for m in study.experiments]
+
+
+def experiments() -> dict[str, type[Experiment]]:
+    """Every registered experiment by name, after importing the studies' experiment modules."""
+    for module in experiment_modules():
+        _import_optional(module)
+    return dict(sorted(_REGISTRY.items()))
+
+
+def get_experiment(name: str) -> type[Experiment]:
+    known = experiments()
+    if name not in known:
+        raise UnknownExperimentError(f"unknown experiment {name!r}; known: {', '.join(known) or 'none'}")
+    return known[name]
+
+
+def trial_seed(seed: int, experiment: str, cell: dict[str, Any], index: int) -> int:
+    """A stable seed < 2**63 for one trial; the cell's key order does not matter."""
+    return stream_seed(seed, "experiment", experiment, tuple(sorted(cell.items())), index) >> 1
+
+
+# --- running one trial (in a worker process, or in-process with jobs=1) ---
+
+_Ref = tuple[str, str, str]  # (experiment name, class module, class qualname): what a worker needs to find it
+_INSTANCES: dict[_Ref, Experiment] = {}
+_Done = tuple[TrialResult | None, str | None, float]  # (result, error, wall seconds)
+
+
+def _ref(cls: type[Experiment]) -> _Ref:
+    return cls.name, cls.__module__, cls.__qualname__
+
+
+def _instance(ref: _Ref) -> Experiment:
+    """The experiment in this process: import its module (which registers it), else look in the studies' modules."""
+    inst = _INSTANCES.get(ref)
+    if inst is None:
+        name, module, qualname = ref
+        importlib.import_module(module)
+        cls = _REGISTRY.get(name)
+        if cls is None or (cls.__module__, cls.__qualname__) != (module, qualname):
+            cls = get_experiment(name)
+        inst = _INSTANCES[ref] = cls()
+    return inst
+
+
+def _worker_init() -> None:
+    # the parent owns Ctrl-C: it cancels what is pending and terminates the workers; and should the parent die
+    # without that (SIGKILL), the kernel stops the worker, whose session then stops its own processes
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from bridge.hosts.participant import die_with_parent
+
+    die_with_parent(signal.SIGTERM)
+
+
+def _error_text(e: BaseException, frames: int = 3, skip: int = 0) -> str:
+    """The exception on one line, then the traceback's last frames (after the first `skip`), with paths relative to
+    the working directory."""
+    what = " ".join("".join(traceback.format_exception_only(type(e), e)).split())
+    tb = traceback.extract_tb(e.__traceback__)[skip:]
+    lines = "".join(traceback.format_list(tb[-frames:] if frames else [])).splitlines()
+    where = [s for s in lines if s.strip(" ^~")]  # without 3.11's column markers
+    return "\n".join([what, *where]).replace(os.getcwd() + os.sep, "")
+
+
+def _scalar(k: str, v: Any) -> Scalar | None:
+    if v is None or isinstance(v, bool | str):
+        return v
+    if isinstance(v, np.bool_):
+        return bool(v)
+    if isinstance(v, int | np.integer):
+        return int(v)
+    if isinstance(v, float | np.floating):
+        return float(v)
+    raise TypeError(f"metric {k!r}: expected a number, bool or str, got {type(v).__name__}")
+
+
+def _clean(res: Any, trial: Trial) -> TrialResult:
+    """Check a trial's result and turn numpy values into plain ones, so rows do not depend on who ran them."""
+    if not isinstance(res, TrialResult):
+        raise TypeError(f"run() returned {type(res).__name__}, not TrialResult")
+    metrics: dict[str, Scalar | None] = {}
+    for k, v in res.metrics.items():
+        if k in RESERVED_COLUMNS or k in trial.cell:
+            raise ValueError(f"metric name {k!r} is taken by a trials.csv column")
+        metrics[str(k)] = _scalar(k, v)
+    curves = {str(k): np.asarray(v, dtype=float).reshape(-1).tolist() for k, v in res.curves.items()}
+    curve_x = {}
+    for k, x in res.curve_x.items():
+        if k not in curves:
+            raise ValueError(f"curve_x[{k!r}] has no curve")
+        curve_x[str(k)] = np.asarray(x, dtype=float).reshape(-1).tolist()
+        if len(curve_x[k]) != len(curves[k]):
+            raise ValueError(f"curve {k!r}: {len(curves[k])} values but {len(curve_x[k])} x values")
+    return TrialResult(metrics, curves, curve_x)
+
+
+def _run_trial(ref: _Ref, trial: Trial) -> _Done:
+    t0 = time.perf_counter()
+    wd = Path(trial.workdir)
+    try:
+        wd.mkdir(parents=True, exist_ok=True)
+        res: TrialResult | None = _clean(_instance(ref).run(trial), trial)
+        err = None
+    except Exception as e:
+        res, err = None, _error_text(e, skip=1)  # from the experiment's code on
+    with contextlib.suppress(OSError):
+        wd.rmdir()  # only if the trial left nothing there
+    return res, err, time.perf_counter() - t0
+
+
+# --- progress ---
+
+
+class _Progress:
+    """A rich bar on a terminal, else a plain line every ~10 %."""
+
+    def __init__(self, name: str, total: int, enabled: bool) -> None:
+        self.name, self.total, self.done, self.failed = name, total, 0, 0
+        self.t0 = time.monotonic()
+        self.step = max(1, math.ceil(total / 10))
+        self.bar: Any = None
+        self.plain = enabled
+        if enabled and sys.stderr.isatty():
+            from rich import progress as rp
+            from rich.console import Console
+
+            self.bar = rp.Progress(rp.TextColumn("{task.description}"), rp.BarColumn(), rp.MofNCompleteColumn(),
+                                   rp.TextColumn("trials, {task.fields[failed]} failed"), rp.TimeElapsedColumn(),
+                                   rp.TextColumn("ETA"), rp.TimeRemainingColumn(), console=Console(stderr=True))
+            self.task = self.bar.add_task(name, total=total, failed=0)
+            self.bar.start()
+            self.plain = False
+
+    def advance(self, failed: bool) -> None:
+        self.done += 1
+        self.failed += failed
+        if self.bar is not None:
+            self.bar.update(self.task, advance=1, failed=self.failed)
+        elif self.plain and (self.done % self.step == 0 or self.done == self.total):
+            print(f"{self.name}: {self.done}/{self.total} trials, {self.failed} failed, "
+                  f"{time.monotonic() - self.t0:.0f} s", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+# --- running all trials ---
+
+
+def _start_method() -> str:
+    # pybullet and zenoh do not survive fork(); spawn (not forkserver) makes the workers children of this process,
+    # so they can be told to die with it
+    return "spawn"
+
+
+@contextlib.contextmanager
+def _no_interrupts():
+    """Ignore Ctrl-C while shutting down, so a second one cannot leave workers behind."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _abort(pool: ProcessPoolExecutor, grace_s: float = 5.0) -> None:
+    """Cancel pending trials and end the workers: SIGTERM (a session in a worker stops), then SIGKILL."""
+    with _no_interrupts():
+        procs = list((pool._processes or {}).values())  # the executor's only handle on its workers
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            with contextlib.suppress(Exception):
+                p.terminate()
+        deadline = time.monotonic() + grace_s
+        for p in procs:
+            p.join(max(0.0, deadline - time.monotonic()))
+        for p in procs:
+            if p.is_alive():
+                p.kill()
+                p.join()
+        pool.shutdown(wait=True)
+
+
+_STOP = threading.Event()  # set by Ctrl-C or SIGTERM during a run: a trial that swallows the interrupt still ends it
+
+
+def _terminate_as_interrupt(signum: int, frame: Any) -> None:
+    _STOP.set()
+    raise KeyboardInterrupt
+
+
+def _from_future(f: Future) -> _Done:
+    try:
+        return f.result()
+    except Exception as e:  # the worker died, or the result could not be sent back
+        return None, f"worker: {_error_text(e, frames=0)}", 0.0
+
+
+def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress) -> tuple[dict[int, _Done], bool]:
+    """Run the trials; returns what finished by position in `trials`, and whether Ctrl-C cut the run short."""
+    done: dict[int, _Done] = {}
+    if jobs == 1:
+        # in-process, a trial's session may catch the interrupt to shut down cleanly and end as a failed trial:
+        # the flag stops the run all the same, and that trial, cut short, is not kept
+        try:
+            for k, t in enumerate(trials):
+                res = _run_trial(ref, t)
+                if _STOP.is_set():
+                    return done, True
+                done[k] = res
+                bar.advance(done[k][1] is not None)
+        except KeyboardInterrupt:
+            return done, True
+        return done, False
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(trials)), initializer=_worker_init,
+                               mp_context=multiprocessing.get_context(_start_method()))
+    futures: dict[Future, int] = {}
+    try:
+        for k, t in enumerate(trials):
+            futures[pool.submit(_run_trial, ref, t)] = k
+        for f in as_completed(futures):
+            done[futures[f]] = _from_future(f)
+            bar.advance(done[futures[f]][1] is not None)
+    except BaseException as e:
+        _abort(pool)
+        if not isinstance(e, KeyboardInterrupt):
+            raise
+        for f, k in futures.items():  # finished as the interrupt came; a trial the interrupt cut short is not kept
+            if k not in done and f.done() and not f.cancelled() and f.exception() is None and f.result()[1] is None:
+                done[k] = f.result()
+        return done, True
+    pool.shutdown(wait=True)
+    return done, False
+
+
+# --- outputs ---
+
+
+def _label(cell: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={v}" for k, v in cell.items()) or "all"
+
+
+def _slug(cell: dict[str, Any]) -> str:
+    parts = [re.sub(r"[^A-Za-z0-9.+-]+", "-", f"{k}-{v}").strip("-") for k, v in cell.items()]
+    return "_".join(parts) or "all"
+
+
+def _file_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "_"
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return ""
+    return repr(v) if isinstance(v, float) else str(v)
+
+
+def _num(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}{'' if n == 1 else 's'}"
+
+
+def _md(text: Any) -> str:
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def _check_cells(cells: list[dict[str, Any]]) -> None:
+    if not cells:
+        raise ValueError("the experiment has no cells")
+    for c in cells:
+        if not isinstance(c, dict):
+            raise TypeError(f"a cell must be a dict, got {type(c).__name__}")
+        for k, v in c.items():
+            if not isinstance(k, str) or not (v is None or isinstance(v, bool | int | float | str)):
+                raise TypeError(f"cell {c!r}: keys must be str and values JSON scalars ({k!r}: {v!r})")
+            if k in RESERVED_COLUMNS:
+                raise ValueError(f"cell key {k!r} is taken by a trials.csv column")
+    slugs = [_slug(c) for c in cells]
+    if len(set(slugs)) != len(slugs):
+        raise ValueError(f"cells must differ (their names clash): {slugs}")
+
+
+def _write_csv(path: Path, header: list[str], rows: list[list[Any]]) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(header)
+        w.writerows([[_fmt(v) for v in r] for r in rows])
+
+
+def _band(series: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """(x, quartiles [3, len(x)]) over trials; trials on other x grids are interpolated, NaN outside their range."""
+    x0 = series[0][0]
+    if all(len(x) == len(x0) and np.array_equal(x, x0) for x, _ in series):
+        grid, ys = x0, np.vstack([y for _, y in series])
+    else:
+        grid = np.unique(np.concatenate([x for x, _ in series]))
+        if len(grid) > 2000:
+            grid = np.linspace(grid[0], grid[-1], 2000)
+        ys = np.full((len(series), len(grid)), np.nan)
+        for r, (x, y) in enumerate(series):
+            if len(x):
+                order = np.argsort(x, kind="stable")
+                inside = (grid >= x[order[0]]) & (grid <= x[order[-1]])
+                ys[r, inside] = np.interp(grid[inside], x[order], y[order])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an x where no trial has a value
+        return grid, np.nanpercentile(ys, [25, 50, 75], axis=0)
+
+
+def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outcome]], plots: Path) -> list[str]:
+    """Draw the experiment's curves and boxes; returns report lines (links, or why a plot is missing)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lines: list[str] = []
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for curve, ylabel in exp.curves:
+        path = plots / f"curve-{_file_name(curve)}.png"
+        try:
+            fig, ax = plt.subplots(figsize=(7.5, 4.5), dpi=110)
+            drawn = 0
+            for ci, (cell, outs) in enumerate(zip(cells, by_cell, strict=True)):
+                series = [(np.asarray(o.result.curve_x.get(curve, range(len(y))), dtype=float),
+                           np.asarray(y, dtype=float))
+                          for o in outs if o.result is not None and (y := o.result.curves.get(curve)) is not None]
+                series = [s for s in series if len(s[1])]
+                if not series:
+                    continue
+                x, (q25, q50, q75) = _band(series)
+                c = colors[ci % len(colors)]
+                ax.plot(x, q50, color=c, lw=1.4, label=f"{_label(cell)} ({len(series)})")
+                ax.fill_between(x, q25, q75, color=c, alpha=0.2, lw=0)
+                drawn += 1
+            if not drawn:
+                ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
+            else:
+                ax.legend(fontsize=7, title="cell (trials)", title_fontsize=7)
+            ax.set_xlabel(exp.x_label)
+            ax.set_ylabel(ylabel)
+            ax.set_title(f"{exp.title}: {curve} (median, 25-75 % band)", fontsize=9)
+            ax.grid(alpha=0.3)
+            fig.tight_layout()
+            fig.savefig(path)
+            plt.close(fig)
+            lines.append(f"![{curve}](plots/{path.name})")
+        except Exception as e:
+            plt.close("all")
+            lines.append(f"- plot of curve `{curve}` failed: {_md(_error_text(e).splitlines()[0])}")
+    for metric, ylabel in exp.boxes:
+        path = plots / f"box-{_file_name(metric)}.png"
+        try:
+            data = [_values(outs, metric) for outs in by_cell]
+            fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(cells) + 2), 4.5), dpi=110)
+            pos = [i + 1 for i, d in enumerate(data) if len(d)]
+            if pos:
+                ax.boxplot([d for d in data if len(d)], positions=pos, widths=0.6,
+                           flierprops={"markersize": 3, "alpha": 0.6})
+            else:
+                ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
+            labels = [_label(c) for c in cells]
+            long = max(len(s) for s in labels) > 12 or len(cells) > 6
+            ax.set_xticks(range(1, len(cells) + 1), labels, rotation=45 if long else 0,
+                          ha="right" if long else "center", fontsize=7)
+            ax.set_xlim(0.4, len(cells) + 0.6)
+            ax.set_ylabel(ylabel)
+            ax.set_title(f"{exp.title}: {metric}", fontsize=9)
+            ax.grid(alpha=0.3, axis="y")
+            fig.tight_layout()
+            fig.savefig(path)
+            plt.close(fig)
+            lines.append(f"![{metric}](plots/{path.name})")
+        except Exception as e:
+            plt.close("all")
+            lines.append(f"- box plot of `{metric}` failed: {_md(_error_text(e).splitlines()[0])}")
+    return lines
+
+
+def _values(outs: list[Outcome], metric: str) -> np.ndarray:
+    """A numeric metric's finite values (bools as 0/1) over a cell's successful trials."""
+    vals = [o.result.metrics.get(metric) for o in outs if o.result is not None]
+    nums = np.array([float(v) for v in vals if isinstance(v, int | float)], dtype=float)
+    return nums[np.isfinite(nums)]
+
+
+def _summary(metric: str, outs: list[Outcome]) -> list[str]:
+    vals = [v for o in outs if o.result is not None and (v := o.result.metrics.get(metric)) is not None]
+    if not vals:
+        return [metric, "", "", "0"]
+    if all(isinstance(v, bool) for v in vals):
+        return [metric, f"{sum(vals)}/{len(vals)} true", "", str(len(vals))]
+    if all(isinstance(v, int | float) for v in vals):
+        nums = np.array(vals, dtype=float)
+        fin = nums[np.isfinite(nums)]
+        if not len(fin):
+            return [metric, "not finite", "", f"0 of {len(nums)}"]
+        q25, q50, q75 = np.percentile(fin, [25, 50, 75])
+        n = str(len(fin)) if len(fin) == len(nums) else f"{len(fin)} of {len(nums)} finite"
+        return [metric, _num(q50), f"{_num(q25)} to {_num(q75)}", n]
+    common = Counter(str(v) for v in vals).most_common(4)
+    return [metric, ", ".join(f"{_md(v)} ({n})" for v, n in common), "", str(len(vals))]
+
+
+@dataclass
+class ExperimentRun:
+    """What run_experiment did: where, the outcomes in (cell, index) order and the targets' verdicts."""
+
+    out: Path
+    outcomes: list[Outcome]
+    total: int  # trials planned
+    failed: int
+    interrupted: bool
+    wall_s: float
+    verdicts: list[tuple[Target, str, bool | None, str]]
+
+
+def _command(name: str, trials: int | None, out: str | Path | None, default_out: Path, smoke: bool,
+             seed: int, only: dict[str, list[str]] | None = None) -> str:
+    cmd = ["swarm-sitl", "experiment", name]
+    if smoke:
+        cmd.append("--smoke")
+    if trials is not None:
+        cmd += ["--trials", str(trials)]
+    cmd += ["--seed", str(seed)]
+    for k, vs in (only or {}).items():
+        cmd += ["--only", f"{k}={','.join(vs)}"]
+    if out is not None and Path(out) != default_out:
+        cmd += ["--out", str(out)]
+    return shlex.join(cmd)
+
+
+def _matches(value: Any, wanted: str) -> bool:
+    """Whether a cell's value is the text given on the command line (``15`` matches 15 and 15.0, ``true`` True)."""
+    if isinstance(value, bool) or value is None:
+        return wanted.lower() == str(value).lower()
+    if isinstance(value, int | float):
+        try:
+            return float(wanted) == float(value)
+        except ValueError:
+            return False
+    return wanted == str(value)
+
+
+def select_cells(cells: list[dict[str, Any]], only: dict[str, list[str]] | None) -> list[dict[str, Any]]:
+    """The cells whose value of every key in `only` is one of the values given for it (all cells if `only` is
+    empty). A key no cell has, or a choice that leaves no cell, is an error naming what there is."""
+    if not only:
+        return cells
+    keys = list(dict.fromkeys(k for c in cells for k in c))
+    kept = cells
+    for key, wanted in only.items():
+        if key not in keys:
+            raise ValueError(f"--only {key}: no cell has the key {key!r} (the cells' keys: {', '.join(keys)})")
+        if not wanted:
+            raise ValueError(f"--only {key}: give one or more values, {key}=V1,V2")
+        kept = [c for c in kept if key in c and any(_matches(c[key], w) for w in wanted)]
+    if not kept:
+        have = {k: sorted({str(c[k]) for c in cells if k in c}) for k in only}
+        raise ValueError("--only leaves no cell; the values there are: "
+                         + "; ".join(f"{k} in {', '.join(v)}" for k, v in have.items()))
+    return kept
+
+
+def execute_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
+                       smoke: bool = False, seed: int = 0, progress: bool = True,
+                       only: dict[str, list[str]] | None = None) -> ExperimentRun:
+    """Run experiment `name` and write its outputs; see run_experiment. Ctrl-C keeps what finished. `only` runs
+    the cells whose values match (key to accepted values); a trial's seed does not depend on which cells run."""
+    t_start = time.monotonic()
+    cls = get_experiment(name)
+    exp = cls()
+    n = trials if trials is not None else (cls.smoke_trials if smoke else cls.trials)
+    jobs = jobs if jobs is not None else (os.cpu_count() or 1)
+    if n < 1 or jobs < 1:
+        raise ValueError(f"trials and jobs must be >= 1 (got {n}, {jobs})")
+    all_cells = [dict(c) for c in exp.cells(smoke)]
+    _check_cells(all_cells)
+    cells = select_cells(all_cells, only)
+    default_out = Path("runs/experiments") / (f"{name}-smoke" if smoke else name)
+    out_dir = Path(out) if out is not None else default_out
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for f in _RESULT_FILES:
+        (out_dir / f).unlink(missing_ok=True)
+    for d in _RESULT_DIRS:
+        shutil.rmtree(out_dir / d, ignore_errors=True)
+
+    work = (out_dir / "work").absolute()
+    plan = [Trial(name, dict(c), i, trial_seed(seed, name, c, i), smoke, str(work / _slug(c) / str(i)))
+            for c in cells for i in range(n)]
+    ref = _ref(cls)
+    _INSTANCES.setdefault(ref, exp)
+    bar = _Progress(name, len(plan), progress)
+    old_term = old_int = None
+    _STOP.clear()
+    if threading.current_thread() is threading.main_thread():  # SIGTERM ends a run as Ctrl-C does: no orphans
+        old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+        old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
+    try:
+        done, interrupted = _execute(ref, plan, jobs, bar)
+    finally:
+        bar.close()
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+            signal.signal(signal.SIGINT, old_int)
+    for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
+        with contextlib.suppress(OSError):
+            d.rmdir()
+
+    outcomes = [Outcome(plan[k], done[k][0], done[k][1]) for k in sorted(done)]
+    by_cell: list[list[Outcome]] = [[] for _ in cells]
+    for k, o in zip(sorted(done), outcomes, strict=True):
+        by_cell[k // n].append(o)  # plan is cell-major
+    cell_keys = list(dict.fromkeys(k for c in cells for k in c))
+    metric_keys = list(dict.fromkeys(k for o in outcomes if o.result for k in o.result.metrics))
+    _write_csv(out_dir / "trials.csv", [*cell_keys, *RESERVED_COLUMNS, *metric_keys],
+               [[*(o.trial.cell.get(k) for k in cell_keys), o.trial.index, o.trial.seed,
+                 o.error.splitlines()[0] if o.error else "",
+                 *((o.result.metrics.get(k) if o.result else None) for k in metric_keys)] for o in outcomes])
+    _write_csv(out_dir / "timings.csv", [*cell_keys, "index", "wall_s"],
+               [[*(plan[k].cell.get(c) for c in cell_keys), plan[k].index, round(done[k][2], 3)]
+                for k in sorted(done)])
+    for cell, outs in zip(cells, by_cell, strict=True):
+        rows = [[o.trial.index, x, curve, v] for o in outs if o.result for curve, ys in o.result.curves.items()
+                for x, v in zip(o.result.curve_x.get(curve, range(len(ys))), ys, strict=True)]
+        if rows:
+            (out_dir / "curves").mkdir(exist_ok=True)
+            _write_csv(out_dir / "curves" / f"{_slug(cell)}.csv", ["index", "x", "curve", "value"], rows)
+    plot_lines: list[str] = []
+    if exp.curves or exp.boxes:
+        (out_dir / "plots").mkdir()
+        plot_lines = _plots(exp, cells, by_cell, out_dir / "plots")
+
+    verdicts: list[tuple[Target, str, bool | None, str]] = []
+    target_error = ""
+    try:
+        targets = exp.targets()
+    except Exception as e:
+        targets, target_error = [], _error_text(e).splitlines()[0]
+    for t in targets:
+        try:
+            ours, ok, note = t.evaluate(outcomes)
+        except Exception as e:
+            ours, ok, note = "error", None, f"evaluate() raised {_error_text(e).splitlines()[0]}"
+        verdicts.append((t, str(ours), ok, str(note)))
+
+    failed = sum(o.error is not None for o in outcomes)
+    wall = time.monotonic() - t_start
+    walls = [d[2] for d in done.values()]
+    chosen = ""
+    if only:
+        which = "; ".join(f"{k} in {', '.join(v)}" for k, v in only.items())
+        chosen = f" (the cells with {which}: {len(cells)} of {len(all_cells)})"
+    lines = [f"# {exp.title}", "", " ".join(exp.description.split()), "",
+             f"Reproduce: `{_command(name, trials, out, default_out, smoke, seed, only)}` (any `--jobs` gives the "
+             f"same trials.csv).", "",
+             f"- experiment `{name}`{' (smoke run)' if smoke else ''}: {_count(len(cells), 'cell')} x "
+             f"{_count(n, 'trial')}, seed {seed}{chosen}",
+             f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"]
+    if interrupted:
+        lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
+                      "cover only the trials that finished."]
+    lines += ["", "## Targets", ""]
+    if verdicts:
+        lines += ["| id | what | thesis | ours | tolerance | result | note |", "|---|---|---|---|---|---|---|"]
+        for t, ours, ok, note in verdicts:
+            verdict = {True: "pass", False: "fail"}.get(ok, "not judged")
+            lines.append(f"| {_md(t.id)} | {_md(t.what)} | {_md(t.thesis)} | {_md(ours)} | {_md(t.tolerance)} "
+                         f"| {verdict} | {_md(note)} |")
+        counts = Counter({True: "pass", False: "fail"}.get(ok, "not judged") for _, _, ok, _ in verdicts)
+        lines += ["", f"{counts['pass']} pass, {counts['fail']} fail, {counts['not judged']} not judged. A target "
+                      "that fails is a finding of the experiment, not an error of the run."]
+    else:
+        lines.append(f"targets() raised {_md(target_error)}" if target_error else "No targets.")
+    if plot_lines:
+        lines += ["", "## Plots", "", *plot_lines]
+    lines += ["", "## Results per cell"]
+    for cell, outs in zip(cells, by_cell, strict=True):
+        bad = sum(o.error is not None for o in outs)
+        lines += ["", f"### {_md(_label(cell))}", "", f"{len(outs)} trials, {bad} failed.", ""]
+        keys = [k for k in metric_keys if any(o.result and k in o.result.metrics for o in outs)]
+        if keys:
+            lines += ["| metric | median | IQR (25-75 %) | n |", "|---|---|---|---|"]
+            lines += ["| " + " | ".join(_summary(k, outs)) + " |" for k in keys]
+    if failed:
+        lines += ["", "## Failures", "", f"{failed} trials raised:", ""]
+        for o in outcomes:
+            if o.error:
+                lines += [f"- {_md(_label(o.trial.cell))}, trial {o.trial.index} (seed {o.trial.seed}):", "",
+                          "  ```", *("  " + s for s in o.error.splitlines()), "  ```", ""]
+    lines += ["", "---", "",
+              f"Wall time {wall:.1f} s with {jobs} job{'s' if jobs != 1 else ''} "
+              f"({'in-process' if jobs == 1 else _start_method() + ' workers'}); trials took "
+              f"{float(np.median(walls)) if walls else 0:.3g} s median, {sum(walls):.1f} s in all "
+              f"(per trial: timings.csv).{' Curves per trial: curves/.' if (out_dir / 'curves').exists() else ''}"]
+    (out_dir / "report.md").write_text(re.sub(r"\n{3,}", "\n\n", "\n".join(lines)).rstrip() + "\n")
+    return ExperimentRun(out_dir, outcomes, len(plan), failed, interrupted, wall, verdicts)
+
+
+def run_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
+                   smoke: bool = False, seed: int = 0, progress: bool = True,
+                   only: dict[str, list[str]] | None = None) -> Path:
+    """Run experiment `name`: `trials` per cell (default its own), on `jobs` processes (default: one per CPU;
+    1 runs in this process), into `out` (default runs/experiments/NAME[-smoke]), the cells `only` selects (default
+    all). Returns the output directory; execute_experiment() also returns the outcomes, failures and verdicts."""
+    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only).out

@@ -1,0 +1,292 @@
+"""``swarm-sitl join ENDPOINT --session NAME [--robot R]``: one robot's swarm logic, run on this computer for a
+session that runs on another one (its config sets ``session.listen`` and gives the robot ``logic = "remote"``).
+
+The joiner connects to the world over zenoh (peer mode, TCP, no scouting), asks it for the session's plan (the
+``plan`` queryable), and is then the robot's logic process ``remote<R>`` as a local one would be
+(``bridge.hosts.participant.serve``): it computes quantum k when the world's tick for k arrives, in simulated time, so
+the robot behaves exactly as with its logic on the world's computer, and the recording is the same byte for byte.
+The only wall-clock times here are the network's timeouts.
+
+Both ends of the exchange live here: the world's answer (``plan_offer``) and the joiner's checks of it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.metadata
+import json
+import signal
+import sys
+import threading
+import time
+from typing import Any, TextIO
+
+import zenoh
+from pydantic import ValidationError
+
+from bridge.core import transport
+from bridge.core.config import SessionCfg
+from bridge.core.plan import Plan
+
+PROTOCOL = 1  # the tick/done/plan exchange; bump on any incompatible change (the version check catches the rest)
+
+
+class JoinError(Exception):
+    """The joiner cannot join: the message says why, naming the endpoint, the session or the robot."""
+
+
+def version() -> str:
+    """This computer's swarm-sitl version (the installed package's)."""
+    try:
+        return importlib.metadata.version("swarm-sitl")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def plan_offer(plan: Plan, joinable: frozenset[str] | None) -> bytes:
+    """The world's answer to a joiner's ``plan`` query (JSON): the session's name, the software version and protocol,
+    the plan, and which remote logic processes may still join (``None``: the session has started)."""
+    return json.dumps({"session": plan.config["session"]["name"], "version": version(), "protocol": PROTOCOL,
+                       "joinable": None if joinable is None else sorted(joinable), "plan": plan.to_json()}).encode()
+
+
+def choose(offer: dict[str, Any], endpoint: str, session: str, robot: int | None) -> tuple[Plan, int, str]:
+    """Check the world's offer against this joiner: the plan, the robot to run and its process name, or a
+    ``JoinError`` saying why not (another version, a robot that is not remote, already joined, too late)."""
+    where = f"session {session!r} at {endpoint}"
+    if offer.get("version") != version() or offer.get("protocol") != PROTOCOL:
+        raise JoinError(f"{where} runs swarm-sitl {offer.get('version')} (protocol {offer.get('protocol')}), this "
+                        f"computer has {version()} (protocol {PROTOCOL}): install the same version on both")
+    if offer.get("session") != session:
+        raise JoinError(f"the session at {endpoint} is {offer.get('session')!r}, not {session!r}")
+    try:
+        plan = Plan.from_json(offer["plan"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise JoinError(f"{where} sent an unusable plan ({e!r})") from None
+    remote = {p.robots[0]: p.name for p in plan.procs if p.remote}
+    listed = ", ".join(map(str, sorted(remote)))
+    if not remote:
+        raise JoinError(f"{where} has no robot whose logic is remote (logic = \"remote\" in its config)")
+    if robot is None:
+        if len(remote) > 1:
+            raise JoinError(f"{where} has several remote robots ({listed}): choose one with --robot")
+        robot = next(iter(remote))
+    elif robot not in remote:
+        raise JoinError(f"robot {robot} is not a remote robot of {where} (remote robots: {listed})")
+    joinable = offer.get("joinable")
+    if joinable is None:
+        raise JoinError(f"{where} has already started: remote logic joins before the start "
+                        "(within its session.startup_timeout_s)")
+    if remote[robot] not in joinable:
+        raise JoinError(f"robot {robot}'s logic has already joined {where} (a join on another computer?)")
+    return plan, robot, remote[robot]
+
+
+def fetch_offer(endpoint: str, session: str, timeout_s: float) -> tuple[zenoh.Session, dict[str, Any]]:
+    """Connect to the world at ``endpoint`` in the session's namespace and ask for the plan, retrying until
+    ``timeout_s`` (wall time: the session may still be starting). The open session and the world's offer."""
+    deadline = time.monotonic() + timeout_s
+    ns = transport.namespace_for(session)
+    try:
+        zs = transport.open_session(endpoint, ns, listen=False, connect_timeout_s=timeout_s)
+    except zenoh.ZError:
+        raise JoinError(f"nobody answers at {endpoint} within {timeout_s:g} s: is `swarm-sitl run` running there, "
+                        "with that session.listen (and the port open in the firewall)?") from None
+    deadline = max(deadline, time.monotonic() + 2.0)  # connected late: still give the world time to answer
+    try:
+        asked_around = False
+        while True:
+            left = deadline - time.monotonic()
+            for reply in zs.get(transport.PLAN_KEY, timeout=max(0.2, min(2.0, left))):
+                if reply.ok is not None:
+                    try:
+                        offer = json.loads(reply.ok.payload.to_bytes())
+                    except ValueError:
+                        raise JoinError(f"the session at {endpoint} sent an unreadable plan") from None
+                    if isinstance(offer, dict):
+                        return zs, offer
+            if not asked_around:  # nobody by that name: which sessions are there?
+                asked_around = True
+                others = sessions_at(endpoint)
+                if others and session not in others:  # (ours among them: its answer was late, ask again)
+                    raise JoinError(f"no session {session!r} at {endpoint}: the session there is "
+                                    f"{' and '.join(map(repr, others))} (--session)")
+            if time.monotonic() >= deadline:
+                raise JoinError(f"{endpoint} accepts connections but no swarm-sitl session {session!r} answers there "
+                                f"within {timeout_s:g} s")
+            time.sleep(0.2)
+    except BaseException:
+        zs.close()
+        raise
+
+
+def sessions_at(endpoint: str) -> list[str]:
+    """The names of the sessions answering at ``endpoint`` (for a clear error when --session names another)."""
+    try:
+        zs = transport.open_session(endpoint, None, listen=False, connect_timeout_s=2.0)
+    except zenoh.ZError:
+        return []
+    try:
+        names = set()
+        for reply in zs.get(f"swarm-sitl/*/{transport.PLAN_KEY}", timeout=2.0):
+            if reply.ok is not None:
+                try:
+                    names.add(str(json.loads(reply.ok.payload.to_bytes())["session"]))
+                except (ValueError, KeyError, TypeError):
+                    continue
+        return sorted(names)
+    finally:
+        zs.close()
+
+
+class _Tracked:
+    """The logic host, noting how often and until when it ran (for the joiner's last line)."""
+
+    def __init__(self, host: Any) -> None:
+        self.host = host
+        self.runs = 0
+        self.t_ns: int | None = None
+
+    def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        self.runs += 1
+        self.t_ns = t_ns
+        return self.host.run(ent, t_ns, inputs)
+
+    def stats(self) -> dict[str, dict]:
+        return self.host.stats()
+
+    def stop(self) -> None:
+        self.host.stop()
+
+
+INTERRUPTED, DROPPED, WORLD_GONE, ENDED = 130, 4, 5, 6  # why a joiner left, besides the world's stop (0)
+
+
+class _Watch:
+    """What ends a joiner besides the world's stop, polled by ``serve`` after every tick and idle second: Ctrl-C or
+    SIGTERM, the world dropping its process (it hung or died, as the world saw it), the session's end, or the world
+    unreachable for longer than ``world_timeout_s``. It also prints the line saying the world accepted the join."""
+
+    def __init__(self, zs: zenoh.Session, proc: str, robot: int, world_timeout_s: float, out: TextIO,
+                 joined_line: str) -> None:
+        self.proc, self.robot, self.world_timeout_s, self.out = proc, robot, world_timeout_s, out
+        self.joined_line = joined_line
+        self.joined = False
+        self.signal: int | None = None
+        self.dropped: dict[str, Any] | None = None  # the world's failure event naming our process
+        self.failed: dict[str, Any] | None = None  # our robot failed, the process goes on until the stop
+        self.ended = False
+        self.world_lost_at: float | None = None
+        self._lock = threading.Lock()
+        self.control = transport.publisher(zs, "control")  # to tell the world we leave (it fails the robot at once)
+        self._subs = [zs.declare_subscriber("status", self._status),
+                      zs.liveliness().declare_subscriber(transport.WORLD_KEY, self._world, history=True)]
+
+    def _status(self, sample: zenoh.Sample) -> None:
+        try:
+            msg = transport.unpack(sample.payload.to_bytes())
+        except Exception:
+            return
+        if not isinstance(msg, dict):
+            return
+        op = msg.get("op")
+        if op == "notice" and msg.get("joined") == self.proc:
+            with self._lock:
+                if not self.joined:
+                    self.joined = True
+                    print(self.joined_line, file=self.out, flush=True)
+        elif op == "event" and msg.get("robot") == self.robot:
+            if msg.get("process") == self.proc:
+                self.dropped = msg
+            else:
+                self.failed = msg
+        elif op == "end":
+            self.ended = True
+
+    def _world(self, sample: zenoh.Sample) -> None:
+        self.world_lost_at = time.monotonic() if sample.kind == zenoh.SampleKind.DELETE else None
+
+    def on_signal(self, signum: int, frame: Any) -> None:
+        self.signal = signum
+
+    def __call__(self) -> int | None:
+        if self.signal is not None:
+            return INTERRUPTED
+        if self.dropped is not None:
+            return DROPPED
+        if self.ended:
+            return ENDED
+        lost = self.world_lost_at
+        if lost is not None and time.monotonic() - lost > self.world_timeout_s:
+            return WORLD_GONE
+        return None
+
+
+def join(endpoint: str, session: str, robot: int | None = None, timeout_s: float = 10.0,
+         world_timeout_s: float = 10.0, out: TextIO = sys.stdout) -> int:
+    """Join the session as robot ``robot``'s logic and run it until the session ends. The exit code: 0 the world said
+    stop, 1 the world dropped this robot, went away or the session ended without us, 130 interrupted. A
+    ``JoinError`` when it cannot join (nobody answers, another session or version, not a remote robot)."""
+    try:
+        SessionCfg(listen=endpoint)
+    except ValidationError as e:
+        raise JoinError(f"ENDPOINT: {e.errors()[0]['msg'].removeprefix('Value error, ')}") from None
+    try:
+        ns = transport.namespace_for(session)
+    except ValueError:
+        raise JoinError("--session: the session's name (its config's session.name) must not be empty") from None
+    zs, offer = fetch_offer(endpoint, session, timeout_s)
+    code = 1
+    try:
+        plan, robot, proc = choose(offer, endpoint, session, robot)
+        rp = plan.robots[robot]
+        from bridge.hosts.logic import LogicHost
+
+        try:
+            host = _Tracked(LogicHost(plan, (robot,)))
+        except Exception as e:
+            raise JoinError(f"robot {robot}'s logic ({rp.behaviour!r}) does not start on this computer: {e}") from None
+        watch = _Watch(zs, proc, robot, world_timeout_s, out,
+                       f"swarm-sitl join: robot {robot}'s logic ({rp.behaviour}) joined session {session!r} at "
+                       f"{endpoint}; it runs in the session's simulated time until the session ends")
+        old = {s: signal.signal(s, watch.on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            from bridge.hosts.participant import serve
+
+            code = serve(proc, endpoint, ns, host, session=zs, watch=watch)
+        except TimeoutError as e:
+            raise JoinError(f"session {session!r} at {endpoint} stopped answering while joining ({e})") from None
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+        if code != 0:  # the world will not say stop: end the robot's thread here
+            with contextlib.suppress(Exception):
+                host.stop()
+        ran = (f"{host.runs} runs, the last at sim t={host.t_ns / 1e9:.3f} s" if host.t_ns is not None
+               else "it never ran")
+        if code == 0:
+            print(f"swarm-sitl join: session {session!r} ended (the world said stop); robot {robot}'s logic: {ran}"
+                  + (f"; the robot failed at sim t={watch.failed['t_s']:.2f} s ({watch.failed['kind']})"
+                     if watch.failed else ""), file=out, flush=True)
+        elif code == INTERRUPTED:
+            name = signal.Signals(watch.signal or signal.SIGINT).name
+            watch.control.put(transport.pack({"op": "dead", "proc": proc,
+                                              "detail": f"swarm-sitl join on another computer stopped ({name})"}))
+            time.sleep(0.2)  # let the message leave before the session closes
+            print(f"swarm-sitl join: interrupted ({name}); robot {robot} fails in session {session!r}; its logic: "
+                  f"{ran}", file=out, flush=True)
+        elif code == DROPPED:
+            d = watch.dropped or {}
+            print(f"swarm-sitl join: the world dropped robot {robot}'s logic at sim t={d.get('t_s', 0):.2f} s "
+                  f"({d.get('kind')}: {str(d.get('detail', '')).strip()}); the session goes on without it",
+                  file=out, flush=True)
+        elif code == WORLD_GONE:
+            print(f"swarm-sitl join: lost the world at {endpoint} for more than {world_timeout_s:g} s: session "
+                  f"{session!r} ended without a stop for robot {robot}, or the network is down; its logic: {ran}",
+                  file=out, flush=True)
+        else:
+            print(f"swarm-sitl join: session {session!r} ended without a stop for robot {robot}; its logic: {ran}",
+                  file=out, flush=True)
+        return {0: 0, INTERRUPTED: 130}.get(code, 1)
+    finally:
+        zs.close()

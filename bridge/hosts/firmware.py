@@ -1,0 +1,366 @@
+"""Hosts the firmware of one or more robots: per robot an Arduino board with the LLC sketch, and the radio
+modules it carries (an XBee, a UWB module), each an entity with its own schedule.
+
+Per tick the host sets a due board's clock and pin inputs from the world's physical values, hands it the CAN
+frames the bus delivered, runs ``loop()`` (``setup()`` first, once) and returns the frames it transmitted,
+its pin outputs when they changed, and its next loop time. A module gets the bytes its UART received and the
+radio events the medium delivered, and returns the bytes it sent to its host, what it puts on the air, and
+when it next needs to run.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pty
+import tty
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from bridge.core.config import Config
+from bridge.core.entities import entity, robot_of, uwb_addr16, xbee_serial64
+from bridge.core.plan import Plan
+from bridge.core.profile import RobotProfile
+from bridge.core.registry import robot_profile
+from bridge.core.rng import stream
+from firmware_sim.board import sensors
+from firmware_sim.board.arduino import Board
+from firmware_sim.board.can_controller import Frame
+from firmware_sim.modules.slcan import SlcanAdapter
+from firmware_sim.modules.uwb import UwbModule
+from firmware_sim.modules.xbee import XBeeModule
+from firmware_sim.robots.eswarbot.llc import (
+    PIN_BATTERY,
+    PIN_DIR,
+    PIN_LDR,
+    PIN_PWM,
+    PIN_RSSI,
+    PIN_SONAR,
+    PIN_SONAR_LEFT,
+    PIN_SONAR_RIGHT,
+    RSSI_PWM_HZ,
+    LlcParams,
+    LowLevelController,
+)
+
+if TYPE_CHECKING:
+    from bridge.hil.xbee_gateway import XBeeGateway
+
+
+def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
+    # the wheel PI was tuned on the eSwarBot's 48-pulse encoders: the same gains per radian of wheel angle
+    per_pulse = 48 / p.encoder_cpr
+    return LlcParams(
+        kp=LlcParams.kp * per_pulse,
+        ki=LlcParams.ki * per_pulse,
+        max_err_pulses=LlcParams.max_err_pulses / per_pulse,
+        wheel_radius_m=p.wheel_radius_m,
+        half_track_m=p.half_track_m,
+        encoder_cpr=p.encoder_cpr,
+        loop_hz=p.llc_loop_hz,
+        max_wheel_rad_s=p.motor_max_wheel_rad_s,
+        deadband_pwm=p.motor_deadband_pwm,
+        motor_time_constant_s=p.motor_time_constant_s,
+        battery_cells=p.battery_cells,
+        sonar_min_mm=round(p.sonar_min_range_m * 1000),
+        sonar_max_mm=round(p.sonar_max_range_m * 1000),
+        side_sonars=len(p.sonar_angles_deg) == 3,
+        conveyor_slots=p.conveyor_slots,
+        conveyor_pitch_mm=p.conveyor_pitch_m * 1000,
+        conveyor_speed_mm_s=p.conveyor_speed_m_s * 1000,
+        belt_mm_per_step=p.conveyor_m_per_step * 1000,
+        rssi_pwm_input=xbee is not None,
+        # the firmware inverts eq. 3.9 with the sensitivity of the module it is built for
+        xbee_sensitivity_dbm=-92.0 if xbee is not None and xbee["series"] == 1 else -94.0,
+    )
+
+
+class PtyLink:
+    """A module's UART on a pseudo-terminal, so outside tools (XCTU, digi-xbee, minicom, python-can's slcan) can
+    open it.
+
+    The slave side is linked at ``link`` and kept open here, so a tool may close and reopen it. Bytes cross
+    in raw mode, as on a USB-serial adapter; what the outside sends is read once per quantum.
+    """
+
+    def __init__(self, link: str, what: str = "xbee.pty") -> None:
+        self.master, self.slave = pty.openpty()
+        tty.setraw(self.slave)
+        os.set_blocking(self.master, False)
+        self.link = Path(link)
+        self.link.parent.mkdir(parents=True, exist_ok=True)
+        if self.link.is_symlink():
+            self.link.unlink()  # a stale link of an earlier session
+        elif self.link.exists():
+            raise FileExistsError(f"{what}: {link} exists and is not a link; it is left alone")
+        self.link.symlink_to(os.ttyname(self.slave))
+        self.dropped = 0
+
+    def read(self) -> bytes:
+        chunks = []
+        while True:
+            try:
+                data = os.read(self.master, 4096)
+            except (BlockingIOError, OSError):
+                break
+            if not data:
+                break
+            chunks.append(data)
+        return b"".join(chunks)
+
+    def write(self, data: bytes) -> None:
+        """What does not fit (nobody reads and the terminal's buffer is full) is lost and counted, as on a
+        serial line without flow control."""
+        try:
+            n = os.write(self.master, data)
+        except OSError:
+            n = 0
+        self.dropped += len(data) - n
+
+    def close(self) -> None:
+        if self.link.is_symlink():
+            self.link.unlink()
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+class CanBridge:
+    """A robot's simulated CAN bus bridged to its real LLC board on a python-can interface (socketcan, slcan, any):
+    frames other nodes put on the simulated bus go to the real one, frames from the real bus (the board's) go on
+    the simulated one, once per quantum. A send the real adapter refuses is counted; an interface that fails to
+    receive has failed or disappeared, and the robot fails with it."""
+
+    def __init__(self, device: dict[str, Any]) -> None:
+        import can
+
+        self.can = can
+        self.name = f"{device.get('interface')}:{device.get('channel')}"
+        try:  # the host's python-can config must not change the device the session was given
+            self.bus = can.Bus(**{**device, "ignore_config": True})
+        except Exception as e:  # python-can raises many kinds for a missing or busy adapter
+            raise RuntimeError(f"can.device {self.name}: cannot open the real board's bus: {e}") from None
+        self.counters = {"to_board": 0, "from_board": 0, "send_failed": 0, "error_frames": 0, "remote_frames": 0}
+
+    def exchange(self, frames: list[tuple[int, bytes, bool]]) -> list[tuple[int, bytes, bool]]:
+        """Send ``frames`` (id, data, extended) to the real bus; return what arrived from it since the last call."""
+        for arb_id, data, ext in frames:
+            try:
+                self.bus.send(self.can.Message(arbitration_id=arb_id, data=data, is_extended_id=ext), timeout=0)
+                self.counters["to_board"] += 1
+            except self.can.CanError:  # a full queue, the adapter bus-off: the frame is lost, as on the wire
+                self.counters["send_failed"] += 1
+        out = []
+        while True:
+            try:
+                m = self.bus.recv(0)
+            except Exception as e:
+                raise RuntimeError(f"can.device {self.name}: the real board's bus failed or disappeared: {e}") from e
+            if m is None:
+                return out
+            if m.is_error_frame:
+                self.counters["error_frames"] += 1
+            elif m.is_remote_frame:
+                self.counters["remote_frames"] += 1
+            else:
+                self.counters["from_board"] += 1
+                out.append((m.arbitration_id, bytes(m.data), m.is_extended_id))
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.bus.shutdown()
+
+
+class FirmwareHost:
+    def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
+        cfg = Config.model_validate(plan.config)
+        seed = cfg.session.seed
+        self.boards: dict[int, Board] = {}
+        self.llcs: dict[int, LowLevelController] = {}
+        self.nominal_ns: dict[int, int] = {}  # the loop's own fixed-rate schedule (millis()-based, as on the board)
+        self.last_pins: dict[int, tuple] = {}
+        self.xbees: dict[int, XBeeModule] = {}
+        self.xbee_baud: dict[int, int] = {}
+        self.ptys: dict[int, PtyLink] = {}
+        self.uwbs: dict[int, UwbModule] = {}
+        self.slcans: dict[int, tuple[SlcanAdapter, PtyLink]] = {}
+        self.bridges: dict[int, CanBridge] = {}  # robots whose LLC is a real board
+        self.gateways: dict[int, XBeeGateway] = {}
+        self.crash_ns = {f.robot: round(f.at_s * 1e9) for f in cfg.faults if f.kind == "firmware_crash"}
+        uwb_team = [r.id for r in plan.robots if r.uwb]
+        self.uwb_baud = cfg.uwb.uart_baud
+        for r in robots:
+            rp = plan.robots[r]
+            if rp.llc_role == "llc":
+                board = Board()
+                self.boards[r] = board
+                self.llcs[r] = LowLevelController(board, llc_params(robot_profile(rp.profile),
+                                                                   rp.xbee if rp.sim_xbee else None))
+            elif rp.llc_role == "can_bridge":
+                self.bridges[r] = CanBridge(rp.can_device)
+            if rp.sim_xbee:
+                x = rp.xbee
+                self.xbees[r] = XBeeModule(
+                    series=x["series"], serial64=xbee_serial64(r), node_id=rp.name, rng=stream(seed, "xbee", r),
+                    api_mode=x["api_mode"], baud=x["baud"], pan_id=x["pan_id"], channel=x["channel"],
+                    power_level=x["power_level"])
+                if x.get("pty"):
+                    self.ptys[r] = PtyLink(x["pty"])
+                if rp.gateway is not None:  # its relay's driver (digi-xbee) only in a process that has one
+                    from bridge.hil.xbee_gateway import XBeeGateway
+
+                    self.gateways[r] = XBeeGateway(rp.gateway)
+            if rp.slcan_pty:
+                self.slcans[r] = (SlcanAdapter(cfg.can.bitrate, serial_number=f"{r % 10000:04d}"),
+                                  PtyLink(rp.slcan_pty, "can.slcan_pty"))
+            if rp.uwb:
+                self.uwbs[r] = UwbModule(
+                    addr16=uwb_addr16(r), robot=r, peers=[(p, uwb_addr16(p)) for p in uwb_team if p != r],
+                    slot=uwb_team.index(r), n_slots=len(uwb_team), rng=stream(seed, "uwb", r),
+                    cfg=cfg.uwb)
+
+    def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        r = robot_of(ent)
+        if t_ns >= self.crash_ns.get(r, t_ns + 1):
+            raise RuntimeError(f"injected fault: robot {r}'s firmware crashed at {self.crash_ns[r] / 1e9:g} s")
+        role = ent[ent.index("/") + 1:]
+        if role == "llc":
+            return self._llc(r, t_ns, inputs)
+        if role == "xbee":
+            return self._xbee(r, t_ns, inputs)
+        if role == "slcan":
+            return self._slcan(r, t_ns, inputs)
+        if role == "can_bridge":
+            return self._can_bridge(r, t_ns, inputs)
+        return self._uwb(r, t_ns, inputs)
+
+    def _llc(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        b, llc = self.boards[r], self.llcs[r]
+        b.time_us = t_ns // 1000
+        s = inputs["sens"]
+        b.encoder_counts = [s["enc"][0], s["enc"][1]]
+        b.analog_volts[PIN_SONAR] = sensors.sonar_volts(s["sonar_m"])
+        for pin, m in zip((PIN_SONAR_LEFT, PIN_SONAR_RIGHT), s.get("sides", ()), strict=False):
+            b.analog_volts[pin] = sensors.sonar_volts(m)
+        b.analog_volts[PIN_LDR] = sensors.ldr_volts(s["lux"])
+        b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(s["battery_v"])
+        b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
+        pose = s.get("pose")  # a ground-truth robot's motion-capture receiver: the world pose (x, y, yaw)
+        b.external_pose = (float(pose[0]), float(pose[1]), float(pose[2])) if pose is not None else None
+        for item in inputs["in"]:
+            if item[0] == "can0_state":  # the bus changed this node's fault-confinement state (its EFLG register)
+                b.can.set_error_state(item[1], item[2], item[3])
+            elif len(item) == 5:  # a frame from another node (error frames only move the counters above)
+                _bus, arb_id, data, ext, ts = item
+                b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
+        if r not in self.nominal_ns:  # first tick: power-up
+            self.nominal_ns[r] = t_ns
+            llc.setup()
+        llc.loop()
+        # Next loop on the nominal schedule; the world rounds it up to a quantum boundary, so when the
+        # quantum does not divide the period the loop jitters but keeps its average rate.
+        period = llc.loop_period_us * 1000
+        nominal = self.nominal_ns[r] + period
+        while nominal <= t_ns:
+            nominal += period
+        self.nominal_ns[r] = nominal
+        pwm = tuple(
+            b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1) for i in (0, 1)
+        )
+        pins = (pwm, b.led_rgb, b.stepper_steps)
+        out: dict[str, Any] = {
+            "out": [["can0", f.arbitration_id, f.data, f.is_extended_id] for f in b.can.take_tx()],
+            "wake": nominal,
+            "wom": False,
+        }
+        if pins != self.last_pins.get(r):
+            self.last_pins[r] = pins
+            out["pins"] = {"pwm": list(pwm), "led": list(b.led_rgb)}
+            if llc.p.conveyor_slots:  # the belt's stepper: how far it has turned
+                out["pins"]["belt_steps"] = b.stepper_steps
+        return out
+
+    def _xbee(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        m = self.xbees[r]
+        link: PtyLink | XBeeGateway | None = self.ptys.get(r)
+        if r in self.gateways:
+            link = self.gateways[r]
+            link.set_time(t_ns)
+        uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
+        if link is not None:
+            uart += link.read()
+        air = [item[1] for item in inputs["in"] if item[0] == "air"]
+        res = m.step(t_ns, uart, air)
+        out: list[list] = [["air", f] for f in res.air_tx]
+        if res.uart_tx:
+            if link is not None:
+                link.write(res.uart_tx)
+            else:
+                out.append(["uart", "xbee", res.uart_tx, m.baud])
+        if res.node is not None:
+            out.append(["node", res.node])
+        if m.baud != self.xbee_baud.get(r):  # BD changed: the line from the host is now sampled at the new rate
+            self.xbee_baud[r] = m.baud
+            out.append(["baud", "xbee", m.baud])
+        if res.rssi_pwm is not None:
+            out.append(["rssi_pwm", float(res.rssi_pwm)])
+        wake = m.next_wake()
+        if link is not None:  # poll the pseudo-terminal (the gateway's real module) every quantum
+            wake = t_ns + 1 if wake is None else min(wake, t_ns + 1)
+        return {"out": out, "wake": wake, "wom": True}
+
+    def _slcan(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        """The USB-CAN adapter on the robot's bus: frames from the bus to its serial line, the host's commands
+        and frames from the line to the bus. Its pseudo-terminal is polled every quantum."""
+        adapter, link = self.slcans[r]
+        for item in inputs["in"]:
+            if item[0] == "can0_state":
+                adapter.set_bus_state(item[1], item[2], item[3])
+            elif len(item) == 5:  # a frame from another node, at the time its last bit left the wire
+                _bus, arb_id, data, ext, wire_end = item
+                adapter.on_bus_frame(wire_end, arb_id, data, ext)
+        adapter.feed(link.read())
+        if out := adapter.take_output():
+            link.write(out)
+        frames = [["can0", f.arbitration_id, f.data, f.extended] for f in adapter.take_tx()]
+        return {"out": frames, "wake": t_ns + 1, "wom": True}
+
+    def _can_bridge(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        """The robot's real LLC board, reached through a CAN interface: polled every quantum."""
+        frames = [(item[1], item[2], item[3]) for item in inputs["in"] if item[0] == "can0" and len(item) == 5]
+        back = self.bridges[r].exchange(frames)
+        return {"out": [["can0", arb, data, ext] for arb, data, ext in back], "wake": t_ns + 1, "wom": True}
+
+    def _uwb(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        m = self.uwbs[r]
+        uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
+        events = [item[1] for item in inputs["in"] if item[0] == "uwb"]
+        res = m.step(t_ns, uart, events)
+        out: list[list] = [["uwb", q] for q in res.requests]
+        if res.uart_tx:
+            out.append(["uart", "uwb", res.uart_tx, self.uwb_baud])
+        # Range results wait in the inbox until the module runs anyway (its next turn, or its host asks): they
+        # carry their own times, so the module sees the same thing, with fewer wake-ups of the process.
+        return {"out": out, "wake": m.next_wake(), "wom": ["uart"]}
+
+    def stats(self) -> dict[str, dict]:
+        """Each module's counters (malformed frames, buffer drops, ...), reported when the session ends."""
+        out: dict[str, dict] = {}
+        for r, m in self.xbees.items():
+            out[entity(r, "xbee")] = dict(m.counters)
+            if r in self.ptys:
+                out[entity(r, "xbee")]["pty_dropped_bytes"] = self.ptys[r].dropped
+        for r, m in self.uwbs.items():
+            out[entity(r, "uwb")] = dict(m.counters)
+        for r, (adapter, link) in self.slcans.items():
+            out[entity(r, "slcan")] = {**adapter.counters, "pty_dropped_bytes": link.dropped}
+        for r, bridge in self.bridges.items():
+            out[entity(r, "can_bridge")] = dict(bridge.counters)
+        for r, gw in self.gateways.items():
+            out.setdefault(entity(r, "xbee"), {})["gateway"] = gw.stats()
+        return out
+
+    def stop(self) -> None:
+        for link in [*self.ptys.values(), *(link for _, link in self.slcans.values()), *self.bridges.values(),
+                     *self.gateways.values()]:
+            link.close()

@@ -1,0 +1,125 @@
+"""The RDPSO study's loop functions (Couceiro 2013): what its sessions measure beyond the world's own figures.
+
+- the rangers' marsupial deployment (chapter 5): when each ranger says it is done (its ``deployment`` log), where its
+  scouts are, their dispersion (eq. 5.11) and the arena they cover; ``session.end_after_deployment`` ends the session
+  1 s after the last ranger;
+- each ranger's subgroup in the radio graph: its partition events, and after its START the thesis' Table 5.2 link
+  statistics (RSSI, hops, relays, lambda2) as its scouts judge links (their q_min);
+- the chapter 6 routing layer's counters (the ``rdpso`` log's ``comm``), summed in ``comm_stats``;
+- the chapter 8 mapping objective (``[objective] kind = "mapping"``): the light sensors read it, the robots scan from
+  where they stand every ``scan_period_s`` (``/world/mapping``), and eta_exp with its AUC go to the summary.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bridge.core.loop_functions import LoopFunctions
+from bridge.media.radio import splits
+from bridge.studies.rdpso.comm_stats import comm_report
+from bridge.studies.rdpso.deployment import covered_share, dispersion, link_stats, mean_sd
+from swarm_logic.graph import components
+
+if TYPE_CHECKING:
+    from bridge.core.config import Config
+    from bridge.core.hub import Hub
+
+BEHAVIOURS = ("rdpso", "est_ranger")  # the study's controllers: their logs are read here
+
+
+class RdpsoLoopFunctions(LoopFunctions):
+    @classmethod
+    def wanted(cls, cfg: Config) -> bool:
+        return (cfg.objective.kind == "mapping" or any(g.carried_by is not None for g in cfg.robots)
+                or any(g.behaviour in BEHAVIOURS for g in cfg.robots))
+
+    def __init__(self, hub: Hub) -> None:
+        super().__init__(hub)
+        robots = hub.plan.robots
+        self.group_of = {rp.id: rp.carrier for rp in robots if rp.carrier is not None}  # scout -> its ranger
+        self.carriers = set(self.group_of.values())  # rangers with scouts on board
+        self.group_pieces: dict[int, list[int]] = defaultdict(list)
+        # each deployed subgroup's radio graph after its START, per sample (Table 5.2; link_stats)
+        self.mission_links: list[dict[str, Any]] = []
+        self.q_min = {rp.carrier: float(rp.params["q_min_dbm"]) for rp in robots if rp.carrier is not None
+                      and rp.params.get("link_mode") == "rssi" and "q_min_dbm" in rp.params}  # ranger -> its scouts'
+        self.deployed: dict[int, dict[str, Any]] = {}  # ranger -> its deployment as it ended (deployment_report)
+        self.comm: dict[int, dict[str, Any]] = {}  # robot -> its routing layer's latest counters (comm_report)
+        self.mapping = None
+        if hub.cfg.objective.kind == "mapping":
+            from bridge.studies.rdpso.mapping import SessionMap
+
+            self.mapping = hub.world.lux_field = SessionMap(hub.cfg)
+
+    def pre_step(self, t: int) -> None:
+        """With the mapping objective, the robots scan from where they stand if a scan is due, so this quantum's
+        light readings see it."""
+        world = self.hub.world
+        if self.mapping is not None and self.mapping.tick(t, world.pos, world.alive):
+            self.hub.rec.write(t, "/world/mapping", "swarm_sitl.Mapping", self.mapping.record())
+
+    def on_log(self, robot: int, topic: str, values: dict[str, Any], t: int) -> None:
+        if topic == "deployment" and values.get("event") == "done" and robot in self.carriers:
+            self._deployed(robot, t)
+        elif topic == "rdpso" and isinstance(values.get("comm"), dict):
+            self.comm[robot] = values["comm"]
+
+    def _deployed(self, carrier: int, t: int) -> None:
+        """A ranger says it has deployed its scouts (and broadcast START): where they are, by ground truth."""
+        world = self.hub.world
+        scouts = [r for r, c in self.group_of.items() if c == carrier and r not in world.carried]
+        pts = world.pos[scouts] if scouts else np.zeros((0, 2))
+        self.deployed[carrier] = {"t_s": t / 1e9, "scouts": scouts, "dispersion_m": round(dispersion(pts), 3),
+                                  "positions": np.round(pts, 3).tolist()}
+        if self.hub.cfg.session.end_after_deployment and len(self.deployed) == len(self.carriers):
+            self.hub.end_ns = min(self.hub.end_ns, t + 1_000_000_000)
+
+    def on_radio_sample(self, t: int, live: list[int], adj: np.ndarray) -> None:
+        """Each ranger's subgroup (its live scouts off the conveyor): how many pieces, and after its START the links
+        as its scouts judge them (the mean RSSI clears their q_min both ways, else any link)."""
+        if not self.group_of:
+            return
+        world = self.hub.world
+        idx = {r: i for i, r in enumerate(live)}
+        for g in sorted(self.carriers):
+            members = [idx[r] for r, c in self.group_of.items() if c == g and r in idx and r not in world.carried]
+            self.group_pieces[g].append(components(adj[np.ix_(members, members)]) if members else 0)
+            if g in self.deployed and members:  # the mission has begun for this subgroup (its START)
+                rssi = self.hub.medium("radio").medium.mean_rssi()[np.ix_(live, live)][np.ix_(members, members)]
+                q = self.q_min.get(g)
+                sub = adj[np.ix_(members, members)] if q is None else (rssi >= q) & (rssi >= q).T
+                self.mission_links.append({"group": g, **link_stats(sub, rssi)})
+
+    def radio_report(self, connectivity: dict[str, Any]) -> None:
+        if self.group_pieces:
+            connectivity["subgroups"] = {str(g): {"partition_events": splits(v), "pieces_max": max(v)}
+                                         for g, v in sorted(self.group_pieces.items())}
+        if self.mission_links:  # each ranger's live scouts after its START, once a second (mean, sd)
+            ml = self.mission_links
+            connectivity["mission"] = {
+                "q_min_dbm": {str(g): q for g, q in sorted(self.q_min.items())},
+                **{k: mean_sd([s[k] for s in ml]) for k in ("rssi_dbm", "hops", "relays", "lambda2")},
+                "partition_events": sum(splits([s["pieces"] for s in ml if s["group"] == g])
+                                        for g in sorted({s["group"] for s in ml}))}
+
+    def summary(self) -> dict[str, Any]:
+        sim_s = self.hub.sim_end_ns / 1e9
+        return {"deployment": self.deployment_report(),
+                "comm": comm_report(self.comm, sim_s) if self.comm else None,
+                "mapping": self.mapping.summary() if self.mapping is not None else None}
+
+    def deployment_report(self) -> dict[str, Any] | None:
+        """Per ranger: when it was done, its scouts' dispersion (eq. 5.11) and positions then; over all, the share
+        of the arena within 1 m of a deployed scout (each where it was when its ranger was done)."""
+        if not self.carriers:
+            return None
+        pts = [p for d in self.deployed.values() for p in d["positions"]]
+        a = self.hub.cfg.arena
+        return {"rangers": {str(c): self.deployed.get(c) for c in sorted(self.carriers)},
+                "done": len(self.deployed), "rangers_total": len(self.carriers),
+                "time_s_max": max((d["t_s"] for d in self.deployed.values()), default=None),
+                "covered_share": round(covered_share(np.array(pts), a.width_m, a.length_m), 4) if pts else 0.0,
+                "left_on_board": sorted(self.hub.world.carried)}

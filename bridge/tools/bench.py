@@ -1,0 +1,201 @@
+"""``swarm-sitl bench``: the demo behaviour at several robot counts and process packings; with ``--rdpso``, the
+RDPSO figures: one E9 cell in the numerical runner (100 robots, 500 iterations, one core) and the
+co-simulation's real-time factor with the 12-robot arena.
+
+Prints, per case: robots, processes, real-time factor, per-tick barrier latency (median and p99: from
+sending a quantum's ticks to the last answer, physics overlapped), CPU per robot (all processes,
+start-up included), resident memory per robot, and start-up time. Figures only, never pass/fail: the
+machine is shared and noisy.
+"""
+
+from __future__ import annotations
+
+import os
+import pstats
+import queue
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+from bridge.core import transport
+from bridge.core.launcher import ZENOH_RUNTIME, run_session
+
+ROOT = Path(__file__).resolve().parents[2]
+DEMO = ROOT / "hil_configs" / "demo.toml"
+
+# (robots, robots per process)
+FULL = [(1, 1), (10, 1), (10, 5), (25, 5), (50, 10), (50, 25), (100, 25)]
+QUICK = [(10, 1)]
+TARGETS = {(10, 1): 5.0, (50, 10): 1.0, (50, 25): 1.0}
+
+
+def numerical_cell(iterations: int = 500, n: int = 100, seed: int = 1) -> tuple[float, float, float]:
+    """One E9 cell (peaks, S1, 300 x 300 m with obstacles) in the numerical runner, in this process: wall and CPU
+    seconds, and the final best solution."""
+    from bridge.experiments.runner import Trial
+    from bridge.studies.rdpso.experiments import E9Static
+
+    exp = E9Static()
+    trial = Trial(exp.name, {"fn": "peaks", "n": n, "set": "S1"}, 0, seed, smoke=False, workdir=".")
+    w0, c0 = time.perf_counter(), time.process_time()
+    res = exp.run(trial, iterations)
+    return time.perf_counter() - w0, time.process_time() - c0, float(res.metrics["final"])
+
+
+def run_rdpso_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
+    """The RDPSO figures of the issue: numerical E9 cell wall time (< 10 s target) and the arena's RTF."""
+    iterations = 100 if quick else 500
+    walls = []
+    for seed in (1,) if quick else (1, 2, 3):
+        wall, cpu, final = numerical_cell(iterations, seed=seed)
+        walls.append(wall)
+        print(f"numerical runner, E9 cell (peaks, S1, 100 robots, {iterations} iterations), seed {seed}: "
+              f"{wall:.2f} s wall, {cpu:.2f} s CPU, final best {final:.4f}", file=sys.stderr)
+    dur = duration or (20.0 if quick else 60.0)
+    res = run_session(str(ROOT / "hil_configs" / "rdpso" / "rdpso_arena.toml"), {"session.duration_s": dur},
+                      str(Path(out_dir) / "rdpso_arena"), progress=None, plot=False)
+    s = res.summary
+    print(f"\nswarm-sitl bench --rdpso ({os.cpu_count()} cores)")
+    print(f"  numerical E9 cell, {iterations} iterations: median {sorted(walls)[len(walls) // 2]:.2f} s wall "
+          f"(target for 500 iterations: < 10 s)")
+    print(f"  co-simulation, rdpso_arena.toml, 12 robots, {dur:g} s: rtf {s['rtf']}x, {s['processes']} processes, "
+          f"start-up {s['startup_s']} s (exit {res.code})")
+    return res.code
+
+
+def run_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench",
+              markdown: bool = False, profile: bool = False, config: str | None = None) -> int:
+    cases = QUICK if quick else FULL
+    dur = duration or (10.0 if quick else 30.0)
+    cfg = config or str(DEMO)
+    rows = []
+    for n, k in cases:
+        out = Path(out_dir) / f"n{n}_k{k}"
+        env_before = os.environ.get("SWARM_SITL_PROFILE")
+        if profile:
+            (out / "profile").mkdir(parents=True, exist_ok=True)
+            os.environ["SWARM_SITL_PROFILE"] = str((out / "profile").resolve())
+        try:
+            res = run_session(cfg, {"robots.count": n, "session.robots_per_process": k, "session.duration_s": dur,
+                                    "session.speed": "max"}, str(out), progress=None, plot=False)
+        finally:
+            if env_before is None:
+                os.environ.pop("SWARM_SITL_PROFILE", None)
+        s = res.summary
+        rows.append((n, k, s))
+        print(f"  ran {n} robots, {k} per process: rtf {s['rtf']}x (exit {res.code})", file=sys.stderr)
+        if profile:
+            _print_profile(out / "profile" / "world.prof")
+    _print_table(rows, dur, markdown)
+    rate, median_us = barrier_yardstick()
+    print(f"machine yardstick: bare lock-step barrier over zenoh, world + 6 participant processes, no physics or "
+          f"firmware: {rate:.0f} quanta/s, median {median_us:.0f} us (compare machines and moments by this)")
+    failed = [r for r in rows if r[2]["exit_code"] != 0]
+    return 1 if failed else 0
+
+
+class _EchoHost:
+    """A participant that does nothing but answer: wakes every quantum."""
+
+    def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        return {"out": [], "wake": t_ns + 1, "wom": False}
+
+    def stop(self) -> None:
+        pass
+
+
+def _echo_main(proc: str, endpoint: str, namespace: str, parent_pid: int) -> None:
+    from bridge.hosts.participant import die_with_parent, serve
+
+    die_with_parent()
+    code = serve(proc, endpoint, namespace, _EchoHost(), parent_pid)
+    os._exit(code)
+
+
+def barrier_yardstick(procs: int = 6, quanta: int = 3000) -> tuple[float, float]:
+    """Quanta per second and median barrier of the bare tick/done protocol, with our participant loop."""
+    d = tempfile.mkdtemp(prefix="swarm-sitl-bench-")
+    ns = f"swarm-sitl-bench/{uuid.uuid4().hex[:12]}"
+    ep = transport.endpoint_for(d)
+    s = transport.open_session(ep, ns, listen=True)
+    q: queue.SimpleQueue = queue.SimpleQueue()
+    subs = [transport.queue_subscriber(s, "done/*", q), transport.queue_subscriber(s, "hello/*", q)]
+    names = [f"e{i}" for i in range(procs)]
+    pubs = {n: transport.publisher(s, f"tick/{n}") for n in names}
+    env = {"ZENOH_RUNTIME": ZENOH_RUNTIME, **os.environ}
+    children = [subprocess.Popen([sys.executable, "-c", f"from bridge.tools.bench import _echo_main; "
+                                  f"_echo_main({n!r}, {ep!r}, {ns!r}, {os.getpid()})"], env=env,
+                                 start_new_session=True) for n in names]
+    try:
+        for _ in names:
+            q.get(timeout=60)
+        for p in pubs.values():
+            transport.wait_matched(p, 60, "tick")
+        lat = []
+        t0 = time.perf_counter()
+        for k in range(quanta):
+            a = time.perf_counter()
+            for n in names:
+                pubs[n].put(transport.pack({"k": k, "t": k, "run": {f"{n}/x": {"in": []}}}))
+            for _ in names:
+                q.get(timeout=30)
+            lat.append(time.perf_counter() - a)
+        rate = quanta / (time.perf_counter() - t0)
+        for n in names:
+            pubs[n].put(transport.pack({"k": quanta, "stop": True}))
+        for c in children:
+            c.wait(timeout=10)
+    finally:
+        for c in children:
+            if c.poll() is None:
+                os.killpg(c.pid, signal.SIGKILL)
+                c.wait()
+        del subs
+        s.close()
+        shutil.rmtree(d, ignore_errors=True)
+    lat.sort()
+    return rate, lat[len(lat) // 2] * 1e6
+
+
+def _fmt(v: float | None, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def _print_table(rows: list, dur: float, markdown: bool) -> None:
+    head = ["robots", "robots/proc", "processes", "RTF", "target", "barrier median", "barrier p99",
+            "CPU per robot", "RSS per robot", "start-up"]
+    lines = []
+    for n, k, s in rows:
+        target = TARGETS.get((n, k))
+        lines.append([
+            str(n), str(k), str(s["processes"]), _fmt(s["rtf"], ".2f") + "x",
+            f">= {target:g}x" if target else "",
+            _fmt(s["barrier_us_median"], ".0f") + " us", _fmt(s["barrier_us_p99"], ".0f") + " us",
+            _fmt(s["cpu_s_per_robot_per_sim_s"] and s["cpu_s_per_robot_per_sim_s"] * 1000, ".0f") + " ms/sim-s",
+            _fmt(s["rss_mb_per_robot"], ".0f") + " MB", _fmt(s["startup_s"], ".1f") + " s",
+        ])
+    print(f"\nswarm-sitl bench: demo behaviour, {dur:g} s simulated per case, quantum 10 ms, {os.cpu_count()} cores")
+    if markdown:
+        print("| " + " | ".join(head) + " |")
+        print("|" + "|".join("---" for _ in head) + "|")
+        for line in lines:
+            print("| " + " | ".join(line) + " |")
+    else:
+        widths = [max(len(h), *(len(r[i]) for r in lines)) for i, h in enumerate(head)]
+        print("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
+        for line in lines:
+            print("  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)))
+
+
+def _print_profile(path: Path, top: int = 12) -> None:
+    if not path.exists():
+        return
+    print(f"\nworld process profile ({path}), by cumulative time:")
+    st = pstats.Stats(str(path), stream=sys.stdout)
+    st.sort_stats("cumulative").print_stats(top)

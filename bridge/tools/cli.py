@@ -1,0 +1,357 @@
+"""``swarm-sitl``: run, validate, benchmark and inspect SITL sessions."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from bridge.core.config import ConfigError, load_config
+
+
+def _speed(v: str) -> float | str:
+    if v == "max":
+        return "max"
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--speed: expected a positive number or 'max', got {v!r}") from None
+    if f <= 0:
+        raise argparse.ArgumentTypeError("--speed must be > 0")
+    return f
+
+
+def _at_least_one(v: str) -> int:
+    try:
+        n = int(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {v!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
+    return n
+
+
+def _overrides(a: argparse.Namespace) -> dict[str, Any]:
+    return {
+        "robots.count": a.robots,
+        "session.duration_s": a.duration,
+        "session.seed": a.seed,
+        "session.speed": a.speed,
+        "session.robots_per_process": a.robots_per_process,
+        "mavlink.endpoint": a.mavlink,
+    }
+
+
+def cmd_run(a: argparse.Namespace) -> int:
+    from bridge.core.launcher import run_session
+
+    out = a.out or f"runs/{Path(a.config).stem}"
+    res = run_session(a.config, _overrides(a), out, progress=None if a.quiet else sys.stderr)
+    if res.summary.get("error"):
+        print(res.summary["error"].strip().splitlines()[-1], file=sys.stderr)
+    return res.code
+
+
+def cmd_join(a: argparse.Namespace) -> int:
+    import os
+
+    from bridge.hil.join import JoinError, join
+
+    try:
+        code = join(a.endpoint, a.session, a.robot, timeout_s=a.timeout, world_timeout_s=a.world_timeout)
+    except JoinError as e:
+        print(f"swarm-sitl join: {e}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print("swarm-sitl join: interrupted before joining", file=sys.stderr)
+        code = 130
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)  # zenoh-python can hang in interpreter teardown
+
+
+def _positive(v: str) -> float:
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {v!r}") from None
+    if not f > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {v}")
+    return f
+
+
+def cmd_validate(a: argparse.Namespace) -> int:
+    from bridge.core.config import config_warnings
+    from bridge.core.plan import make_plan
+
+    cfg = load_config(a.config, _overrides(a))
+    plan = make_plan(cfg, a.config)
+    for w in config_warnings(cfg):
+        print(f"{a.config}: warning: {w}", file=sys.stderr)
+    print(f"{a.config}: ok: {len(plan.robots)} robots, {len(plan.procs) + 1} processes, "
+          f"{cfg.session.duration_s} s at quantum {cfg.session.quantum_ms} ms, seed {cfg.session.seed}")
+    return 0
+
+
+def cmd_digest(a: argparse.Namespace) -> int:
+    from bridge.core.recorder import file_digest
+
+    d, n = file_digest(a.recording)
+    print(json.dumps({"digest": d, "messages": n}))
+    return 0
+
+
+def cmd_plot(a: argparse.Namespace) -> int:
+    from bridge.core.plan import Plan
+    from bridge.core.plot import plot_session
+
+    rec = Path(a.recording)
+    plan = Plan.from_json(json.loads((rec.parent / "plan.json").read_text()))
+    out = a.out or str(rec.with_name("trajectories.png"))
+    plot_session(rec, plan, out)
+    print(out)
+    return 0
+
+
+def cmd_bench(a: argparse.Namespace) -> int:
+    from bridge.tools.bench import run_bench, run_rdpso_bench
+
+    if a.rdpso:
+        return run_rdpso_bench(quick=a.quick, duration=a.duration, out_dir=a.out)
+
+    return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
+                     config=a.config)
+
+
+def cmd_radio_survey(a: argparse.Namespace) -> int:
+    from bridge.tools.radio_survey import run_survey
+
+    out = a.out or f"runs/{Path(a.config).stem}-radio-survey"
+    cal = run_survey(a.config, out, duration_s=a.duration, interval_s=a.interval, seed=a.seed, series=a.series,
+                     progress=None if a.quiet else sys.stderr, aps_retries=a.aps_retries)
+    for k, v in cal.items():
+        if isinstance(v, dict):
+            verdict = {True: "  PASS", False: "  FAIL", None: "  (no data: run longer)"}.get(v.get("pass"), "")
+            if "pass" not in v:
+                verdict = ""
+            print(f"{k}: {json.dumps({kk: vv for kk, vv in v.items() if kk != 'pass'})}{verdict}")
+    print(f"wrote {out}/survey.csv, {out}/survey.png, {out}/calibration.json")
+    return 0
+
+
+def cmd_radio_fit(a: argparse.Namespace) -> int:
+    from bridge.tools.radio_fit import fit_csv
+
+    try:
+        res = fit_csv(a.csv, a.out, tx_power_dbm=a.tx_power, sensitivity_dbm=a.sensitivity, d0_m=a.d0)
+    except ValueError as e:
+        print(f"swarm-sitl radio-fit: {e}", file=sys.stderr)
+        return 2
+    print(json.dumps({k: v for k, v in res.items() if k != "radio"}, indent=1, default=float))
+    print(f"[radio] fields: {json.dumps(res['radio'])}")
+    if a.out:
+        print(f"wrote {a.out}")
+    return 0
+
+
+def _cell_choice(text: str) -> tuple[str, list[str]]:
+    """``KEY=V1,V2`` of ``experiment --only``."""
+    key, sep, values = text.partition("=")
+    chosen = [v.strip() for v in values.split(",") if v.strip()]
+    if not sep or not key.strip() or not chosen:
+        raise argparse.ArgumentTypeError(f"{text!r}: write KEY=V1[,V2...], e.g. n=15,30")
+    return key.strip(), chosen
+
+
+def cmd_experiment(a: argparse.Namespace) -> int:
+    from bridge.experiments.runner import UnknownExperimentError, execute_experiment, experiments
+
+    if a.list:
+        known = experiments()
+        width = max((len(n) for n in known), default=0)
+        for name, cls in known.items():
+            print(f"{name:<{width}}  {cls.title}")
+        return 0
+    if not a.name:
+        print("swarm-sitl experiment: name an experiment (--list shows them)", file=sys.stderr)
+        return 2
+    only: dict[str, list[str]] = {}
+    for key, values in a.only:  # --only n=15 --only n=30 is --only n=15,30
+        chosen = only.setdefault(key, [])
+        chosen += [v for v in values if v not in chosen]
+    try:
+        run = execute_experiment(a.name, trials=a.trials, jobs=a.jobs, out=a.out, smoke=a.smoke, seed=a.seed,
+                                 progress=not a.quiet, only=only or None)
+    except (UnknownExperimentError, ValueError) as e:
+        print(f"swarm-sitl experiment: {e}", file=sys.stderr)
+        return 2
+    for t, ours, ok, _note in run.verdicts:
+        verdict = {True: "PASS", False: "FAIL"}.get(ok, "not judged")
+        print(f"{t.id}: {ours} (thesis {t.thesis}; {t.tolerance})  {verdict}")
+    state = "interrupted: " if run.interrupted else ""
+    print(f"{a.name}: {state}{len(run.outcomes)}/{run.total} trials ran, {run.failed} failed, {run.wall_s:.0f} s")
+    plots = f", {run.out}/plots/" if (run.out / "plots").is_dir() else ""
+    print(f"wrote {run.out}/report.md, {run.out}/trials.csv{plots}")
+    return 130 if run.interrupted else 1 if run.failed else 0
+
+
+def cmd_devices(a: argparse.Namespace) -> int:
+    from bridge.hil.devices import session_devices
+
+    cfg = load_config(a.config)
+    out = a.out or f"runs/{Path(a.config).stem}"
+    found = session_devices(cfg, out)
+    if not found:
+        print(f"{a.config}: opens nothing to the outside world: a fully simulated session")
+        return 0
+    bad = 0
+    for d in found:
+        print(f"{d.field}: {d.target}\n    {d.note}")
+        if d.real and not a.no_check:
+            rep = d.check()
+            bad += not rep.ok
+            print(f"    {'answers' if rep.ok else 'FAILED'}: {rep.detail}")
+    return 1 if bad else 0
+
+
+def cmd_canlog(a: argparse.Namespace) -> int:
+    from bridge.tools.canlog import export
+
+    rec = Path(a.recording)
+    if rec.is_dir():
+        rec = rec / "session.mcap"
+    try:
+        n = export(rec, a.out, set(a.robot) if a.robot else None)
+    except ValueError as e:
+        print(f"swarm-sitl canlog: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {n} frames to {a.out}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+
+    def session_args(p: argparse.ArgumentParser) -> None:
+        p.add_argument("config", help="session config (TOML), e.g. hil_configs/demo.toml")
+        p.add_argument("--robots", type=int, help="robot count (configs with one [[robots]] group)")
+        p.add_argument("--duration", type=float, help="simulated seconds")
+        p.add_argument("--seed", type=int)
+        p.add_argument("--speed", type=_speed, help="real-time factor to pace to, or 'max'")
+        p.add_argument("--robots-per-process", type=int, help="pack K robots into each firmware/logic process")
+        p.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="ENDPOINT",
+                       help="give every robot a MAVLink face behind one UDP endpoint (default udpout:127.0.0.1:14550, "
+                            "where MAVProxy and QGroundControl listen)")
+
+    p = sub.add_parser("run", help="run one session")
+    session_args(p)
+    p.add_argument("--out", help="output directory (default runs/<config name>)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(fn=cmd_run)
+
+    p = sub.add_parser("join", help="run a remote robot's swarm logic on this computer for a session on another one "
+                                    "(its config: session.listen, the robot's logic = \"remote\")")
+    p.add_argument("endpoint", help="where the session's world listens: its session.listen with that computer's "
+                                    "address, e.g. tcp/192.168.1.10:7447")
+    p.add_argument("--session", required=True, help="the session's name (session.name in its config)")
+    p.add_argument("--robot", type=int, help="the robot whose logic to run (default: the session's only remote robot)")
+    p.add_argument("--timeout", type=_positive, default=10.0,
+                   help="wall seconds to wait for the session to answer (default 10)")
+    p.add_argument("--world-timeout", type=_positive, default=10.0,
+                   help="wall seconds the world may be unreachable before the join gives up (default 10)")
+    p.set_defaults(fn=cmd_join)
+
+    p = sub.add_parser("validate", help="check a config without running it")
+    session_args(p)
+    p.set_defaults(fn=cmd_validate)
+
+    p = sub.add_parser("bench", help="real-time factor and barrier cost at several robot counts and packings")
+    p.add_argument("--quick", action="store_true", help="a small smoke subset (for CI)")
+    p.add_argument("--duration", type=float, help="simulated seconds per case")
+    p.add_argument("--out", default="runs/bench")
+    p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
+    p.add_argument("--config", help="session config to benchmark (default: the demo)")
+    p.add_argument("--rdpso", action="store_true", help="the RDPSO figures: a numerical E9 cell's wall time and "
+                                                         "the 12-robot arena's real-time factor")
+    p.set_defaults(fn=cmd_bench)
+
+    p = sub.add_parser("radio-survey", help="the thesis' RSSI-vs-distance survey (Fig. 3.7) in a config's arena")
+    p.add_argument("config", help="session config whose arena (and robots' XBee settings) to survey in")
+    p.add_argument("--duration", type=float, default=3600.0, help="simulated seconds (default 3600)")
+    p.add_argument("--interval", type=float, default=2.0, help="seconds between messages (default 2, as the thesis)")
+    p.add_argument("--seed", type=int)
+    p.add_argument("--series", type=int, choices=[1, 2], help="XBee series (default: the config's, else 2)")
+    p.add_argument("--aps-retries", action="store_true",
+                   help="Series 2: let the module re-send a lost packet (ZigBee APS retries); rows become messages")
+    p.add_argument("--out", help="output directory (default runs/<config>-radio-survey)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(fn=cmd_radio_survey)
+
+    p = sub.add_parser("radio-fit", help="fit path loss and shadowing to RSSI-vs-distance pairs (a CSV)")
+    p.add_argument("csv", help="columns distance_m, rssi_dbm (empty: lost), optional walls")
+    p.add_argument("--out", help="write the fitted [radio] config fragment (TOML) here")
+    p.add_argument("--tx-power", type=float, default=3.0, help="transmit power, dBm (XBee S2 at PL 4: +3)")
+    p.add_argument("--sensitivity", type=float, default=-94.0, help="receiver sensitivity, dBm")
+    p.add_argument("--d0", type=float, default=1.0, help="reference distance, m")
+    p.set_defaults(fn=cmd_radio_fit)
+
+    p = sub.add_parser("experiment", help="run a named, seeded experiment: many trials in parallel, CSV, plots and a "
+                                          "report against the thesis' figures")
+    p.add_argument("name", nargs="?", help="experiment name (--list shows them)")
+    p.add_argument("--list", action="store_true", help="list the experiments and exit")
+    p.add_argument("--trials", type=_at_least_one, help="trials per cell (default: the experiment's own)")
+    p.add_argument("--jobs", type=_at_least_one, help="worker processes (default: one per CPU; 1 runs in-process)")
+    p.add_argument("--out", help="output directory (default runs/experiments/<name>, with --smoke <name>-smoke)")
+    p.add_argument("--smoke", action="store_true", help="a few short trials per cell (for CI)")
+    p.add_argument("--seed", type=int, default=0, help="base seed; each trial's seed derives from it (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--only", type=_cell_choice, action="append", default=[], metavar="KEY=V1[,V2...]",
+                   help="run only the cells whose KEY is one of the values (repeat for more keys; e.g. "
+                        "--only n=15,30); trial seeds stay those of the full run")
+    p.set_defaults(fn=cmd_experiment)
+
+    p = sub.add_parser("digest", help="recompute the digest of a recording")
+    p.add_argument("recording")
+    p.set_defaults(fn=cmd_digest)
+
+    p = sub.add_parser("devices", help="what a config would open to the outside world (pseudo-terminals, real "
+                                       "devices, the MAVLink endpoint); checks that each real device answers")
+    p.add_argument("config")
+    p.add_argument("--out", help="the session's output directory, where its pseudo-terminal links go")
+    p.add_argument("--no-check", action="store_true", help="only list; do not open the real devices")
+    p.set_defaults(fn=cmd_devices)
+
+    p = sub.add_parser("canlog", help="a session's CAN traffic as a python-can log (ASC, BLF, candump .log, CSV, "
+                                      "TRC): for cantools, SavvyCAN, Vector tools")
+    p.add_argument("recording", help="session.mcap, or the session's output directory")
+    p.add_argument("out", help="log file; the format follows the suffix: .asc .blf .log .csv .trc")
+    p.add_argument("--robot", type=int, action="append", help="only this robot's bus (repeat for more; default all)")
+    p.set_defaults(fn=cmd_canlog)
+
+    from bridge.tools.catalogue import add_parser as add_list
+
+    add_list(sub)
+
+    p = sub.add_parser("plot", help="draw trajectories.png from a recording (plan.json beside it)")
+    p.add_argument("recording")
+    p.add_argument("--out")
+    p.set_defaults(fn=cmd_plot)
+
+    a = ap.parse_args(argv)
+    try:
+        code = a.fn(a)
+    except ConfigError as e:
+        print(f"config error: {e}", file=sys.stderr)
+        code = 2
+    except FileNotFoundError as e:
+        print(f"swarm-sitl {a.cmd}: no such file: {e.filename}", file=sys.stderr)
+        code = 2
+    sys.exit(code)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,189 @@
+"""Config validation: good configs load; bad ones name the file, the field and the reason."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bridge.core.config import ConfigError, load_config
+from bridge.core.plan import make_plan
+
+MINIMAL = """
+[session]
+duration_s = 5
+[[robots]]
+count = 3
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_demo_config_is_valid(demo_config: Path) -> None:
+    cfg = load_config(demo_config)
+    assert cfg.robot_count == 10
+    assert (cfg.arena.width_m, cfg.arena.length_m) == (10, 20)
+    assert cfg.session.duration_s == 120
+    plan = make_plan(cfg)
+    assert len(plan.procs) == 20
+
+
+def test_overrides_apply(demo_config: Path) -> None:
+    cfg = load_config(demo_config, {"robots.count": 4, "session.seed": 99, "session.robots_per_process": 2})
+    plan = make_plan(cfg)
+    assert cfg.session.seed == 99
+    assert len(plan.robots) == 4
+    assert [p.robots for p in plan.procs if p.kind == "firmware"] == [(0, 1), (2, 3)]
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (MINIMAL.replace("count = 3", "count = 0"), "robots[0].count: Input should be greater than or equal to 1"),
+        (MINIMAL.replace("duration_s = 5", "duration_s = -1"), "session.duration_s: Input should be greater than 0"),
+        (MINIMAL + "colour = 'red'\n", "robots[0].colour: Extra inputs are not permitted"),
+        (MINIMAL.replace("[[robots]]", "[[robots]]\nprofile = 'rover'"),
+         "robots[0].profile: unknown robot profile 'rover'"),
+        (MINIMAL.replace("[session]", "[session]\nspeed = 'fast'"), "session.speed"),
+        (MINIMAL + "[[obstacles]]\ntype = 'box'\nx = 50\ny = 1\nsize = [1, 1, 1]\n",
+         "obstacles[0]: centre (50.0, 1.0)"),
+        (MINIMAL + "[[obstacles]]\ntype = 'cone'\nx = 1\ny = 1\n", "obstacles[0]"),
+        (MINIMAL.replace("[session]", "[session]\nquantum_ms = 1"), "shorter than one physics step"),
+        (MINIMAL.replace("[session]", "[session]\nquantum_ms = 25"), "longer than the eswarbot LLC loop period"),
+        ("[session\n", "not valid TOML"),
+    ],
+)
+def test_errors_name_file_field_reason(tmp_path: Path, text: str, expected: str) -> None:
+    p = write(tmp_path, text)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    msg = str(e.value)
+    assert msg.startswith(str(p)), msg
+    assert expected in msg, msg
+
+
+def test_missing_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="no such file"):
+        load_config(tmp_path / "nope.toml")
+
+
+def test_explicit_poses_must_match_count_and_arena(tmp_path: Path) -> None:
+    bad = MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0]]\n"
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement\.poses: 1 poses for count = 3"):
+        load_config(write(tmp_path, bad))
+    outside = MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [11, 1, 0]]\n"
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement\.poses\[2\]: \(11.0, 1.0\) is outside"):
+        load_config(write(tmp_path, outside))
+    in_obstacle = (MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [5, 5, 0]]\n"
+                   "[[obstacles]]\ntype = 'cylinder'\nx = 5\ny = 5\nradius = 0.3\n")
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement\.poses\[2\]: \(5.0, 5.0\) is inside"):
+        make_plan(load_config(write(tmp_path, in_obstacle)), "c.toml")
+    near_wall = MINIMAL + "[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [0.01, 5, 0]]\n"
+    with pytest.raises(ConfigError, match=r"poses\[2\]"):
+        make_plan(load_config(write(tmp_path, near_wall)), "c.toml")
+
+
+@pytest.mark.parametrize(("extra", "expected"), [
+    ("behaviour = 'dance'\n", "robots[0].behaviour: unknown behaviour 'dance'"),
+    ("behaviour = 'nosuchmodule:Thing'\n", "robots[0].behaviour: No module named 'nosuchmodule'"),
+    ("[robots.params]\nsped_mps = 0.2\n", "robots[0].params: unknown parameters ['sped_mps'] for random_walk"),
+    ("[robots.params]\nspeed_mps = 'fast'\n", "robots[0].params.speed_mps: expected a number, got 'fast'"),
+    ("[robots.placement]\nkind = 'grid'\nposes = [[1, 1, 0]]\n", "poses do(es) not apply to kind = 'grid'"),
+    ("[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [3, 1, 0]]\nyaw_deg = 0\n",
+     "yaw_deg do(es) not apply to kind = 'explicit'"),
+])
+def test_behaviour_and_placement_errors(tmp_path: Path, extra: str, expected: str) -> None:
+    p = write(tmp_path, MINIMAL + extra)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value).startswith(str(p)) and expected in str(e.value), str(e.value)
+
+
+def test_map_must_be_an_image(tmp_path: Path) -> None:
+    (tmp_path / "m.png").write_text("not an image")
+    with pytest.raises(ConfigError, match=r"arena\.map: cannot read m\.png as an image"):
+        load_config(write(tmp_path, MINIMAL + "[arena]\nmap = 'm.png'\n"))
+
+
+def test_random_placement_avoids_map_obstacles(tmp_path: Path) -> None:
+    import numpy as np
+    from PIL import Image
+
+    img = np.full((80, 80), 255, np.uint8)
+    img[10:70, 10:70] = 0  # a 3 x 3 m block in a 4 x 4 m map, leaving a 0.5 m border free
+    Image.fromarray(img).save(tmp_path / "m.png")
+    text = (MINIMAL.replace("count = 3", "count = 6") + "[robots.placement]\nkind = 'random'\nmin_separation_m = 0.3\n"
+            "[arena]\nwidth_m = 4\nlength_m = 4\nmap = 'm.png'\n")
+    plan = make_plan(load_config(write(tmp_path, text)), "c.toml")
+    for r in plan.robots:
+        x, y, _ = r.pose
+        assert not (0.5 - 0.08 < x < 3.5 + 0.08 and 0.5 - 0.08 < y < 3.5 + 0.08), r.pose
+
+
+def test_random_placement_is_seeded_and_collision_free(demo_config: Path) -> None:
+    a = make_plan(load_config(demo_config))
+    b = make_plan(load_config(demo_config))
+    c = make_plan(load_config(demo_config, {"session.seed": 8}))
+    assert [r.pose for r in a.robots] == [r.pose for r in b.robots]
+    assert [r.pose for r in a.robots] != [r.pose for r in c.robots]
+    pts = [r.pose[:2] for r in a.robots]
+    for i, p in enumerate(pts):
+        for q in pts[i + 1:]:
+            assert ((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2) ** 0.5 >= 0.6
+
+
+def test_grid_into_obstacle_is_rejected(tmp_path: Path) -> None:
+    text = MINIMAL + "[[obstacles]]\ntype = 'cylinder'\nx = 1.5\ny = 1\nradius = 0.3\n"
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement: grid position 1"):
+        make_plan(load_config(write(tmp_path, text)), "c.toml")
+
+
+def test_map_path_must_exist(tmp_path: Path) -> None:
+    text = MINIMAL + "[arena]\nmap = 'missing.png'\n"
+    with pytest.raises(ConfigError, match=r"arena\.map: no such file 'missing\.png'"):
+        load_config(write(tmp_path, text))
+
+
+def test_plan_config_round_trips(demo_config: Path) -> None:
+    from bridge.core.config import Config
+
+    cfg = load_config(demo_config)
+    again = Config.model_validate(make_plan(cfg).config)  # what every process of a session does
+    assert again == cfg
+
+
+SPIRAL = """
+[arena]
+width_m = {w}
+length_m = 2.45
+[[robots]]
+count = 12
+behaviour = "random_walk"
+[robots.placement]
+kind = "spiral"
+centres = [[0.9, 1.25], [1.55, 0.8]]
+spacing_m = 0.25
+"""
+
+
+def test_spiral_placement_puts_each_block_on_a_spiral_of_theodorus(tmp_path: Path) -> None:
+    import itertools
+    import math
+
+    for seed in range(5):
+        cfg = load_config(write(tmp_path, SPIRAL.format(w=2.55)), {"session.seed": seed})
+        poses = [r.pose for r in make_plan(cfg).robots]
+        for block, centre in ((poses[:6], (0.9, 1.25)), (poses[6:], (1.55, 0.8))):
+            steps = [math.dist(a[:2], b[:2]) for a, b in itertools.pairwise(block)]
+            assert steps == pytest.approx([0.25] * 5)  # eq. 5.1-5.2: consecutive robots one leg apart
+            radii = [math.dist(p[:2], centre) for p in block]
+            assert radii == pytest.approx([0.25 * math.sqrt(n + 1) for n in range(1, 7)])
+
+
+def test_a_spiral_that_cannot_fit_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"robots\[0\]\.placement: spiral 1 of 6 robots .* does not fit"):
+        make_plan(load_config(write(tmp_path, SPIRAL.format(w=1.2))))

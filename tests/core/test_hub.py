@@ -1,0 +1,84 @@
+"""The hub's handling of participants' replies: malformed ones are counted and cost only their robot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bridge.core.config import Config
+from bridge.core.entities import entity, robot_of
+from bridge.core.hub import Hub
+from bridge.core.plan import make_plan
+from bridge.core.recorder import file_digest
+
+Q = 10_000_000
+
+
+@pytest.fixture
+def hub(tmp_path: Path) -> Hub:
+    cfg = Config.model_validate({"robots": [{"count": 3}]})
+    h = Hub(make_plan(cfg), str(tmp_path), str(tmp_path), "test")
+    yield h
+    h.rec.finish()
+    h.world.close()
+
+
+def reply(**ents) -> dict:
+    return {"k": 0, "ents": ents}
+
+
+@pytest.mark.parametrize("bad", [
+    {"out": None},
+    {"out": [], "wake": "soon"},
+    {"out": [], "wake": 1.5},
+    {"out": [], "err": 1},
+    "not a dict",
+])
+def test_malformed_reply_fails_only_its_robot(hub: Hub, bad) -> None:
+    good = {"out": [["can0", 0x181, bytes(8), False]], "wake": Q, "wom": False}
+    due = {"fw0": [entity(0, "llc")], "fw1": [entity(1, "llc")]}
+    hub._outputs(0, {"fw0": reply(**{entity(0, "llc"): bad}), "fw1": reply(**{entity(1, "llc"): good})}, {}, due)
+    assert hub.dead == {0} or (bad == "not a dict" and hub.dead == set())
+    assert hub.counts["malformed_done"] == 1
+    assert hub.next_wake[entity(1, "llc")] == Q and hub.medium("can").buses[1].frames == 1
+
+
+def test_malformed_frames_and_pins_are_counted_and_dropped(hub: Hub) -> None:
+    res = {"out": [["can0", 0x800, b"", False], ["can0", 0x100, bytes(9), False], ["can1", 1, b"", False],
+                   ["can0", 0x100, b"\x01", "yes"], "junk", ["can0", 0x100, b"\x01", False]],
+           "pins": {"pwm": [300, 0], "led": [0, 0, 0]}, "wake": Q}
+    hub._outputs(0, {"fw0": reply(**{entity(0, "llc"): res})}, {entity(0, "llc"): {"enc": [0, 0]}},
+                 {"fw0": [entity(0, "llc")]})
+    assert hub.counts["malformed_frames"] == 3 and hub.counts["malformed_pins"] == 1
+    assert hub.counts["malformed_items"] == 2  # a bus the robot does not have, and not a list at all
+    assert hub.medium("can").buses[0].frames == 1 and not hub.dead
+
+
+def test_reply_for_an_entity_that_was_not_ticked_is_ignored(hub: Hub) -> None:
+    hub._outputs(0, {"fw0": reply(**{entity(2, "llc"): {"out": [], "wake": Q}})}, {}, {"fw0": [entity(0, "llc")]})
+    assert hub.counts["malformed_done"] == 1
+    assert hub.next_wake[entity(2, "llc")] != Q
+
+
+def test_malformed_control_messages_are_counted(hub: Hub) -> None:
+    from bridge.core import transport
+
+    assert hub._control(b"\xc1garbage", 0) is None
+    assert hub._control(transport.pack([1, 2]), 0) is None
+    assert hub._control(transport.pack({"op": "launch"}), 0) is None
+    assert hub.counts["malformed_control"] == 3
+    assert hub._control(transport.pack({"op": "dead", "proc": "fw9"}), 0) is None  # no such live process
+    assert hub._control(transport.pack({"op": "dead", "proc": "fw1", "detail": "exit code -9"}), 0) == "fw1"
+
+
+def test_events_are_recorded(hub: Hub, tmp_path: Path) -> None:
+    hub.robot_failed(1, 5 * Q, "died", "exit code -9", proc="fw1")
+    hub.rec.finish()
+    _, n = file_digest(tmp_path / "session.mcap")
+    assert n == 1 and hub.failures[0]["process"] == "fw1"
+
+
+def test_entity_ids_beyond_999_robots() -> None:
+    assert robot_of(entity(3, "llc")) == 3
+    assert robot_of(entity(1234, "logic")) == 1234

@@ -1,0 +1,266 @@
+"""Whole sessions: the world, firmware and logic processes over zenoh, as a user runs them."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+from mcap.reader import make_reader
+from PIL import Image
+
+from bridge.core.recorder import file_digest
+from tests.conftest import ROOT
+
+pytestmark = pytest.mark.session
+
+SMALL = """
+[session]
+name = "small"
+duration_s = {duration}
+seed = {seed}
+on_robot_failure = "{policy}"
+hang_timeout_s = 3
+[arena]
+width_m = 6
+length_m = 6
+[[obstacles]]
+type = "cylinder"
+x = 3
+y = 3
+radius = 0.3
+[[obstacles]]
+type = "box"
+x = 1.5
+y = 4.5
+size = [0.6, 0.6, 0.5]
+[light]
+ambient_lux = 15
+[[light.sources]]
+x = 4.5
+y = 4.5
+peak_lux = 60
+sigma_m = 1.5
+[[robots]]
+count = 4
+behaviour = "{behaviour}"
+[robots.placement]
+kind = "random"
+min_separation_m = 0.6
+"""
+
+
+def config(tmp_path: Path, duration: float = 3, seed: int = 5, policy: str = "continue",
+           behaviour: str = "random_walk", name: str = "small.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(SMALL.format(duration=duration, seed=seed, policy=policy, behaviour=behaviour))
+    return p
+
+
+def cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "bridge.tools.cli", *args]
+
+
+def run(cfg: Path, out: Path, *extra: str, timeout: float = 180) -> tuple[int, dict]:
+    r = subprocess.run(cli("run", str(cfg), "--out", str(out), "--quiet", *extra), cwd=ROOT,
+                       capture_output=True, text=True, timeout=timeout)
+    summary = json.loads((out / "summary.json").read_text())
+    return r.returncode, summary
+
+
+def session_procs(out: Path) -> list[psutil.Process]:
+    found = []
+    for p in psutil.process_iter(["cmdline"]):
+        cmd = p.info["cmdline"] or []
+        if "bridge.core.proc" in cmd and str(out) in cmd:
+            found.append(p)
+    return found
+
+
+def start(cfg: Path, out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen(cli("run", str(cfg), "--out", str(out), *extra), cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def wait_started(p: subprocess.Popen, timeout: float = 90) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = p.stderr.readline()
+        if "started:" in line:
+            return
+        if not line and p.poll() is not None:
+            break
+    raise AssertionError("session did not start")
+
+
+def test_session_writes_summary_recording_and_plot(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    code, s = run(config(tmp_path), out)
+    assert code == 0, s
+    for key in ("seed", "robots", "processes", "sim_time_s", "wall_time_s", "rtf", "ticks", "messages", "digest"):
+        assert s[key] is not None, key
+    assert (s["seed"], s["robots"], s["processes"], s["sim_time_s"]) == (5, 4, 9, 3.0)
+    assert s["failures"] == [] and set(s["process_exits"].values()) == {0}
+    with open(out / "session.mcap", "rb") as f:
+        reader = make_reader(f)
+        topics = {c.topic for c in reader.get_summary().channels.values()}
+        n = sum(1 for _ in reader.iter_messages())
+    assert {"/world/poses", "/r000/can0", "/r003/llc/pins"} <= topics
+    assert n == s["messages"]
+    assert file_digest(out / "session.mcap") == (s["digest"], s["messages"])
+    assert Image.open(out / "trajectories.png").size[0] > 300
+    _check_messages_match_their_schemas(out / "session.mcap")
+    assert all(r["distance_m"] > 0.1 for r in s["per_robot"])  # every robot moved
+
+
+def _check_messages_match_their_schemas(path: Path) -> None:
+    """Every recorded message is a JSON object whose fields are declared in its embedded schema, with the
+    declared JSON types (what Foxglove relies on to show them)."""
+    types = {"integer": int, "number": (int, float), "string": str, "boolean": bool, "array": list,
+             "null": type(None)}
+    seen = set()
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            props = json.loads(schema.data).get("properties")
+            msg = json.loads(message.data)
+            seen.add(schema.name)
+            assert isinstance(msg, dict), (channel.topic, msg)
+            if props is None:  # free-form (the logic's own log records)
+                continue
+            assert set(msg) <= set(props), (channel.topic, msg)
+            for k, v in msg.items():
+                spec = props[k]
+                if "enum" in spec:
+                    assert v in spec["enum"], (channel.topic, k, v)
+                    continue
+                kinds = spec["type"] if isinstance(spec["type"], list) else [spec["type"]]
+                assert any(isinstance(v, types[t]) for t in kinds), (channel.topic, k, v)
+    assert {"swarm_sitl.CanFrame", "swarm_sitl.LlcPins", "swarm_sitl.Poses"} <= seen
+
+
+def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path) -> None:
+    cfg = config(tmp_path)
+    digests = {}
+    for name, extra in [("a", ()), ("b", ()), ("packed", ("--robots-per-process", "2")),
+                        ("one-process", ("--robots-per-process", "4")), ("paced", ("--speed", "4"))]:
+        code, s = run(cfg, tmp_path / name, *extra)
+        assert code == 0, s
+        digests[name] = s["digest"]
+    assert len(set(digests.values())) == 1, digests
+    code, s = run(cfg, tmp_path / "other-seed", "--seed", "6")
+    assert code == 0 and s["digest"] != digests["a"]
+
+
+def long_session_then(tmp_path: Path, out: Path, act, within_s: float) -> subprocess.Popen:
+    """Start a long paced session, let it run a second, ``act(launcher, procs)``, and check that no process
+    of the session is left ``within_s`` seconds later."""
+    p = start(config(tmp_path, duration=300), out, "--speed", "2")
+    try:
+        wait_started(p)
+        time.sleep(1.0)
+        procs = session_procs(out)
+        assert len(procs) == 9
+        act(p, procs)
+        t0 = time.monotonic()
+        p.wait(timeout=within_s)
+        while session_procs(out) and time.monotonic() - t0 < within_s:
+            time.sleep(0.1)
+        assert session_procs(out) == []
+    finally:
+        if p.poll() is None:
+            p.kill()
+    return p
+
+
+def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> None:
+    def ctrl_c(launcher: subprocess.Popen, procs: list[psutil.Process]) -> None:
+        for proc in procs:  # network hygiene: unix sockets only, nothing on inet
+            assert proc.net_connections(kind="inet") == []
+        launcher.send_signal(signal.SIGINT)
+
+    out = tmp_path / "run"
+    p = long_session_then(tmp_path, out, ctrl_c, within_s=5)
+    assert p.returncode == 130
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] and 0 < s["sim_time_s"] < 300
+    assert file_digest(out / "session.mcap") == (s["digest"], s["messages"])
+
+
+@pytest.mark.parametrize("policy", ["continue", "stop"])
+def test_kill_9_of_a_firmware_process_follows_policy(tmp_path: Path, policy: str) -> None:
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=8, policy=policy), out, "--speed", "2")
+    try:
+        wait_started(p)
+        time.sleep(0.5)
+        (fw1,) = [q for q in session_procs(out) if "fw1" in q.cmdline()]
+        os.kill(fw1.pid, signal.SIGKILL)
+        p.wait(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    s = json.loads((out / "summary.json").read_text())
+    assert [(f["robot"], f["kind"]) for f in s["failures"]] == [(1, "died")]
+    assert 0 < s["failures"][0]["t_s"] < 8
+    assert [r["alive"] for r in s["per_robot"]] == [True, False, True, True]
+    if policy == "continue":
+        assert p.returncode == 0 and s["sim_time_s"] == 8.0
+    else:
+        assert p.returncode == 1 and s["sim_time_s"] < 8.0 and "on_robot_failure = stop" in s["stop_reason"]
+    assert session_procs(out) == []
+
+
+def test_raising_controller_fails_only_its_robot(tmp_path: Path) -> None:
+    code, s = run(config(tmp_path, behaviour="tests.support.faulty:RaisesAtOneSecond"), tmp_path / "run",
+                  "--robots-per-process", "2")
+    assert code == 0
+    (f,) = s["failures"]
+    assert (f["robot"], f["kind"], f["t_s"]) == (1, "raised", 1.01)  # robot 1 boots 10 ms after robot 0
+    assert "controller bug on purpose" in f["detail"]
+    assert [r["alive"] for r in s["per_robot"]] == [True, False, True, True]
+
+
+def test_hanging_controller_never_hangs_the_session(tmp_path: Path) -> None:
+    code, s = run(config(tmp_path, behaviour="tests.support.faulty:HangsAtOneSecond"), tmp_path / "run")
+    assert code == 0
+    (f,) = s["failures"]
+    assert (f["robot"], f["kind"]) == (1, "hung")
+    assert s["sim_time_s"] == 3.0
+    assert s["process_exits"]["lg1"] == -9  # the world killed it
+
+
+def test_two_sessions_at_once_do_not_see_each_other(tmp_path: Path) -> None:
+    cfg = config(tmp_path)
+    code, solo = run(cfg, tmp_path / "solo")
+    assert code == 0
+    a = start(cfg, tmp_path / "a")
+    b = start(cfg, tmp_path / "b")
+    assert a.wait(timeout=180) == 0 and b.wait(timeout=180) == 0
+    for name in ("a", "b"):
+        s = json.loads((tmp_path / name / "summary.json").read_text())
+        assert (s["digest"], s["messages"]) == (solo["digest"], solo["messages"])
+
+
+def test_config_errors_exit_2_naming_file_and_field(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[session]\nduration_s = 'long'\n[[robots]]\ncount = 2\n")
+    r = subprocess.run(cli("run", str(bad), "--out", str(tmp_path / "x")), cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 2
+    assert f"{bad}: session.duration_s: Input should be a valid number" in r.stderr
+    r = subprocess.run(cli("validate", str(config(tmp_path))), cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0 and "4 robots, 9 processes" in r.stdout
+
+
+def test_killed_launcher_leaves_no_orphans_and_a_readable_recording(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    # SIGKILL: the launcher cannot clean up; its children must go by themselves
+    long_session_then(tmp_path, out, lambda launcher, procs: launcher.kill(), within_s=10)
+    world = json.loads((out / "world_result.json").read_text())  # the world finished its recording
+    assert file_digest(out / "session.mcap") == (world["digest"], world["messages"])
+    assert 0 < world["sim_time_s"] < 300

@@ -1,0 +1,90 @@
+"""The pybullet world: walls stop robots, obstacles from a bitmap, the light field, battery drain."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from bridge.core.config import Config, load_config
+from bridge.core.plan import make_plan
+from bridge.core.world import World
+
+
+def world(**cfg) -> World:
+    c = Config.model_validate(cfg)
+    return World(c, make_plan(c).robots)
+
+
+def one_robot(x: float, y: float, yaw_deg: float, **extra) -> dict:
+    return {"robots": [{"count": 1, "placement": {"kind": "explicit", "poses": [[x, y, yaw_deg]]}}], **extra}
+
+
+def run(w: World, seconds: float, pwm: tuple[int, int]) -> None:
+    q = 10_000_000
+    t = 0
+    for _ in range(round(seconds * 100)):
+        w.set_pwm(0, *pwm)
+        w.step_quantum(t, q)
+        t += q
+
+
+def test_wall_stops_a_robot_and_wheels_keep_counting() -> None:
+    w = world(**one_robot(1.0, 5.0, 180.0, arena={"width_m": 10, "length_m": 10}))
+    run(w, 8.0, (200, 200))
+    x = w.pos[0, 0]
+    assert 0.063 - 0.01 < x < 0.2  # pressed against the wall at x = 0, not through it
+    assert w.sensors(0).encoders[0] > 1.5 * 362  # counted far more than the 0.94 m it could travel
+
+
+def test_robots_collide_with_each_other() -> None:
+    c = Config.model_validate({"robots": [{"count": 2, "placement": {
+        "kind": "explicit", "poses": [[2.0, 2.0, 0.0], [3.0, 2.0, 180.0]]}}]})
+    w = World(c, make_plan(c).robots)
+    w.gain[:] = 1.0  # ideal drive trains: exactly head-on along one line
+    w.wheel_r[:] = w.profiles[0].wheel_radius_m
+    closest = math.inf
+    for k in range(400):  # without contacts they would pass through each other
+        w.set_pwm(0, 180, 180)
+        w.set_pwm(1, 180, 180)
+        w.step_quantum(k * 10_000_000, 10_000_000)
+        closest = min(closest, math.dist(w.pos[0], w.pos[1]))
+    assert 2 * 0.063 - 0.01 < closest < 2 * 0.063 + 0.02  # they met and did not interpenetrate
+
+
+def test_bitmap_map_becomes_obstacles(tmp_path: Path) -> None:
+    img = np.full((40, 40), 255, np.uint8)
+    img[18:22, 0:40] = 0  # a horizontal wall across the middle of a 2 x 2 m map
+    Image.fromarray(img).save(tmp_path / "m.png")
+    (tmp_path / "c.toml").write_text(
+        "[arena]\nwidth_m = 2\nlength_m = 2\nmap = 'm.png'\nmap_resolution_m = 0.05\n"
+        "[[robots]]\n[robots.placement]\nkind = 'explicit'\nposes = [[1.0, 0.4, 90]]\n")
+    cfg = load_config(tmp_path / "c.toml")
+    w = World(cfg, make_plan(cfg).robots)
+    assert len(w.static_rects) == 5  # 4 arena walls + 1 merged rectangle
+    run(w, 6.0, (200, 200))
+    assert w.pos[0, 1] < 0.9 - 0.063 + 0.02  # stopped by the map wall spanning y in [0.9, 1.1]
+
+
+def test_light_field_and_sensor_noise_are_seeded() -> None:
+    extra = {"light": {"ambient_lux": 10, "sources": [{"x": 2, "y": 2, "peak_lux": 100, "sigma_m": 1}]}}
+    a = world(**one_robot(2.0, 2.0, 0, **extra))
+    b = world(**one_robot(2.0, 2.0, 0, **extra))
+    assert a.cfg.light.illuminance(2, 2) == pytest.approx(110)
+    assert a.cfg.light.illuminance(3, 2) == pytest.approx(10 + 100 * math.exp(-0.5))
+    readings = [a.sensors(0).lux for _ in range(200)]
+    assert readings[:5] == [b.sensors(0).lux for _ in range(5)]  # seeded: same stream in the same order
+    assert np.std(readings) == pytest.approx(110 * 0.01, rel=0.25)  # 1 % noise is there
+    assert np.mean(readings) == pytest.approx(110, rel=0.005)
+
+
+def test_battery_drains_faster_with_motors_on() -> None:
+    idle = world(**one_robot(2, 2, 0))
+    busy = world(**one_robot(2, 2, 0))
+    run(idle, 5, (0, 0))
+    run(busy, 5, (255, -255))
+    assert busy.soc[0] < idle.soc[0] < 1.0
+    assert busy.battery_v[0] < idle.battery_v[0]

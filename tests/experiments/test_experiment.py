@@ -1,0 +1,292 @@
+"""The experiment machinery, on small real experiments defined here (workers import them from this module)."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import psutil
+import pytest
+
+from bridge.experiments import runner as ex
+from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
+from bridge.tools.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _median_error(outcomes: list[Outcome], n: int) -> float:
+    errors = [o.result.metrics["abs_error"] for o in outcomes if o.result and o.trial.cell["n"] == n]
+    return float(np.median(errors)) if errors else math.nan
+
+
+@register
+class MonteCarloPi(Experiment):
+    name = "test-pi"
+    title = "Estimating pi by Monte Carlo"
+    description = "Points drawn uniformly in the unit square; 4 x the share inside the quarter circle estimates pi."
+    trials = 6
+    smoke_trials = 2
+    x_label = "points drawn"
+    curves = (("estimate", "estimate of pi"),)
+    boxes = (("abs_error", "absolute error"),)
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"n": 100}, {"n": 1000}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        n = trial.cell["n"]
+        xy = np.random.default_rng(trial.seed).random((n, 2))
+        est = 4 * np.cumsum((xy**2).sum(axis=1) <= 1) / np.arange(1, n + 1)
+        return TrialResult(metrics={"estimate": est[-1], "abs_error": abs(est[-1] - math.pi),
+                                    "close": bool(abs(est[-1] - math.pi) < 0.1), "size": "small" if n < 500 else "big"},
+                           curves={"estimate": est.tolist()}, curve_x={"estimate": list(range(1, n + 1))})
+
+    def targets(self) -> list[Target]:
+        def loose(outs: list[Outcome]) -> tuple[str, bool | None, str]:
+            e = _median_error(outs, 1000)
+            return f"{e:.3f}", e < 0.2, "n = 1000"
+
+        def strict(outs: list[Outcome]) -> tuple[str, bool | None, str]:
+            e = _median_error(outs, 100)
+            if math.isnan(e):
+                return "no trials", None, "n = 100 did not run"
+            return f"{e:.3f}", e < 1e-9, "n = 100 cannot be that close"
+
+        return [Target("PI1", "median |error|, 1000 points", "0", "< 0.2", loose),
+                Target("PI2", "median |error|, 100 points", "0", "< 1e-9", strict),
+                Target("PI3", "nothing to compare", "n/a", "n/a", lambda outs: ("-", None, "no thesis figure"))]
+
+
+@register
+class Flaky(Experiment):
+    name = "test-flaky"
+    title = "Every third trial raises"
+    description = "Checks that failures are reported, not dropped."
+    trials = 6
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"k": "a"}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        if trial.index % 3 == 1:
+            raise ValueError(f"trial {trial.index} fails on purpose")
+        return TrialResult(metrics={"value": trial.index})
+
+
+@register
+class Sleepy(Experiment):
+    name = "test-sleepy"
+    title = "Slow trials that note their process id"
+    description = "For interrupting."
+    trials = 40
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"s": 1}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        (Path(trial.workdir) / "pid").write_text(str(os.getpid()))
+        time.sleep(0.4)
+        return TrialResult(metrics={"slept": 0.4})
+
+
+@register
+class Swallowing(Sleepy):
+    name = "test-swallowing"
+    title = "Slow trials that catch Ctrl-C themselves, as a session does to shut down cleanly"
+    description = "For interrupting in-process."
+
+    def run(self, trial: Trial) -> TrialResult:
+        (Path(trial.workdir) / "pid").write_text(str(os.getpid()))
+        try:
+            time.sleep(0.4)
+        except KeyboardInterrupt:
+            raise RuntimeError("session interrupted") from None
+        return TrialResult(metrics={"slept": 0.4})
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_results_do_not_depend_on_jobs_and_seeds_are_stable(tmp_path: Path) -> None:
+    a = ex.run_experiment("test-pi", trials=4, jobs=1, out=tmp_path / "a", progress=False)
+    b = ex.run_experiment("test-pi", trials=4, jobs=2, out=tmp_path / "b", progress=False)
+    assert (a / "trials.csv").read_bytes() == (b / "trials.csv").read_bytes()
+    for f in (a / "curves").iterdir():
+        assert f.read_bytes() == (b / "curves" / f.name).read_bytes()
+    rows = _rows(a / "trials.csv")
+    assert list(rows[0]) == ["n", "index", "seed", "error", "estimate", "abs_error", "close", "size"]
+    assert [(r["n"], r["index"]) for r in rows] == [(n, str(i)) for n in ("100", "1000") for i in range(4)]
+    seeds = [int(r["seed"]) for r in rows]
+    assert len(set(seeds)) == len(seeds) and all(0 <= s < 2**63 for s in seeds)
+    assert seeds[0] == ex.trial_seed(0, "test-pi", {"n": 100}, 0)
+    assert ex.trial_seed(0, "x", {"a": 1, "b": 2}, 3) == ex.trial_seed(0, "x", {"b": 2, "a": 1}, 3)
+    assert ex.trial_seed(1, "test-pi", {"n": 100}, 0) != seeds[0]
+    assert ex.trial_seed(0, "test-pi", {"n": 100}, 0) == 4474581379651440175  # stable across runs and machines
+    assert {"index", "x", "curve", "value"} <= set(_rows(a / "curves" / "n-100.csv")[0])
+
+
+def test_report_targets_plots_and_clearing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "pi"
+    (out / "plots").mkdir(parents=True)
+    (out / "plots" / "stale.png").write_bytes(b"")
+    (out / "notes.txt").write_text("mine")
+    (out / "trials.csv").write_text("stale\n")
+    run = ex.execute_experiment("test-pi", trials=4, jobs=2, out=out, progress=True)
+    assert run.failed == 0 and not run.interrupted and len(run.outcomes) == 8
+    assert "test-pi: 8/8 trials, 0 failed" in capsys.readouterr().err  # plain progress lines off a terminal
+    assert (out / "notes.txt").read_text() == "mine" and not (out / "plots" / "stale.png").exists()
+    assert not (out / "work").exists()  # no trial wrote in its scratch directory
+    report = (out / "report.md").read_text()
+    assert report.startswith("# Estimating pi by Monte Carlo")
+    assert "`swarm-sitl experiment test-pi --trials 4 --seed 0 --out " in report
+    assert "| id | what | thesis | ours | tolerance | result | note |" in report
+    lines = report.splitlines()
+    assert next(s for s in lines if s.startswith("| PI1 |")).endswith("| pass | n = 1000 |")
+    assert "| fail |" in next(s for s in lines if s.startswith("| PI2 |"))
+    assert "| not judged |" in next(s for s in lines if s.startswith("| PI3 |"))
+    assert "1 pass, 1 fail, 1 not judged" in report
+    assert "### n=100" in report and "| abs_error |" in report and "| close |" in report
+    for png in ("curve-estimate.png", "box-abs_error.png"):
+        assert (out / "plots" / png).stat().st_size > 1000 and f"(plots/{png})" in report
+    assert [ok for _, _, ok, _ in run.verdicts] == [True, False, None]
+
+
+def test_a_failing_trial_is_reported_and_the_others_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = ex.execute_experiment("test-flaky", jobs=2, out=tmp_path / "f", progress=False)
+    assert run.failed == 2 and len(run.outcomes) == 6
+    rows = _rows(tmp_path / "f" / "trials.csv")
+    assert [r["error"] for r in rows] == ["", "ValueError: trial 1 fails on purpose", "", "",
+                                         "ValueError: trial 4 fails on purpose", ""]
+    assert [r["value"] for r in rows] == ["0", "", "2", "3", "", "5"]
+    report = (tmp_path / "f" / "report.md").read_text()
+    assert "## Failures" in report and "trial 4 (seed" in report and "in run" in report
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "test-flaky", "--jobs", "1", "--quiet", "--out", str(tmp_path / "g")])
+    assert e.value.code == 1
+    assert "6/6 trials ran, 2 failed" in capsys.readouterr().out
+
+
+def test_only_runs_the_chosen_cells_with_the_full_runs_seeds(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    full = _rows(ex.run_experiment("test-pi", trials=2, jobs=1, out=tmp_path / "all", progress=False) / "trials.csv")
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "test-pi", "--trials", "2", "--jobs", "1", "--quiet", "--out", str(tmp_path / "some"),
+              "--only", "n=1000"])
+    assert e.value.code == 0
+    some = _rows(tmp_path / "some" / "trials.csv")
+    assert some == [r for r in full if r["n"] == "1000"]  # the same trials, seeds and figures as in the full run
+    report = (tmp_path / "some" / "report.md").read_text()
+    assert "--only n=1000" in report and "(the cells with n in 1000: 1 of 2)" in report
+    assert "### n=100\n" not in report and "### n=1000" in report
+    assert "| no trials |" in next(s for s in report.splitlines() if s.startswith("| PI2 |"))  # its cell did not run
+    assert ex.select_cells([{"n": 100}, {"n": 1000}], {"n": ["100.0", "1000"]}) == [{"n": 100}, {"n": 1000}]
+    assert ex.select_cells([{"d": "est", "k": 1}, {"d": "est", "k": 2}, {"d": "random", "k": 1}],
+                           {"d": ["est"], "k": ["1"]}) == [{"d": "est", "k": 1}]
+    assert ex.select_cells([{"on": True}, {"on": False}], {"on": ["true"]}) == [{"on": True}]
+    capsys.readouterr()
+    for bad, says in ((["--only", "m=5"], "no cell has the key 'm' (the cells' keys: n)"),
+                      (["--only", "n=7"], "--only leaves no cell; the values there are: n in 100, 1000")):
+        with pytest.raises(SystemExit) as e:
+            main(["experiment", "test-pi", "--out", str(tmp_path / "bad"), *bad])
+        assert e.value.code == 2 and says in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "test-pi", "--only", "n"])
+    assert e.value.code == 2 and "write KEY=V1[,V2...]" in capsys.readouterr().err
+
+
+def test_unknown_names_and_listing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(ex.UnknownExperimentError, match="test-pi"):
+        ex.run_experiment("no-such-thing", out=tmp_path)
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "no-such-thing"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "unknown experiment 'no-such-thing'" in err and "test-flaky" in err and "test-pi" in err
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "--list"])
+    assert e.value.code == 0
+    assert re.search(r"^test-pi +Estimating pi by Monte Carlo$", capsys.readouterr().out, re.MULTILINE)
+    for bad in (["--trials", "0"], ["--jobs", "-1"]):
+        with pytest.raises(SystemExit) as e:
+            main(["experiment", "test-pi", *bad])
+        assert e.value.code == 2
+
+
+def test_missing_experiment_module_is_skipped_but_broken_one_raises(tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(ex, "experiment_modules", lambda: ["bridge.no_such_experiments"])
+    assert "test-pi" in ex.experiments()  # not written yet: skipped
+    (tmp_path / "half_written_experiments.py").write_text("import no_such_dependency_at_all\n")
+    (tmp_path / "raising_experiments.py").write_text("raise RuntimeError('broken')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for module, error in (("half_written_experiments", ModuleNotFoundError), ("raising_experiments", RuntimeError)):
+        monkeypatch.setattr(ex, "experiment_modules", lambda module=module: [module])
+        with pytest.raises(error):
+            ex.experiments()
+
+
+def test_ctrl_c_keeps_what_finished_and_leaves_no_process(tmp_path: Path) -> None:
+    out = tmp_path / "sleepy"
+    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_experiment; "
+            f"from bridge.tools.cli import main; main(['experiment', 'test-sleepy', '--jobs', '2', '--quiet', '--out', "
+            f"{str(out)!r}])")
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while len(list(out.glob("work/*/*/pid"))) < 4 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.killpg(p.pid, signal.SIGINT)  # as a terminal's Ctrl-C: to the whole process group
+    stdout, stderr = p.communicate(timeout=30)
+    assert p.returncode == 130, stderr
+    done = _rows(out / "trials.csv")
+    assert 2 <= len(done) < 40 and "interrupted" in stdout
+    assert not [r for r in done if r["error"]]  # trials cut short are not reported as failures
+    assert "**Interrupted**" in (out / "report.md").read_text()
+    pids = {int(f.read_text()) for f in out.glob("work/*/*/pid")}
+    deadline = time.monotonic() + 5
+    while any(psutil.pid_exists(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [pid for pid in pids if psutil.pid_exists(pid)]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_in_process_interrupt_ends_the_run_even_when_a_trial_catches_it(tmp_path: Path, sig: int) -> None:
+    out = tmp_path / "swallowing"
+    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_experiment; "
+            f"from bridge.tools.cli import main; main(['experiment', 'test-swallowing', '--jobs', '1', '--quiet', "
+            f"'--out', {str(out)!r}])")
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while len(list(out.glob("work/*/*/pid"))) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.kill(p.pid, sig)
+    stdout, stderr = p.communicate(timeout=30)
+    assert p.returncode == 130, stderr
+    done = _rows(out / "trials.csv")
+    assert 2 <= len(done) < 40 and "interrupted" in stdout
+    assert not [r for r in done if r["error"]]  # the trial cut short is not reported as a failure
+
+
+def test_a_session_hands_a_caught_signal_on_to_the_program_that_ran_it() -> None:
+    from bridge.core.launcher import _pass_on
+
+    got = []
+    _pass_on(signal.SIGTERM, {signal.SIGTERM: lambda s, f: got.append(s)})
+    assert got == [signal.SIGTERM]
+    _pass_on(signal.SIGINT, {signal.SIGINT: signal.default_int_handler})  # the command line: nothing raised here
+    _pass_on(signal.SIGTERM, {signal.SIGTERM: signal.SIG_DFL})
+    _pass_on(None, {signal.SIGTERM: lambda s, f: got.append(s)})
+    assert got == [signal.SIGTERM]
