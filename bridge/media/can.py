@@ -641,6 +641,14 @@ class CanBuses(Medium):
             else:
                 self.noticed[node] = (last, quiet + 1)
 
+    def radio_report(self, out: dict[str, Any]) -> None:
+        """The USB-CAN adapter's own counters, and a real board's bridge's (they report them at the end)."""
+        hub = self.hub
+        for r in range(hub.n):
+            for role in ("slcan", "can_bridge"):
+                if role in hub.roles[r]:
+                    out["per_robot"].setdefault(r, {})[role] = hub.module_stats.get(entity(r, role))
+
     def report(self, result: dict[str, Any]) -> None:
         result["can_events"] = self.events
         sim_s = max(self.hub.sim_end_ns / 1e9, 1e-9)

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.core.hub import _splits
 from bridge.core.recorder import iter_messages
+from bridge.media.radio import splits as _splits
 from swarm_logic.families.rdpso.graph import components
 from tests.conftest import ROOT
 from tests.core.test_session import cli
