@@ -96,9 +96,13 @@ def cmd_validate(a: argparse.Namespace) -> int:
 
 
 def cmd_digest(a: argparse.Namespace) -> int:
-    from bridge.recorder import file_digest
+    from bridge.recorder import NotARecording, file_digest
 
-    d, n = file_digest(a.recording)
+    try:
+        d, n = file_digest(a.recording)
+    except NotARecording as e:
+        print(f"swarm-sitl digest: {e}", file=sys.stderr)
+        return 2
     print(json.dumps({"digest": d, "messages": n}))
     return 0
 
