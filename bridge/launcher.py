@@ -57,12 +57,54 @@ class SessionResult:
     children: list[Child] = field(default_factory=list)
 
 
+def say(stream: TextIO | None, text: str) -> bool:
+    """Write ``text`` for the user and flush it; False if the stream is gone (a closed pipe: ``| tee`` died with
+    the same Ctrl-C; a hung-up terminal). Then it, and stdout or stderr if they are the same file, are pointed at
+    /dev/null, so no later write (nor Python's flush of sys.stdout at exit) raises again. A lost line must never
+    cost a session its stop, its summary or its recording."""
+    if stream is None:
+        return False
+    try:
+        stream.write(text)
+        stream.flush()
+    except (OSError, ValueError):  # EPIPE, EIO; ValueError: the stream was closed
+        output_gone(stream)
+        return False
+    return True
+
+
+def output_gone(stream: TextIO) -> None:
+    """Point the file descriptor behind ``stream`` (and behind sys.stdout and sys.stderr, if the same file) at
+    /dev/null: what is still buffered, and whatever is written later, goes nowhere instead of failing."""
+    try:
+        fd = stream.fileno()
+        gone = os.fstat(fd)
+    except (OSError, ValueError, AttributeError):
+        return
+    fds = {fd}
+    for std in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            st = os.fstat(std.fileno())
+            if (st.st_dev, st.st_ino) == (gone.st_dev, gone.st_ino):
+                fds.add(std.fileno())
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for f in fds:
+            os.dup2(devnull, f)
+    finally:
+        os.close(devnull)
+
+
 class _Progress:
     def __init__(self, stream: TextIO | None, name: str, duration: float, robots: int) -> None:
         self.stream = stream
         self.tty = bool(stream and stream.isatty())
         self.name, self.duration, self.robots = name, duration, robots
         self.last_line_t = -1e9
+
+    def _write(self, text: str) -> None:
+        if not say(self.stream, text):
+            self.stream = None  # gone: no more lines
 
     def update(self, sim_t: float, rtf: float, alive: int, lag_s: float | None = None) -> None:
         if not self.stream:
@@ -72,17 +114,14 @@ class _Progress:
         if lag_s is not None:  # a paced session: how far the simulated clock is behind wall time
             line += f"   lag {lag_s * 1e3:5.1f} ms"
         if self.tty:
-            self.stream.write("\r" + line)
-            self.stream.flush()
+            self._write("\r" + line)
         elif sim_t - self.last_line_t >= 10 or sim_t >= self.duration:
             self.last_line_t = sim_t
-            self.stream.write(line + "\n")
-            self.stream.flush()
+            self._write(line + "\n")
 
     def note(self, text: str) -> None:
         if self.stream:
-            self.stream.write(("\n" if self.tty else "") + text + "\n")
-            self.stream.flush()
+            self._write(("\n" if self.tty else "") + text + "\n")
 
 
 def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_dir: str = "runs/latest",
@@ -95,7 +134,7 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         raise ConfigError(f"{config_path}: {e}") from None
     if progress is not None:
         for w in config_warnings(cfg):
-            print(f"{config_path}: warning: {w}", file=progress)
+            say(progress, f"{config_path}: warning: {w}\n")
     from bridge.devices import session_devices  # pymavlink and python-can: only when a session starts
 
     for d in session_devices(cfg):  # a real device that does not answer stops the session before it starts
