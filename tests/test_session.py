@@ -228,6 +228,30 @@ def test_ctrl_c_with_the_output_pipe_gone_still_finishes_the_session(tmp_path: P
     assert (out / "trajectories.png").exists()
 
 
+@pytest.mark.parametrize("second", ["after-stopping-note", "after-summary-appears"])
+def test_second_ctrl_c_never_leaves_a_traceback_or_a_wrong_summary(tmp_path: Path, second: str) -> None:
+    """The second Ctrl-C kills at once: wherever it lands (the session still stopping, its teardown, the
+    summary, the plot), no traceback, exit 130, and a summary that lists only what was written."""
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=300), out, "--speed", "2")
+    try:
+        wait_for(p.stderr, p, "] sim ")
+        p.send_signal(signal.SIGINT)
+        wait_for(p.stderr, p, "stopping at sim t=")  # the first one took effect
+        if second == "after-summary-appears":  # the launcher is drawing the plot now
+            deadline = time.monotonic() + 90
+            while not (out / "summary.json").exists() and p.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.005)
+        p.send_signal(signal.SIGINT)
+        err = p.stderr.read()
+        p.wait(timeout=90)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    check_stopped_cleanly(p, out)
+
+
 def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> None:
     def ctrl_c(launcher: subprocess.Popen, procs: list[psutil.Process]) -> None:
         for proc in procs:  # network hygiene: unix sockets only, nothing on inet
