@@ -620,11 +620,18 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
     """Read and validate ``path``; ``overrides`` are command-line values (``session.seed`` etc.)."""
     p = Path(path)
     try:
-        raw = tomllib.loads(p.read_text())
+        raw = tomllib.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{p}: is a directory, not a config file") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{p}: not a text file (byte {e.start} is not UTF-8): a config is a TOML file") from None
+    except OSError as e:
+        raise ConfigError(f"{p}: cannot read it: {e.strerror or e}") from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{p}: not valid TOML: {e}") from None
+    _refuse_hal_config(p, raw)
     for dotted, value in (overrides or {}).items():
         if value is None:
             continue
@@ -656,6 +663,21 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
     _check_geometry(str(p), cfg)
     _check_behaviours(str(p), cfg)
     return cfg
+
+
+# Top-level keys of a robot's HAL config (``python -m swarm_logic --hal FILE``, ``swarm_logic/__main__.py``) that a
+# session config never has: the devices of one real robot.
+HAL_KEYS = ("llc_can", "llc_mavlink")
+
+
+def _refuse_hal_config(p: Path, raw: dict[str, Any]) -> None:
+    """A HAL config is TOML too, and would fail validation field by field; say what it is instead."""
+    if "robots" in raw or "session" in raw or not any(k in raw for k in HAL_KEYS):
+        return
+    raise ConfigError(f"{p}: a HAL config for a real robot (it names one robot's devices: "
+                      f"{', '.join(k for k in HAL_KEYS if k in raw)}), not a session config. Run it on that "
+                      f"robot's companion computer: python -m swarm_logic --hal {p}; a session needs a session "
+                      "config ([session], [[robots]]), e.g. hil_configs/demos/random_walk.toml")
 
 
 def _check_behaviours(path: str, cfg: Config) -> None:

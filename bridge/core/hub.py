@@ -527,7 +527,7 @@ class Hub:
         for p in sorted(waiting):
             self.tick_pub[p].put(stop)
         deadline = time.monotonic() + 3.0
-        while waiting and time.monotonic() < deadline:
+        while waiting and not self.abort and time.monotonic() < deadline:  # abort: SIGTERM, they are gone
             try:
                 key, data = self.q.get(timeout=0.05)
             except queue.Empty:

@@ -1,11 +1,12 @@
 """The launcher: starts one session's processes, supervises them, shows progress, writes the summary.
 
 It owns the terminal: Ctrl-C (or SIGTERM) asks the world to stop at the end of the current quantum and
-finish the recording; a second Ctrl-C kills everything at once. A child that dies is reported to the
-world, which applies the failure policy. Children are in their own process groups and die with the
-launcher (PR_SET_PDEATHSIG), so no process of a session outlives it. A remote logic process (``logic = "remote"``)
-is not its child: it joins from another computer (``swarm-sitl join``, whose command the launcher prints), and the
-world's timeouts (``startup_timeout_s``, ``hang_timeout_s``) watch it.
+finish the recording; a second Ctrl-C kills everything at once (the world gets SIGTERM, so it still finishes the
+recording, as when the launcher dies) and skips the plot. A closed stdout or stderr never stops it. A child that
+dies is reported to the world, which applies the failure policy. Children are in their own process groups and die
+with the launcher (PR_SET_PDEATHSIG), so no process of a session outlives it. A remote logic process
+(``logic = "remote"``) is not its child: it joins from another computer (``swarm-sitl join``, whose command the
+launcher prints), and the world's timeouts (``startup_timeout_s``, ``hang_timeout_s``) watch it.
 """
 
 from __future__ import annotations
@@ -57,12 +58,54 @@ class SessionResult:
     children: list[Child] = field(default_factory=list)
 
 
+def say(stream: TextIO | None, text: str) -> bool:
+    """Write ``text`` for the user and flush it; False if the stream is gone (a closed pipe: ``| tee`` died with
+    the same Ctrl-C; a hung-up terminal). Then it, and stdout or stderr if they are the same file, are pointed at
+    /dev/null, so no later write (nor Python's flush of sys.stdout at exit) raises again. A lost line must never
+    cost a session its stop, its summary or its recording."""
+    if stream is None:
+        return False
+    try:
+        stream.write(text)
+        stream.flush()
+    except (OSError, ValueError):  # EPIPE, EIO; ValueError: the stream was closed
+        output_gone(stream)
+        return False
+    return True
+
+
+def output_gone(stream: TextIO) -> None:
+    """Point the file descriptor behind ``stream`` (and behind sys.stdout and sys.stderr, if the same file) at
+    /dev/null: what is still buffered, and whatever is written later, goes nowhere instead of failing."""
+    try:
+        fd = stream.fileno()
+        gone = os.fstat(fd)
+    except (OSError, ValueError, AttributeError):
+        return
+    fds = {fd}
+    for std in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            st = os.fstat(std.fileno())
+            if (st.st_dev, st.st_ino) == (gone.st_dev, gone.st_ino):
+                fds.add(std.fileno())
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for f in fds:
+            os.dup2(devnull, f)
+    finally:
+        os.close(devnull)
+
+
 class _Progress:
     def __init__(self, stream: TextIO | None, name: str, duration: float, robots: int) -> None:
         self.stream = stream
         self.tty = bool(stream and stream.isatty())
         self.name, self.duration, self.robots = name, duration, robots
         self.last_line_t = -1e9
+
+    def _write(self, text: str) -> None:
+        if not say(self.stream, text):
+            self.stream = None  # gone: no more lines
 
     def update(self, sim_t: float, rtf: float, alive: int, lag_s: float | None = None) -> None:
         if not self.stream:
@@ -72,17 +115,41 @@ class _Progress:
         if lag_s is not None:  # a paced session: how far the simulated clock is behind wall time
             line += f"   lag {lag_s * 1e3:5.1f} ms"
         if self.tty:
-            self.stream.write("\r" + line)
-            self.stream.flush()
+            self._write("\r" + line)
         elif sim_t - self.last_line_t >= 10 or sim_t >= self.duration:
             self.last_line_t = sim_t
-            self.stream.write(line + "\n")
-            self.stream.flush()
+            self._write(line + "\n")
 
     def note(self, text: str) -> None:
         if self.stream:
-            self.stream.write(("\n" if self.tty else "") + text + "\n")
-            self.stream.flush()
+            self._write(("\n" if self.tty else "") + text + "\n")
+
+
+class _Hurry(BaseException):  # like KeyboardInterrupt, which `except Exception` lets through
+    """Raised by a Ctrl-C (or SIGTERM) that comes while the launcher draws the plot: be done at once."""
+
+
+class _Stops:
+    """The launcher's Ctrl-C and SIGTERM handler, from the session's start until its summary is written.
+
+    The first asks the world to stop (``used`` = 1 once asked); any further one ("Ctrl-C again") means be done at
+    once: stop the session's processes now, skip the plot, or abandon it (``raising``: while it is drawn)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.used = 0
+        self.last: int | None = None
+        self.raising = False
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        self.count += 1
+        self.last = signum
+        if self.raising:
+            self.raising = False
+            raise _Hurry
+
+    def hurry(self) -> bool:
+        return self.count > self.used
 
 
 def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_dir: str = "runs/latest",
@@ -95,7 +162,7 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         raise ConfigError(f"{config_path}: {e}") from None
     if progress is not None:
         for w in config_warnings(cfg):
-            print(f"{config_path}: warning: {w}", file=progress)
+            say(progress, f"{config_path}: warning: {w}\n")
     from bridge.hil.devices import session_devices  # pymavlink and python-can: only when a session starts
 
     for d in session_devices(cfg):  # a real device that does not answer stops the session before it starts
@@ -137,15 +204,21 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         log.close()
         return p
 
-    stop_requests = 0
-    last_signal: int | None = None
+    stops = _Stops()
+    old = {s: signal.signal(s, stops) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        res = _supervise(cfg, plan, out, logs, spawn, stops, endpoint, namespace, session_dir, prog, ports, remote,
+                         plot)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    _pass_on(stops.last, old)
+    return res
 
-    def on_signal(signum, frame):
-        nonlocal stop_requests, last_signal
-        stop_requests += 1
-        last_signal = signum
 
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, endpoint: str, namespace: str,
+               session_dir: str, prog: _Progress, ports: list[str], remote: int, plot: bool) -> SessionResult:
+    """Start the session's processes, supervise them until the world ends, tear down, write the summary."""
     children: list[Child] = []
     t_launch = time.monotonic()
     session = None
@@ -162,10 +235,10 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
             if world.popen.poll() is not None or time.monotonic() - t_launch > cfg.session.startup_timeout_s:
                 startup_error = f"the world process did not open its endpoint; see {logs / 'world.log'}"
                 break
-            if stop_requests:
+            if stops.count:
                 break
             time.sleep(0.01)
-        if startup_error or stop_requests:
+        if startup_error or stops.count:
             raise _Abort
         session = transport.open_session(endpoint, namespace, listen=False)
         _sub = transport.queue_subscriber(session, "status", status_q)
@@ -215,31 +288,29 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
             if world.exit_code is not None:
                 world_code = world.exit_code
                 break
-            if stop_requests and not sent_stop:
+            if stops.count and not sent_stop:
                 sent_stop = interrupted = True
+                stops.used = 1
                 prog.note(f"stopping at sim t={last_sim:.1f} s (Ctrl-C again to kill at once)")
                 control.put(transport.pack({"op": "stop", "reason": "interrupted"}))
-            if stop_requests >= 2:
+            if stops.hurry():
                 break
             time.sleep(0.02)
     except _Abort:
-        interrupted = bool(stop_requests)
+        interrupted = bool(stops.count)
+        stops.used = min(stops.count, 1)
     finally:
         for c in children:
             c.expected_exit = True
-        _terminate(children, grace_s=0.5 if stop_requests >= 2 else 2.0)
+        _terminate(children, grace_s=2.0, hurry=stops.hurry)
         if session is not None:
             session.close()
         shutil.rmtree(session_dir, ignore_errors=True)
-        for s, h in old.items():
-            signal.signal(s, h)
     wall = time.monotonic() - t_launch
     if world_code is None and children:
         world_code = children[0].exit_code  # the world, reaped during teardown
-    res = _finish(cfg, plan, out, children, world_code, interrupted, wall, t_started, t_launch, prog, plot,
-                  startup_error)
-    _pass_on(last_signal, old)
-    return res
+    return _finish(cfg, plan, out, children, world_code, interrupted, wall, t_started, t_launch, prog,
+                   plot, startup_error, stops)
 
 
 def _pass_on(signum: int | None, handlers: dict[int, Any]) -> None:
@@ -306,12 +377,27 @@ def _reap(c: Child) -> None:
     c.maxrss_kb = ru.ru_maxrss
 
 
-def _terminate(children: list[Child], grace_s: float) -> None:
+def _terminate(children: list[Child], grace_s: float, hurry=lambda: False, world_grace_s: float = 5.0) -> None:
+    """Reap the children; kill those still running after ``grace_s``.
+
+    ``hurry()`` (Ctrl-C again) cuts the wait short, as if the launcher had died: the participants are killed at
+    once, and the world gets SIGTERM, on which it finishes its recording without waiting for anyone; it is killed
+    only if it has not ended ``world_grace_s`` later (a safety net: the recording stays whole)."""
     deadline = time.monotonic() + grace_s
-    while time.monotonic() < deadline and any(c.exit_code is None for c in children):
+    hurried = False
+    while any(c.exit_code is None for c in children):
         for c in children:
             if c.exit_code is None:
                 _reap(c)
+        if time.monotonic() >= deadline:
+            break
+        if not hurried and hurry():
+            hurried = True
+            deadline = time.monotonic() + world_grace_s
+            for c in children:
+                if c.exit_code is None:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.killpg(c.popen.pid, signal.SIGTERM if c.kind == "world" else signal.SIGKILL)
         time.sleep(0.02)
     for c in children:
         if c.exit_code is None:
@@ -324,9 +410,32 @@ def _terminate(children: list[Child], grace_s: float) -> None:
                 time.sleep(0.01)
 
 
+def _draw(out: Path, plan: Plan, prog: _Progress, stops: _Stops) -> bool:
+    """Draw trajectories.png (whole: drawn aside, then renamed); False if it was not drawn. A Ctrl-C (or SIGTERM)
+    not used to stop the session, before or while it is drawn, skips it: "Ctrl-C again kills at once"."""
+    png, part = out / "trajectories.png", out / "trajectories.partial.png"
+    try:
+        stops.raising = True
+        try:
+            if stops.hurry():
+                raise _Hurry
+            from bridge.core.plot import plot_session
+
+            plot_session(out / "session.mcap", plan, part)
+            part.replace(png)
+        finally:
+            stops.raising = False
+    except _Hurry:
+        prog.note("trajectories.png not drawn (Ctrl-C)")
+    except Exception as e:  # a plot must never cost the summary
+        prog.note(f"could not draw the trajectories: {e}")
+    part.unlink(missing_ok=True)
+    return png.exists()
+
+
 def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None, interrupted: bool, wall: float,
             t_started: float | None, t_launch: float, prog: _Progress, plot: bool,
-            startup_error: str | None = None) -> SessionResult:
+            startup_error: str | None, stops: _Stops) -> SessionResult:
     res_path = out / "world_result.json"
     world_res: dict[str, Any] = json.loads(res_path.read_text()) if res_path.exists() else {}
     n = len(plan.robots)
@@ -373,8 +482,7 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "process_cpu_s": {c.name: round(c.cpu_s, 3) for c in children},
         "process_maxrss_mb": {c.name: round(c.maxrss_kb / 1024, 1) for c in children},
         "per_robot": world_res.get("robots", []),
-        "files": {"recording": str(out / "session.mcap"), "summary": str(out / "summary.json"),
-                  "plot": str(out / "trajectories.png"), "logs": str(out / "logs")},
+        "files": {},  # the outputs there are (below)
     }
     radio = world_res.get("radio") or {}
     if radio.get("per_robot") or len(radio) > 1:
@@ -382,8 +490,11 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
             rr.update(radio.get("per_robot", {}).get(str(rr["id"]), {}))
         summary["radio"] = {k: v for k, v in radio.items() if k != "per_robot"}
     if not world_res:
-        summary["error"] = ("interrupted during start-up" if interrupted else startup_error or
-                            f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}")
+        summary["error"] = (
+            "interrupted during start-up" if interrupted and t_started is None else
+            "the world was killed before it wrote its result (Ctrl-C again); the recording ends where it was cut"
+            if interrupted else startup_error or
+            f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}")
     code = world_code if world_code is not None else 1
     robots_alive = [r["alive"] for r in summary["per_robot"]]
     if interrupted:
@@ -394,14 +505,18 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         code = code or 1
         summary["error"] = summary["error"] or "every robot failed"
     summary["exit_code"] = code
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    if plot and (out / "session.mcap").exists():
-        try:
-            from bridge.core.plot import plot_session
+    outputs = {"recording": out / "session.mcap", "summary": out / "summary.json", "plot": out / "trajectories.png",
+               "logs": out / "logs"}
 
-            plot_session(out / "session.mcap", plan, out / "trajectories.png")
-        except Exception as e:  # a plot must never cost the summary
-            prog.note(f"could not draw the trajectories: {e}")
+    def write_summary() -> None:  # listing the outputs that exist; whole or not at all
+        summary["files"] = {k: str(p) for k, p in outputs.items() if k == "summary" or p.exists()}
+        tmp = out / "summary.json.tmp"
+        tmp.write_text(json.dumps(summary, indent=1))
+        tmp.replace(out / "summary.json")
+
+    write_summary()
+    if plot and (out / "session.mcap").exists() and _draw(out, plan, prog, stops):
+        write_summary()  # now with the plot
     how = "interrupted" if interrupted else "stopped" if code else "done"
     why = f" ({summary['stop_reason'] or summary['error'].strip().splitlines()[-1]})" if code and not interrupted and (
         summary["stop_reason"] or summary["error"]) else ""

@@ -199,9 +199,23 @@ class Recorder:
         self._f.close()
 
 
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+class NotARecording(ValueError):
+    """The file is no MCAP recording at all (another file, an empty one, a directory)."""
+
+
 def iter_messages(path: str | Path) -> Iterator[tuple[str, int, bytes]]:
-    """(topic, log_time_ns, payload) in file order; reads what a crashed writer left, up to the damage."""
+    """(topic, log_time_ns, payload) in file order; reads what a crashed writer left, up to the damage.
+    Raises NotARecording if ``path`` does not start as an MCAP file (a truncated end is damage; a wrong start is
+    another file)."""
+    if Path(path).is_dir():
+        raise NotARecording(f"{path}: not an MCAP recording (a directory)")
     with open(path, "rb") as f:
+        if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise NotARecording(f"{path}: not an MCAP recording (no MCAP magic at its start)")
+        f.seek(0)
         reader = NonSeekingReader(f, validate_crcs=True)
         try:
             for _schema, channel, message in reader.iter_messages(log_time_order=False):

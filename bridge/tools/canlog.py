@@ -39,18 +39,18 @@ import can
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
 from mcap.exceptions import McapError
-from mcap.records import Header
+from mcap.records import Chunk, DataEnd, Footer, Header, Message, Metadata
 from mcap.stream_reader import StreamReader
 from zstandard import ZstdError
 
-from bridge.core.recorder import iter_messages
+from bridge.core.recorder import MCAP_MAGIC, iter_messages
 from swarm_logic.robots.eswarbot import eswarbot_llc_db
 
 SUFFIXES = (".asc", ".blf", ".log", ".csv", ".trc")
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 LIBRARY = "swarm-sitl"  # the header's library field of a session recording (bridge.core.recorder.Recorder)
 START_EVENT = "swarm-sitl: simulated time"
 _TOPIC = re.compile(r"^/r(\d{3,})/can0$")
+_ROBOT_TOPIC = re.compile(r"^/r(\d{3,})/")  # any topic of a robot (its bus, its LLC's pins, its logic's logs)
 
 
 def channel_name(robot: int) -> str:
@@ -64,24 +64,50 @@ def _check_suffix(path: Path) -> None:
                          f"use one of {', '.join(SUFFIXES)}")
 
 
-def _check_recording(path: Path) -> None:
-    """Raise ValueError unless ``path`` is a session recording (also one whose writer died)."""
+def _check_recording(path: Path) -> int | None:
+    """Raise ValueError unless ``path`` is a session recording (also one whose writer died); return the run's
+    robot count, from the "session" metadata the hub writes right after the header (None if it has none)."""
     if not path.is_file():
         raise ValueError(f"{path}: no such file")
     with open(path, "rb") as f:
         if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
             raise ValueError(f"{path}: not an MCAP file (no MCAP magic at its start)")
         f.seek(0)
+        records = StreamReader(f, skip_magic=False).records
         try:
-            header = next(iter(StreamReader(f, skip_magic=False).records), None)
+            header = next(records, None)
         except (McapError, EOFError, struct.error) as e:
             raise ValueError(f"{path}: MCAP file ends or is damaged before its header ({e or type(e).__name__})") \
                 from None
-    if not isinstance(header, Header):
-        raise ValueError(f"{path}: MCAP file without a header record")
-    if header.library != LIBRARY:
-        raise ValueError(f"{path}: an MCAP file, but not a swarm-sitl session recording "
-                         f"(written by {header.library!r})")
+        if not isinstance(header, Header):
+            raise ValueError(f"{path}: MCAP file without a header record")
+        if header.library != LIBRARY:
+            raise ValueError(f"{path}: an MCAP file, but not a swarm-sitl session recording "
+                             f"(written by {header.library!r})")
+        try:
+            for rec in records:
+                if isinstance(rec, Metadata) and rec.name == "session":
+                    n = rec.metadata.get("robots", "")
+                    return int(n) if n.isdigit() else None
+                if isinstance(rec, Chunk | Message | DataEnd | Footer):  # the metadata comes before any message
+                    return None
+        except (McapError, EOFError, struct.error, ZstdError):  # damage: reported (or read up to) by _frames
+            return None
+    return None
+
+
+def _not_in_run(path: Path, wanted: set[int], there: list[int], what: str = "run") -> ValueError:
+    """The error for robots asked for that the run does not have, naming those it has."""
+    missing = sorted(wanted - set(there))
+    ids = ", ".join(map(str, missing))
+    if not there:
+        has = "it has no robots"
+    elif there == list(range(len(there))) and len(there) > 10:
+        has = f"its robots are 0 to {len(there) - 1}"
+    else:
+        has = f"its robots are {', '.join(map(str, there))}"
+    who = f"robot {ids} is" if len(missing) == 1 else f"robots {ids} are"
+    return ValueError(f"{path}: {who} not in this {what}; {has}")
 
 
 def _message(robot: int, t_ns: int, payload: bytes) -> can.Message | None:
@@ -101,11 +127,16 @@ def _message(robot: int, t_ns: int, payload: bytes) -> can.Message | None:
                        is_error_frame=bool(d.get("error", False)), channel=channel_name(robot), is_rx=True)
 
 
-def _frames(path: Path, robots: set[int] | None) -> Iterator[can.Message]:
+def _frames(path: Path, robots: set[int] | None, check_robots: bool = False) -> Iterator[can.Message]:
+    """``check_robots``: the recording does not say which robots its run had; raise ValueError at the end if
+    ``robots`` names one it has no topic of."""
     group: list[tuple[float, int, can.Message]] = []  # (time, robot, frame) delivered at one boundary
     group_t: int | None = None
+    seen: set[int] = set()
     try:
         for topic, t_ns, payload in iter_messages(path):
+            if check_robots and (r := _ROBOT_TOPIC.match(topic)):
+                seen.add(int(r.group(1)))
             m = _TOPIC.match(topic)
             if m is None or (robots is not None and int(m.group(1)) not in robots):
                 continue
@@ -119,6 +150,8 @@ def _frames(path: Path, robots: set[int] | None) -> Iterator[can.Message]:
     except (McapError, ValueError, ZstdError) as e:  # damage other than a truncated end (read up to quietly)
         raise ValueError(f"{path}: damaged recording: {e}") from None
     yield from _in_order(group)
+    if check_robots and robots is not None and not robots <= seen:
+        raise _not_in_run(path, robots, sorted(seen), "recording")
 
 
 def _in_order(group: list[tuple[float, int, can.Message]]) -> Iterator[can.Message]:
@@ -131,19 +164,22 @@ def iter_frames(mcap_path: str | Path, robots: set[int] | None = None) -> Iterat
     """Every CAN frame the robots' buses delivered (of ``robots`` only, if given), in time order.
 
     ``timestamp`` is the simulated time the frame left the wire (s), ``channel`` ``"rNNN"``, ``is_rx`` True.
-    Raises ValueError at once if the file is missing or no session recording; a truncated recording yields
-    what it holds up to the damage.
+    Raises ValueError at once if the file is missing or no session recording, or if ``robots`` names a robot
+    the run did not have (a recording without the hub's robot count: at the end, if it has no topic of one);
+    a truncated recording yields what it holds up to the damage.
     """
     path = Path(mcap_path)
-    _check_recording(path)
-    return _frames(path, robots)
+    n = _check_recording(path)
+    if robots is not None and n is not None and not robots <= set(range(n)):
+        raise _not_in_run(path, robots, list(range(n)))
+    return _frames(path, robots, check_robots=n is None)
 
 
 def export(mcap_path: str | Path, out_path: str | Path, robots: set[int] | None = None) -> int:
     """Write a recording's CAN frames to ``out_path`` with ``can.Logger`` (.asc, .blf, .log = candump -l,
     .csv, .trc by suffix); return the number of frames. Raises ValueError naming the file for an unknown
-    suffix, a missing file, a file that is no session recording, or one damaged other than by a truncated
-    end (then no output is left behind)."""
+    suffix, a missing file, a file that is no session recording, a robot that is not in the run, or a
+    recording damaged other than by a truncated end (then no output is left behind)."""
     out = Path(out_path)
     _check_suffix(out)
     frames = iter_frames(mcap_path, robots)

@@ -45,12 +45,12 @@ def _overrides(a: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_run(a: argparse.Namespace) -> int:
-    from bridge.core.launcher import run_session
+    from bridge.core.launcher import run_session, say
 
     out = a.out or f"runs/{Path(a.config).stem}"
     res = run_session(a.config, _overrides(a), out, progress=None if a.quiet else sys.stderr)
     if res.summary.get("error"):
-        print(res.summary["error"].strip().splitlines()[-1], file=sys.stderr)
+        say(sys.stderr, res.summary["error"].strip().splitlines()[-1] + "\n")
     return res.code
 
 
@@ -96,9 +96,13 @@ def cmd_validate(a: argparse.Namespace) -> int:
 
 
 def cmd_digest(a: argparse.Namespace) -> int:
-    from bridge.core.recorder import file_digest
+    from bridge.core.recorder import NotARecording, file_digest
 
-    d, n = file_digest(a.recording)
+    try:
+        d, n = file_digest(a.recording)
+    except NotARecording as e:
+        print(f"swarm-sitl digest: {e}", file=sys.stderr)
+        return 2
     print(json.dumps({"digest": d, "messages": n}))
     return 0
 
@@ -350,7 +354,26 @@ def main(argv: list[str] | None = None) -> None:
     except FileNotFoundError as e:
         print(f"swarm-sitl {a.cmd}: no such file: {e.filename}", file=sys.stderr)
         code = 2
+    except KeyboardInterrupt:  # Ctrl-C outside a session (which handles its own): before it starts, or after
+        code = 130
+    except BrokenPipeError:  # the reader of our output went away (`| head`)
+        code = 1
+        _drop_output()
+    try:  # what is still buffered, now: at exit Python would report a failed flush as an error of its own
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        code = code or 1
+        _drop_output()
     sys.exit(code)
+
+
+def _drop_output() -> None:
+    """stdout and stderr are gone (a closed pipe): send whatever is left of them to /dev/null."""
+    from bridge.core.launcher import output_gone
+
+    for stream in (sys.stdout, sys.stderr):
+        output_gone(stream)
 
 
 if __name__ == "__main__":

@@ -187,3 +187,41 @@ def test_spiral_placement_puts_each_block_on_a_spiral_of_theodorus(tmp_path: Pat
 def test_a_spiral_that_cannot_fit_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"robots\[0\]\.placement: spiral 1 of 6 robots .* does not fit"):
         make_plan(load_config(write(tmp_path, SPIRAL.format(w=1.2))))
+
+
+def test_unreadable_files_are_config_errors(tmp_path: Path) -> None:
+    binary = tmp_path / "blob.toml"
+    binary.write_bytes(bytes(range(256)) * 4)  # not UTF-8
+    for p, expected in ((binary, "not a text file"), (tmp_path, "is a directory"),
+                        (tmp_path / "nope.toml", "no such file")):
+        with pytest.raises(ConfigError) as e:
+            load_config(p)
+        assert str(e.value).startswith(f"{p}: ") and expected in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("hal", ["eswarbot_real.toml", "eswarbot_rdpso_real.toml"])
+def test_a_hal_config_is_named_as_one(hal: str) -> None:
+    p = Path(__file__).resolve().parent.parent / "hil_configs" / hal
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    msg = str(e.value)
+    assert msg.startswith(f"{p}: a HAL config for a real robot"), msg
+    assert f"python -m swarm_logic --hal {p}" in msg, msg
+    assert "Extra inputs" not in msg, msg
+
+
+@pytest.mark.parametrize("cmd", ["run", "validate", "devices"])
+def test_cli_exits_2_naming_an_unusable_config(tmp_path: Path, cmd: str, capsys: pytest.CaptureFixture) -> None:
+    from bridge.tools.cli import main
+
+    binary = tmp_path / "blob.toml"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00" * 20)
+    hal = Path(__file__).resolve().parent.parent / "hil_configs" / "eswarbot_real.toml"
+    for p, expected in ((binary, "not a text file"), (tmp_path, "is a directory"),
+                        (tmp_path / "nope.toml", "no such file"), (hal, "a HAL config for a real robot")):
+        with pytest.raises(SystemExit) as e:
+            main([cmd, str(p), *(["--out", str(tmp_path / "out")] if cmd in ("run", "devices") else [])])
+        err = capsys.readouterr().err
+        assert e.value.code == 2, (p, err)
+        assert err.startswith(f"config error: {p}: ") and expected in err, err
+    assert not (tmp_path / "out").exists()

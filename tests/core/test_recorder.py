@@ -53,3 +53,31 @@ def test_truncated_recording_is_still_readable(tmp_path: Path) -> None:
     got = list(iter_messages(cut))
     assert 0 < len(got) < 20000
     assert [t for _, t, _ in got] == list(range(len(got)))
+
+
+def test_digest_of_a_file_that_is_no_recording_is_an_error(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    from bridge.tools.cli import main
+
+    readme = Path(__file__).resolve().parent.parent / "README.md"
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    for p in (readme, empty, tmp_path):
+        with pytest.raises(ValueError, match="not an MCAP recording"):
+            file_digest(p)
+        with pytest.raises(SystemExit) as e:
+            main(["digest", str(p)])
+        out, err = capsys.readouterr()
+        assert e.value.code == 2 and out == "", (p, out, err)
+        assert err.startswith(f"swarm-sitl digest: {p}: not an MCAP recording"), err
+    rec = make(tmp_path / "ok.mcap")  # a recording still digests; also one its writer left without a summary
+    rec.finish()
+    data = (tmp_path / "ok.mcap").read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(data[: len(data) - 40])
+    for p in (tmp_path / "ok.mcap", tmp_path / "cut.mcap"):
+        main_code = None
+        with pytest.raises(SystemExit) as e:
+            main(["digest", str(p)])
+        main_code = e.value.code
+        assert main_code == 0
+        assert json.loads(capsys.readouterr().out) == {"digest": rec.digest, "messages": 50}

@@ -178,6 +178,80 @@ def long_session_then(tmp_path: Path, out: Path, act, within_s: float) -> subpro
     return p
 
 
+def wait_for(stream, p: subprocess.Popen, text: str, timeout: float = 90) -> str:
+    """Read the launcher's output up to a line containing ``text`` (the safety-net timeout only bounds a hang)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = stream.readline()
+        if text in line:
+            return line
+        if not line and p.poll() is not None:
+            break
+    raise AssertionError(f"the launcher never printed {text!r}")
+
+
+def check_stopped_cleanly(p: subprocess.Popen, out: Path) -> dict:
+    """Exit 130, no process of the session left, a summary that lists only files that exist, and a whole
+    recording whose digest is the summary's (a second Ctrl-C too lets the world finish it)."""
+    assert p.returncode == 130
+    assert session_procs(out) == []
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] and s["exit_code"] == 130
+    assert {k: Path(v).exists() for k, v in s["files"].items()} == dict.fromkeys(s["files"], True), s["files"]
+    assert ("plot" in s["files"]) == (out / "trajectories.png").exists()
+    assert file_digest(out / "session.mcap") == (s["digest"], s["messages"]) and s["digest"] is not None
+    with open(out / "session.mcap", "rb") as f:
+        assert make_reader(f).get_summary() is not None  # the world finished the file: its summary section
+    return s
+
+
+def test_ctrl_c_with_the_output_pipe_gone_still_finishes_the_session(tmp_path: Path) -> None:
+    """``swarm-sitl run ... 2>&1 | tee x.log`` and Ctrl-C: the terminal's SIGINT kills ``tee`` too, so every
+    write to stdout and stderr fails (EPIPE) from then on; the session must still stop as on any Ctrl-C."""
+    out = tmp_path / "run"
+    r, w = os.pipe()
+    p = subprocess.Popen(cli("run", str(config(tmp_path, duration=300)), "--out", str(out), "--speed", "2"),
+                         cwd=ROOT, stdin=subprocess.DEVNULL, stdout=w, stderr=w)
+    os.close(w)
+    tee = os.fdopen(r, "r")
+    try:
+        wait_for(tee, p, "] sim ")  # the first progress line: the session runs
+        tee.close()  # tee is gone: the pipe has no reader
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=90)
+    finally:
+        if p.poll() is None:
+            p.kill()
+        tee.close()
+    s = check_stopped_cleanly(p, out)  # 1 before: a BrokenPipeError from the "stopping" note
+    assert 0 < s["sim_time_s"] < 300
+    assert (out / "trajectories.png").exists()
+
+
+@pytest.mark.parametrize("second", ["after-stopping-note", "after-summary-appears"])
+def test_second_ctrl_c_never_leaves_a_traceback_or_a_wrong_summary(tmp_path: Path, second: str) -> None:
+    """The second Ctrl-C kills at once: wherever it lands (the session still stopping, its teardown, the
+    summary, the plot), no traceback, exit 130, and a summary that lists only what was written."""
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=300), out, "--speed", "2")
+    try:
+        wait_for(p.stderr, p, "] sim ")
+        p.send_signal(signal.SIGINT)
+        wait_for(p.stderr, p, "stopping at sim t=")  # the first one took effect
+        if second == "after-summary-appears":  # the launcher is drawing the plot now
+            deadline = time.monotonic() + 90
+            while not (out / "summary.json").exists() and p.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.005)
+        p.send_signal(signal.SIGINT)
+        err = p.stderr.read()
+        p.wait(timeout=90)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    check_stopped_cleanly(p, out)
+
+
 def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> None:
     def ctrl_c(launcher: subprocess.Popen, procs: list[psutil.Process]) -> None:
         for proc in procs:  # network hygiene: unix sockets only, nothing on inet

@@ -39,7 +39,8 @@ def write_delivery(rec: Recorder, t_ns: int, robot: int, d: Delivery) -> None:
         f'"name":"{name}","wire_end_ns":{d.wire_end_ns}}}').encode())
 
 
-def make_recording(path: Path, robots: int = 3, quanta: int = 50, extra: Sequence[tuple[int, dict]] = ()) -> None:
+def make_recording(path: Path, robots: int = 3, quanta: int = 50, extra: Sequence[tuple[int, dict]] = (),
+                   metadata: dict[str, str] | None = None) -> None:
     """A recording with the hub's CAN records: each robot's LLC and logic offer DBC frames on the robot's
     bus every quantum, the bus delivers them as ``CanMedium`` decides (at a quantum boundary, possibly
     several quanta after they were offered). ``extra`` records (robot, payload) come last."""
@@ -47,7 +48,7 @@ def make_recording(path: Path, robots: int = 3, quanta: int = 50, extra: Sequenc
     status = db.get_message_by_name("STATUS")
     buses = [CanMedium(f"r{r:03d}") for r in range(robots)]
     deliveries: dict[int, list[tuple[int, Delivery]]] = defaultdict(list)
-    rec = Recorder(path, {"config": "{}"})
+    rec = Recorder(path, metadata or {"config": "{}"})
     for k in range(quanta):
         t = k * Q_NS
         for r, d in deliveries.pop(t, []):
@@ -305,3 +306,37 @@ def test_damaged_recording_is_an_error_and_leaves_no_output(tmp_path: Path) -> N
     with pytest.raises(ValueError, match=r"s\.mcap: damaged recording: "):
         canlog.export(path, tmp_path / "s.blf")
     assert not (tmp_path / "s.blf").exists()
+
+
+@pytest.mark.parametrize("metadata", [{"config": "{}", "robots": "3"}, None], ids=["hub-metadata", "no-metadata"])
+def test_a_robot_not_in_the_run_is_an_error_and_leaves_no_output(tmp_path: Path, metadata: dict | None,
+                                                                  capsys: pytest.CaptureFixture) -> None:
+    """``Hub`` records the robot count in the recording's "session" metadata; without it (an older or foreign
+    writer) the robots are those the recording has topics of."""
+    from bridge.tools.cli import main
+
+    mcap = tmp_path / "session.mcap"
+    make_recording(mcap, robots=3, quanta=5, metadata=metadata)
+    out = tmp_path / "r7.log"
+    what = "run" if metadata else "recording"
+    for robots in ({7}, {1, 7}):
+        with pytest.raises(ValueError, match=rf"session\.mcap: robot 7 is not in this {what}; its robots are 0, 1, 2"):
+            canlog.export(mcap, out, robots)
+        assert not out.exists()
+    with pytest.raises(SystemExit) as e:
+        main(["canlog", str(tmp_path), str(out), "--robot", "7", "--robot", "9"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2, err
+    assert f"robots 7, 9 are not in this {what}; its robots are 0, 1, 2" in err, err
+    assert not out.exists()
+    assert canlog.export(mcap, out, {2}) > 0  # a robot of the run still exports
+
+
+@pytest.mark.session
+def test_canlog_of_a_robot_not_in_a_real_run(real_session: Path, tmp_path: Path) -> None:
+    out = tmp_path / "r7.log"
+    r = subprocess.run(swarm_sitl_cmd("canlog", str(real_session.parent), str(out), "--robot", "7"),
+                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "robot 7 is not in this run; its robots are 0, 1, 2" in r.stderr, r.stderr
+    assert not out.exists()
