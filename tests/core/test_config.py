@@ -201,7 +201,7 @@ def test_unreadable_files_are_config_errors(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("hal", ["eswarbot_real.toml", "eswarbot_rdpso_real.toml"])
 def test_a_hal_config_is_named_as_one(hal: str) -> None:
-    p = Path(__file__).resolve().parent.parent / "hil_configs" / hal
+    p = Path(__file__).resolve().parents[2] / "hil_configs" / "robots" / hal
     with pytest.raises(ConfigError) as e:
         load_config(p)
     msg = str(e.value)
@@ -216,7 +216,7 @@ def test_cli_exits_2_naming_an_unusable_config(tmp_path: Path, cmd: str, capsys:
 
     binary = tmp_path / "blob.toml"
     binary.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00" * 20)
-    hal = Path(__file__).resolve().parent.parent / "hil_configs" / "eswarbot_real.toml"
+    hal = Path(__file__).resolve().parents[2] / "hil_configs" / "robots" / "eswarbot_real.toml"
     for p, expected in ((binary, "not a text file"), (tmp_path, "is a directory"),
                         (tmp_path / "nope.toml", "no such file"), (hal, "a HAL config for a real robot")):
         with pytest.raises(SystemExit) as e:

@@ -59,7 +59,7 @@ def test_digest_of_a_file_that_is_no_recording_is_an_error(tmp_path: Path,
                                                              capsys: pytest.CaptureFixture) -> None:
     from bridge.tools.cli import main
 
-    readme = Path(__file__).resolve().parent.parent / "README.md"
+    readme = Path(__file__).resolve().parents[2] / "README.md"
     empty = tmp_path / "empty.mcap"
     empty.write_bytes(b"")
     for p in (readme, empty, tmp_path):
