@@ -23,11 +23,14 @@ Telemetry, default rates in Hz (HAL ``mavlink.rates`` and MAV_CMD_SET_MESSAGE_IN
 0 stops one): HEARTBEAT, SYS_STATUS, BATTERY_STATUS, RADIO_STATUS and NAMED_VALUE_FLOAT / NAMED_VALUE_INT (the
 controller's ``telemetry()``, names cut to 10 characters) at 1; LOCAL_POSITION_NED, ATTITUDE and DISTANCE_SENSOR
 (the sonar: ultrasound, forward, 15-600 cm; no echo: current_distance UINT16_MAX and signal_quality 1) at 10.
-SYS_STATUS counts the XBee driver's lost frames as comm errors and the face's dropped packets in errors_count1;
-ATTITUDE's yaw rate comes from successive odometry updates (the LLC reports no turn rate). RADIO_STATUS
-carries the XBee RSSI (the LLC's reading of the module's RSSI PWM output, else the driver's last packet RSSI)
-scaled as SiK radios scale theirs, rssi = 1.9 * (dBm + 127) (255: unknown), so MAVProxy and QGroundControl show
-it as they show a SiK radio's.
+SYS_STATUS reports the robot's sensors (motor outputs, battery, proximity: present and enabled), each healthy unless
+the LLC flags a fault (a stall or the watchdog: motors; battery_low: battery), and every other health bit set, as
+MAVLink means it (1: no error) and ArduPilot sends it, so a ground station sees no fence breach or failed sensor the
+robot does not have. It counts the XBee driver's lost frames as comm errors and the face's dropped packets in
+errors_count1. ATTITUDE's yaw rate comes from successive odometry updates (the LLC reports no turn rate).
+RADIO_STATUS carries the XBee RSSI (the LLC's reading of the module's RSSI PWM output, else the driver's last packet
+RSSI) scaled as SiK radios scale theirs, rssi = 1.9 * (dBm + 127) (255: unknown), so MAVProxy and QGroundControl
+show it as they show a SiK radio's.
 
 Commands (COMMAND_LONG or COMMAND_INT to this system or to all, each answered by COMMAND_ACK): ARM_DISARM (400),
 DO_SET_MODE (176, param1 with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), DO_CHANGE_SPEED (178: the GUIDED cruise speed,
@@ -98,6 +101,12 @@ RATES = {  # telemetry streams and their default rates (Hz)
 }
 MAX_RATE_HZ = 50.0  # no stream faster: the supervisor would wake for nothing else
 SONAR_MIN_CM, SONAR_MAX_CM = 15, 600  # the eSwarBot's sonar
+# SYS_STATUS: the robot's sensors and controllers (present and enabled): wheels, battery, sonar. Its health bits
+# are 1 for "no error" (MAVLink: 0 error, 1 healthy), so what the robot lacks is not failing, as ArduPilot reports
+# it: a clear GEOFENCE bit is a "fence breach" to MAVProxy, a clear AHRS or LOGGING bit a sensor alarm
+SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+           | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY)
+NO_ERRORS = sum(b for b in mavlink.enums["MAV_SYS_STATUS_SENSOR"] if b < mavlink.MAV_SYS_STATUS_EXTENSION_USED)
 UINT16_MAX = 0xFFFF
 RSSI_UNKNOWN = 255
 TARGET_TIMEOUT_S = 3.0  # velocity, heading and turn targets lapse this long after the last one (ArduPilot Rover)
@@ -444,9 +453,8 @@ class MavlinkFace:
 
     def _sys_status(self) -> None:
         motors, battery = mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS, mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-        present = motors | battery | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY
         faults = self._faults()
-        health = present
+        health = NO_ERRORS
         if faults.get("stall") or faults.get("watchdog"):
             health &= ~motors
         if faults.get("battery_low"):
@@ -455,7 +463,7 @@ class MavlinkFace:
         dropped, frames = self._xbee_errors()
         drop_rate = round(10000 * dropped / (dropped + frames)) if dropped else 0
         bad = self.counters["bad_crc"] + self.counters["bad_data"]
-        self.mav.sys_status_send(present, present, health, 0, mv, -1, remaining, drop_rate, min(dropped, UINT16_MAX),
+        self.mav.sys_status_send(SENSORS, SENSORS, health, 0, mv, -1, remaining, drop_rate, min(dropped, UINT16_MAX),
                                  min(bad, UINT16_MAX), 0, 0, 0)
 
     def _battery_status(self) -> None:

@@ -387,6 +387,43 @@ def test_battery_radio_and_named_values() -> None:
     assert floats == {"left_s"}
 
 
+def mavproxy_sys_status_warnings(statuses: list[Any]) -> list[str]:
+    """What MAVProxy makes of a run of SYS_STATUS: its fence module (it starts believing the fence healthy and says
+    "fence breach" when the GEOFENCE health bit is clear) and its warning module (health of AS, MAG, INS, AHRS,
+    TERR, LOG and FEN), as MAVProxy 1.8 checks them."""
+    fence = mavlink.MAV_SYS_STATUS_GEOFENCE
+    healthy, said = True, []
+    for m in statuses:
+        ok = m.onboard_control_sensors_health & fence == fence
+        if healthy and not ok:
+            said.append("fence breach")
+        healthy = ok
+        for bits in (mavlink.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE, mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG,
+                     mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO,
+                     mavlink.MAV_SYS_STATUS_AHRS, mavlink.MAV_SYS_STATUS_TERRAIN, mavlink.MAV_SYS_STATUS_LOGGING,
+                     fence):
+            if m.onboard_control_sensors_health & bits != bits:
+                said.append(f"status {mavlink.enums['MAV_SYS_STATUS_SENSOR'][bits & -bits].name}")
+    return said
+
+
+def test_sys_status_reports_the_robots_sensors_and_no_bogus_failure() -> None:
+    rig = Rig()
+    rig.at(2.05, lambda: setattr(rig.llc.state, "faults", {"stall": True, "battery_low": True}))
+    rig.run(RandomWalk(), 4.0)
+    has = (mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+           | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY)  # wheels, battery, sonar: nothing else
+    statuses = rig.gcs.of("SYS_STATUS")
+    assert len(statuses) == 5  # 1 Hz from t = 0
+    for m in statuses:
+        assert m.onboard_control_sensors_present == m.onboard_control_sensors_enabled == has
+    assert mavproxy_sys_status_warnings(statuses) == []  # MAVProxy says nothing: no fence breach, no bad sensor
+    healthy, faulty = statuses[0], rig.gcs.of("SYS_STATUS", since=2.05)[0]
+    assert healthy.onboard_control_sensors_health & has == has  # its own sensors healthy ...
+    assert faulty.onboard_control_sensors_health & has == mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY  # ... until faults
+    assert faulty.onboard_control_sensors_health | has == healthy.onboard_control_sensors_health  # the rest unchanged
+
+
 # -- arming and modes ----------------------------------------------------------------------------------------------
 def test_arm_disarm_is_acknowledged_and_shown() -> None:
     rig = Rig(boot="disarmed")
