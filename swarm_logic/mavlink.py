@@ -49,8 +49,12 @@ point. The LLC limits the speeds.
 
 Parameters: the controller's numeric parameters (its class ``defaults``, as configured in ``robot.params``;
 strings are not shown), REAL32 for floats and INT32 for ints and bools, values C-cast into the float field.
-Names of up to 16 characters are their own ids; longer ones become their first 13 characters, "_" and two base-36
-characters of their CRC-32 (the next free value on a clash), so ids are unique and stable. PARAM_SET is checked
+MAVLink ids are upper case, as ArduPilot's and PX4's are (MAVProxy upper-cases the names it is given, and matches
+what it received against them): a name of up to 16 characters is its id in upper case (``speed_mps`` is
+SPEED_MPS); a longer one becomes its first 13 characters, "_" and two base-36 characters of its CRC-32 (the next
+free value on a clash), so ids are unique, even ignoring case, and stable. PARAM_SET and PARAM_REQUEST_READ find a
+parameter by its id in any case (or PARAM_REQUEST_READ by param_index), and every PARAM_SET is answered by the
+PARAM_VALUE a ground station waits for (id, value, type, index and count). PARAM_SET is checked
 (a finite number, an integer for INT32, 0 or 1 for a bool, the class's ``resolve`` if it has one) and applied by
 ``Controller.set_param``; a refused value is answered with the unchanged PARAM_VALUE and a STATUSTEXT saying why,
 and a parameter in ``static_params`` is stored for the next reboot, which a STATUSTEXT says.
@@ -259,17 +263,22 @@ class Param:
 
 
 def param_ids(names: Iterable[str]) -> dict[str, str]:
-    """Parameter name -> MAVLink param_id (at most 16 characters), unique; see the module's docstring."""
+    """Parameter name -> MAVLink param_id: upper case, at most 16 characters, unique even ignoring case; see the
+    module's docstring."""
     names = list(names)
-    ids = {n: n for n in names if len(n) <= 16}
-    taken = set(ids.values())
+    ids: dict[str, str] = {}
+    taken: set[str] = set()
+    for n in names:
+        if len(n) <= 16 and n.upper() not in taken:
+            ids[n] = n.upper()
+            taken.add(ids[n])
     for n in names:
         if n in ids:
             continue
         h = zlib.crc32(n.encode())
         while True:
             h %= 36 * 36
-            pid = f"{n[:13]}_{np.base_repr(h, 36).lower():0>2}"
+            pid = f"{n[:13].upper()}_{np.base_repr(h, 36):0>2}"
             if pid not in taken:
                 break
             h += 1
@@ -683,13 +692,18 @@ class MavlinkFace:
         for i in range(len(self.params)):
             self._send_param(i)
 
+    def _find_param(self, param_id: Any) -> int | None:
+        """The index of the parameter a ground station names, in any case (MAVProxy upper-cases what it is given,
+        a script may send the controller's own name)."""
+        return self._param_index.get(param_id.upper()) if isinstance(param_id, str) else None
+
     def _param_request_read(self, m: Any) -> None:
-        i = self._param_index.get(m.param_id) if m.param_index == -1 else m.param_index
+        i = self._find_param(m.param_id) if m.param_index == -1 else m.param_index
         if i is not None and 0 <= i < len(self.params):
             self._send_param(i)
 
     def _param_set(self, m: Any) -> None:
-        i = self._param_index.get(m.param_id)
+        i = self._find_param(m.param_id)
         if i is None:
             self.statustext(f"no parameter {m.param_id}", mavlink.MAV_SEVERITY_WARNING)
             return

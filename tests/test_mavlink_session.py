@@ -81,11 +81,11 @@ def test_ground_station_arms_tunes_and_sends_a_robot(tmp_path: Path) -> None:
         wait_for(gcs, "HEARTBEAT", lambda m: m.get_srcSystem() == SYSID
                  and m.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
-        gcs.mav.param_set_send(SYSID, 1, b"speed_mps", 0.25, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
-        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "speed_mps")
+        gcs.mav.param_set_send(SYSID, 1, b"SPEED_MPS", 0.25, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)  # as MAVProxy
+        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "SPEED_MPS")
         assert pv.param_value == pytest.approx(0.25)
-        gcs.mav.param_request_read_send(SYSID, 1, b"speed_mps", -1)
-        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "speed_mps")
+        gcs.mav.param_request_read_send(SYSID, 1, b"speed_mps", -1)  # any case
+        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "SPEED_MPS")
         assert pv.param_value == pytest.approx(0.25)
 
         gcs.mav.command_long_send(SYSID, 1, mavutil.mavlink.MAV_CMD_DO_SET_MODE, 0,
