@@ -55,9 +55,12 @@ SPEED_MPS); a longer one becomes its first 13 characters, "_" and two base-36 ch
 free value on a clash), so ids are unique, even ignoring case, and stable. PARAM_SET and PARAM_REQUEST_READ find a
 parameter by its id in any case (or PARAM_REQUEST_READ by param_index), and every PARAM_SET is answered by the
 PARAM_VALUE a ground station waits for (id, value, type, index and count). PARAM_SET is checked
-(a finite number, an integer for INT32, 0 or 1 for a bool, the class's ``resolve`` if it has one) and applied by
-``Controller.set_param``; a refused value is answered with the unchanged PARAM_VALUE and a STATUSTEXT saying why,
-and a parameter in ``static_params`` is stored for the next reboot, which a STATUSTEXT says.
+(a finite number, an integer for INT32, 0 or 1 for a bool, the range the controller declares for the parameter
+(``Controller.ranges``, the one a session config is checked against), the class's ``resolve`` if it has one) and
+applied by ``Controller.set_param``; a refused value is answered, as ArduPilot answers it, with the unchanged
+PARAM_VALUE, and a STATUSTEXT says why; it is counted (``counters["refused_params"]``) and logged
+(``robot.log("mavlink_param_refused", ...)``: in a session, the recording). A parameter in ``static_params`` is
+stored for the next reboot, which a STATUSTEXT says.
 
 Robustness: pymavlink's parser runs in robust mode; packets with a bad CRC or bad data are counted in ``counters``
 and dropped, and no input raises. Messages for other systems or components are counted and ignored, and so are
@@ -127,6 +130,7 @@ COUNTER_NAMES = (
     "other_target",  # packets for another system or component
     "ignored",  # messages the face does not act on (a ground station's HEARTBEAT, ...)
     "refused_targets",  # SET_POSITION_TARGET_LOCAL_NED not obeyed (disarmed, not GUIDED, bad frame or values)
+    "refused_params",  # PARAM_SET refused: a value not of the parameter's kind or outside its declared range
 )
 IGNORE_POS = mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
 IGNORE_VEL = mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE
@@ -709,7 +713,10 @@ class MavlinkFace:
             return
         p = self.params[i]
         error = self._apply(p, m.param_value)
-        if error is not None:
+        if error is not None:  # the value stays as it was, and the PARAM_VALUE below says so (as ArduPilot answers)
+            self.counters["refused_params"] += 1
+            assert self.robot is not None
+            self.robot.log("mavlink_param_refused", param=p.name, value=m.param_value, reason=error)
             self.statustext(f"{p.id} refused: {error}", mavlink.MAV_SEVERITY_WARNING)
         elif p.name in type(self.controller).static_params:
             self.statustext(f"{p.id} stored: a reboot applies it", mavlink.MAV_SEVERITY_NOTICE)
@@ -731,7 +738,11 @@ class MavlinkFace:
             value = int(raw)
         else:
             value = float(str(np.float32(raw)))  # the decimal the sender meant, not float32's binary neighbour
-        resolve = getattr(type(self.controller), "resolve", None)
+        cls = type(self.controller)
+        error = cls.param_error(p.name, value)  # its declared range: the one a session config is checked against
+        if error is not None:
+            return f"{p.name}: {error}"
+        resolve = getattr(cls, "resolve", None)
         try:
             if resolve is not None:
                 resolve({**self.robot.params, p.name: value})

@@ -714,15 +714,46 @@ def test_param_set_is_applied_or_refused_with_a_reason() -> None:
     assert "AVOID_M refused: not a finite number" in texts and "no parameter no_such" in texts
 
 
+def test_a_value_outside_its_declared_range_is_refused_answered_unchanged_counted_and_logged() -> None:
+    """As ArduPilot answers a PARAM_SET it refuses: the PARAM_VALUE echo carries the unchanged value (MAVProxy then
+    reports the set as failed); the range is the one a session config is checked against."""
+    rig = Rig()
+    logs: list[tuple[str, dict[str, Any]]] = []
+    rig.robot.log_sink = lambda topic, values: logs.append((topic, values))
+    g = rig.gcs
+    rig.at(0.5, lambda: g.mav.param_set_send(1, 1, b"SPEED_MPS", 50, mavlink.MAV_PARAM_TYPE_REAL32))
+    rig.at(0.6, lambda: g.mav.param_set_send(1, 1, b"TURN_RATE_RPS", 0, mavlink.MAV_PARAM_TYPE_REAL32))
+    rig.at(0.7, lambda: g.mav.param_set_send(1, 1, b"SPEED_MPS", 0.3, mavlink.MAV_PARAM_TYPE_REAL32))
+    ctl = Spy()
+    rig.run(ctl, 1.5)
+    values = [(m.param_id, round(m.param_value, 6)) for m in g.of("PARAM_VALUE")]
+    assert values == [("SPEED_MPS", 0.15), ("TURN_RATE_RPS", 1.5), ("SPEED_MPS", 0.3)]
+    assert ctl.p["speed_mps"] == 0.3 and ctl.p["turn_rate_rps"] == 1.5 and rig.robot.params == {"speed_mps": 0.3}
+    assert {v for t, v, w in rig.llc.drives if 0.5 < t < 0.7 and w == 0} <= {0.15}  # never 50 m/s
+    texts = g.texts()
+    assert "SPEED_MPS refused: speed_mps: must lie in [0, 2], got 50.0" in texts
+    assert "TURN_RATE_RPS refused: turn_rate_rps: must lie in (0, 20], got 0.0" in texts
+    assert rig.face.counters["refused_params"] == 2
+    assert logs == [("mavlink_param_refused", {"param": "speed_mps", "value": 50.0,
+                                               "reason": "speed_mps: must lie in [0, 2], got 50.0"}),
+                    ("mavlink_param_refused", {"param": "turn_rate_rps", "value": 0.0,
+                                               "reason": "turn_rate_rps: must lie in (0, 20], got 0.0"})]
+    with pytest.raises(ValueError, match=r"speed_mps: must lie in \[0, 2\], got 50"):  # the same range, directly
+        ctl.set_param("speed_mps", 50)
+
+
 def test_rdpso_parameters_resolve_and_static_ones_wait_for_a_reboot() -> None:
     rig = Rig(xbee=Radio(), params={"n_total": 4, "subgroups_init": 1})
     g = rig.gcs
-    for name, value in (("alpha", 5.0), ("alpha", 0.6), ("n_total", 6), ("fuzzy", 2), ("sc_max", 2.5)):
+    for name, value in (("alpha", 5.0), ("alpha", 0.6), ("n_total", 6), ("fuzzy", 2), ("sc_max", 2.5),
+                        ("comm_window_s", 1.5)):
         rig.at(0.5, lambda name=name, value=value: g.mav.param_set_send(1, 1, name.encode(), value, 0))
     ctl = Rdpso()
     rig.run(ctl, 2.0)
     texts = g.texts()
-    assert "ALPHA refused: alpha = 5.0 is outside (0, 1] (fractional order, eq. 4.8)" in texts  # two chunks
+    assert "ALPHA refused: alpha: must lie in (0, 1], got 5.0" in texts  # its declared range
+    assert ("COMM_WINDOW_S refused: comm_window_s: must lie in (0, iteration_s = 1.0), got 1.5" in texts  # resolve;
+            and ctl.p["comm_window_s"] == 0.25)  # two chunks
     assert ctl.alpha == 0.6 and ctl.p["alpha"] == 0.6
     assert "N_TOTAL stored: a reboot applies it" in texts
     assert rig.robot.params["n_total"] == 6 and ctl.p["n_total"] == 4
