@@ -681,7 +681,8 @@ def _refuse_hal_config(p: Path, raw: dict[str, Any]) -> None:
 
 
 def _check_behaviours(path: str, cfg: Config) -> None:
-    """Each group's behaviour must load, and its params must be ones it declares, of the declared kind."""
+    """Each group's behaviour must load, and its params must be ones it declares, each of its declared kind and in its
+    declared range (``Controller.param_error``, as the MAVLink face checks a PARAM_SET), then pass its ``resolve``."""
     from swarm_logic.behaviours import load_behaviour
 
     for i, g in enumerate(cfg.robots):
@@ -696,11 +697,10 @@ def _check_behaviours(path: str, cfg: Config) -> None:
         if unknown:
             raise ConfigError(f"{path}: robots[{i}].params: unknown parameters {unknown} for {g.behaviour}; "
                               f"known: {sorted(declared)}")
-        for k, v in g.params.items():
-            d = declared[k]
-            if isinstance(d, int | float) and not isinstance(d, bool) and (
-                    isinstance(v, bool) or not isinstance(v, int | float)):
-                raise ConfigError(f"{path}: robots[{i}].params.{k}: expected a number, got {v!r}")
+        for k, v in g.params.items():  # each a value of its kind, in the range the controller declares for it
+            error = cls.param_error(k, v)
+            if error is not None:
+                raise ConfigError(f"{path}: robots[{i}].params.{k}: {error}")
         if getattr(cls, "needs_radio", False) and g.xbee is None:
             raise ConfigError(f"{path}: robots[{i}].xbee: {g.behaviour} talks over the radio: give the group an "
                               "XBee, e.g. xbee = { series = 2, baud = 115200 }")

@@ -23,11 +23,14 @@ Telemetry, default rates in Hz (HAL ``mavlink.rates`` and MAV_CMD_SET_MESSAGE_IN
 0 stops one): HEARTBEAT, SYS_STATUS, BATTERY_STATUS, RADIO_STATUS and NAMED_VALUE_FLOAT / NAMED_VALUE_INT (the
 controller's ``telemetry()``, names cut to 10 characters) at 1; LOCAL_POSITION_NED, ATTITUDE and DISTANCE_SENSOR
 (the sonar: ultrasound, forward, 15-600 cm; no echo: current_distance UINT16_MAX and signal_quality 1) at 10.
-SYS_STATUS counts the XBee driver's lost frames as comm errors and the face's dropped packets in errors_count1;
-ATTITUDE's yaw rate comes from successive odometry updates (the LLC reports no turn rate). RADIO_STATUS
-carries the XBee RSSI (the LLC's reading of the module's RSSI PWM output, else the driver's last packet RSSI)
-scaled as SiK radios scale theirs, rssi = 1.9 * (dBm + 127) (255: unknown), so MAVProxy and QGroundControl show
-it as they show a SiK radio's.
+SYS_STATUS reports the robot's sensors (motor outputs, battery, proximity: present and enabled), each healthy unless
+the LLC flags a fault (a stall or the watchdog: motors; battery_low: battery), and every other health bit set, as
+MAVLink means it (1: no error) and ArduPilot sends it, so a ground station sees no fence breach or failed sensor the
+robot does not have. It counts the XBee driver's lost frames as comm errors and the face's dropped packets in
+errors_count1. ATTITUDE's yaw rate comes from successive odometry updates (the LLC reports no turn rate).
+RADIO_STATUS carries the XBee RSSI (the LLC's reading of the module's RSSI PWM output, else the driver's last packet
+RSSI) scaled as SiK radios scale theirs, rssi = 1.9 * (dBm + 127) (255: unknown), so MAVProxy and QGroundControl
+show it as they show a SiK radio's.
 
 Commands (COMMAND_LONG or COMMAND_INT to this system or to all, each answered by COMMAND_ACK): ARM_DISARM (400),
 DO_SET_MODE (176, param1 with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), DO_CHANGE_SPEED (178: the GUIDED cruise speed,
@@ -46,11 +49,18 @@ point. The LLC limits the speeds.
 
 Parameters: the controller's numeric parameters (its class ``defaults``, as configured in ``robot.params``;
 strings are not shown), REAL32 for floats and INT32 for ints and bools, values C-cast into the float field.
-Names of up to 16 characters are their own ids; longer ones become their first 13 characters, "_" and two base-36
-characters of their CRC-32 (the next free value on a clash), so ids are unique and stable. PARAM_SET is checked
-(a finite number, an integer for INT32, 0 or 1 for a bool, the class's ``resolve`` if it has one) and applied by
-``Controller.set_param``; a refused value is answered with the unchanged PARAM_VALUE and a STATUSTEXT saying why,
-and a parameter in ``static_params`` is stored for the next reboot, which a STATUSTEXT says.
+MAVLink ids are upper case, as ArduPilot's and PX4's are (MAVProxy upper-cases the names it is given, and matches
+what it received against them): a name of up to 16 characters is its id in upper case (``speed_mps`` is
+SPEED_MPS); a longer one becomes its first 13 characters, "_" and two base-36 characters of its CRC-32 (the next
+free value on a clash), so ids are unique, even ignoring case, and stable. PARAM_SET and PARAM_REQUEST_READ find a
+parameter by its id in any case (or PARAM_REQUEST_READ by param_index), and every PARAM_SET is answered by the
+PARAM_VALUE a ground station waits for (id, value, type, index and count). PARAM_SET is checked
+(a finite number, an integer for INT32, 0 or 1 for a bool, the range the controller declares for the parameter
+(``Controller.ranges``, the one a session config is checked against), the class's ``resolve`` if it has one) and
+applied by ``Controller.set_param``; a refused value is answered, as ArduPilot answers it, with the unchanged
+PARAM_VALUE, and a STATUSTEXT says why; it is counted (``counters["refused_params"]``) and logged
+(``robot.log("mavlink_param_refused", ...)``: in a session, the recording). A parameter in ``static_params`` is
+stored for the next reboot, which a STATUSTEXT says.
 
 Robustness: pymavlink's parser runs in robust mode; packets with a bad CRC or bad data are counted in ``counters``
 and dropped, and no input raises. Messages for other systems or components are counted and ignored, and so are
@@ -98,6 +108,12 @@ RATES = {  # telemetry streams and their default rates (Hz)
 }
 MAX_RATE_HZ = 50.0  # no stream faster: the supervisor would wake for nothing else
 SONAR_MIN_CM, SONAR_MAX_CM = 15, 600  # the eSwarBot's sonar
+# SYS_STATUS: the robot's sensors and controllers (present and enabled): wheels, battery, sonar. Its health bits
+# are 1 for "no error" (MAVLink: 0 error, 1 healthy), so what the robot lacks is not failing, as ArduPilot reports
+# it: a clear GEOFENCE bit is a "fence breach" to MAVProxy, a clear AHRS or LOGGING bit a sensor alarm
+SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+           | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY)
+NO_ERRORS = sum(b for b in mavlink.enums["MAV_SYS_STATUS_SENSOR"] if b < mavlink.MAV_SYS_STATUS_EXTENSION_USED)
 UINT16_MAX = 0xFFFF
 RSSI_UNKNOWN = 255
 TARGET_TIMEOUT_S = 3.0  # velocity, heading and turn targets lapse this long after the last one (ArduPilot Rover)
@@ -114,6 +130,7 @@ COUNTER_NAMES = (
     "other_target",  # packets for another system or component
     "ignored",  # messages the face does not act on (a ground station's HEARTBEAT, ...)
     "refused_targets",  # SET_POSITION_TARGET_LOCAL_NED not obeyed (disarmed, not GUIDED, bad frame or values)
+    "refused_params",  # PARAM_SET refused: a value not of the parameter's kind or outside its declared range
 )
 IGNORE_POS = mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
 IGNORE_VEL = mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE
@@ -250,17 +267,22 @@ class Param:
 
 
 def param_ids(names: Iterable[str]) -> dict[str, str]:
-    """Parameter name -> MAVLink param_id (at most 16 characters), unique; see the module's docstring."""
+    """Parameter name -> MAVLink param_id: upper case, at most 16 characters, unique even ignoring case; see the
+    module's docstring."""
     names = list(names)
-    ids = {n: n for n in names if len(n) <= 16}
-    taken = set(ids.values())
+    ids: dict[str, str] = {}
+    taken: set[str] = set()
+    for n in names:
+        if len(n) <= 16 and n.upper() not in taken:
+            ids[n] = n.upper()
+            taken.add(ids[n])
     for n in names:
         if n in ids:
             continue
         h = zlib.crc32(n.encode())
         while True:
             h %= 36 * 36
-            pid = f"{n[:13]}_{np.base_repr(h, 36).lower():0>2}"
+            pid = f"{n[:13].upper()}_{np.base_repr(h, 36):0>2}"
             if pid not in taken:
                 break
             h += 1
@@ -444,9 +466,8 @@ class MavlinkFace:
 
     def _sys_status(self) -> None:
         motors, battery = mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS, mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-        present = motors | battery | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY
         faults = self._faults()
-        health = present
+        health = NO_ERRORS
         if faults.get("stall") or faults.get("watchdog"):
             health &= ~motors
         if faults.get("battery_low"):
@@ -455,7 +476,7 @@ class MavlinkFace:
         dropped, frames = self._xbee_errors()
         drop_rate = round(10000 * dropped / (dropped + frames)) if dropped else 0
         bad = self.counters["bad_crc"] + self.counters["bad_data"]
-        self.mav.sys_status_send(present, present, health, 0, mv, -1, remaining, drop_rate, min(dropped, UINT16_MAX),
+        self.mav.sys_status_send(SENSORS, SENSORS, health, 0, mv, -1, remaining, drop_rate, min(dropped, UINT16_MAX),
                                  min(bad, UINT16_MAX), 0, 0, 0)
 
     def _battery_status(self) -> None:
@@ -675,19 +696,27 @@ class MavlinkFace:
         for i in range(len(self.params)):
             self._send_param(i)
 
+    def _find_param(self, param_id: Any) -> int | None:
+        """The index of the parameter a ground station names, in any case (MAVProxy upper-cases what it is given,
+        a script may send the controller's own name)."""
+        return self._param_index.get(param_id.upper()) if isinstance(param_id, str) else None
+
     def _param_request_read(self, m: Any) -> None:
-        i = self._param_index.get(m.param_id) if m.param_index == -1 else m.param_index
+        i = self._find_param(m.param_id) if m.param_index == -1 else m.param_index
         if i is not None and 0 <= i < len(self.params):
             self._send_param(i)
 
     def _param_set(self, m: Any) -> None:
-        i = self._param_index.get(m.param_id)
+        i = self._find_param(m.param_id)
         if i is None:
             self.statustext(f"no parameter {m.param_id}", mavlink.MAV_SEVERITY_WARNING)
             return
         p = self.params[i]
         error = self._apply(p, m.param_value)
-        if error is not None:
+        if error is not None:  # the value stays as it was, and the PARAM_VALUE below says so (as ArduPilot answers)
+            self.counters["refused_params"] += 1
+            assert self.robot is not None
+            self.robot.log("mavlink_param_refused", param=p.name, value=m.param_value, reason=error)
             self.statustext(f"{p.id} refused: {error}", mavlink.MAV_SEVERITY_WARNING)
         elif p.name in type(self.controller).static_params:
             self.statustext(f"{p.id} stored: a reboot applies it", mavlink.MAV_SEVERITY_NOTICE)
@@ -709,7 +738,11 @@ class MavlinkFace:
             value = int(raw)
         else:
             value = float(str(np.float32(raw)))  # the decimal the sender meant, not float32's binary neighbour
-        resolve = getattr(type(self.controller), "resolve", None)
+        cls = type(self.controller)
+        error = cls.param_error(p.name, value)  # its declared range: the one a session config is checked against
+        if error is not None:
+            return f"{p.name}: {error}"
+        resolve = getattr(cls, "resolve", None)
         try:
             if resolve is not None:
                 resolve({**self.robot.params, p.name: value})

@@ -8,6 +8,10 @@ import pytest
 
 from bridge.core.config import ConfigError, load_config
 from bridge.core.plan import make_plan
+from bridge.tools.cli import main
+from swarm_logic.behaviours import BEHAVIOURS
+from swarm_logic.controller import MAX_SPEED_MPS, MAX_TURN_RATE_RPS, Range
+from swarm_logic.robots.eswarbot import eswarbot_llc_db
 
 MINIMAL = """
 [session]
@@ -92,6 +96,15 @@ def test_explicit_poses_must_match_count_and_arena(tmp_path: Path) -> None:
     ("behaviour = 'nosuchmodule:Thing'\n", "robots[0].behaviour: No module named 'nosuchmodule'"),
     ("[robots.params]\nsped_mps = 0.2\n", "robots[0].params: unknown parameters ['sped_mps'] for random_walk"),
     ("[robots.params]\nspeed_mps = 'fast'\n", "robots[0].params.speed_mps: expected a number, got 'fast'"),
+    ("[robots.params]\nspeed_mps = 50\n", "robots[0].params.speed_mps: must lie in [0, 2], got 50"),
+    ("[robots.params]\nturn_rate_rps = 0.0\n", "robots[0].params.turn_rate_rps: must lie in (0, 20], got 0.0"),
+    ("[robots.params]\nmean_run_s = -1\n", "robots[0].params.mean_run_s: must be > 0, got -1"),
+    ("behaviour = 'rssi_keeper'\nxbee = { series = 2 }\n[robots.params]\nq_min_dbm = 20\n",
+     "robots[0].params.q_min_dbm: must lie in [-128, 0], got 20"),
+    ("behaviour = 'rssi_keeper'\nxbee = { series = 2 }\n[robots.params]\nk = 1.5\n",
+     "robots[0].params.k: must be an integer, got 1.5"),
+    ("behaviour = 'rdpso'\nxbee = { series = 2 }\n[robots.params]\nroute_ttl = 300\n",
+     "robots[0].params.route_ttl: must lie in [1, 255], got 300"),
     ("[robots.placement]\nkind = 'grid'\nposes = [[1, 1, 0]]\n", "poses do(es) not apply to kind = 'grid'"),
     ("[robots.placement]\nkind = 'explicit'\nposes = [[1, 1, 0], [2, 1, 0], [3, 1, 0]]\nyaw_deg = 0\n",
      "yaw_deg do(es) not apply to kind = 'explicit'"),
@@ -225,3 +238,29 @@ def test_cli_exits_2_naming_an_unusable_config(tmp_path: Path, cmd: str, capsys:
         assert e.value.code == 2, (p, err)
         assert err.startswith(f"config error: {p}: ") and expected in err, err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("cmd", ["validate", "run"])
+def test_a_parameter_out_of_its_range_is_a_config_error_with_exit_2(tmp_path: Path, cmd: str,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    p = write(tmp_path, MINIMAL + "[robots.params]\nspeed_mps = 50\n")
+    with pytest.raises(SystemExit) as e:
+        main([cmd, str(p), "--quiet", "--out", str(tmp_path / "out")] if cmd == "run" else [cmd, str(p)])
+    assert e.value.code == 2
+    assert f"config error: {p}: robots[0].params.speed_mps: must lie in [0, 2], got 50" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == [p]  # refused before anything ran
+
+
+@pytest.mark.parametrize("name", BEHAVIOURS.names())
+def test_every_numeric_parameter_of_a_behaviour_has_a_declared_range(name: str) -> None:
+    cls = BEHAVIOURS.get(name)
+    numeric = {k for k, v in cls.defaults.items() if isinstance(v, int | float) and not isinstance(v, bool)}
+    assert set(cls.ranges) == numeric  # every tunable number, and nothing else
+    for k, r in cls.ranges.items():
+        assert isinstance(r, Range) and cls.defaults[k] in r and cls.param_error(k, cls.defaults[k]) is None
+
+
+def test_speed_and_turn_rate_ranges_are_what_drive_cmd_carries() -> None:
+    drive = eswarbot_llc_db().get_message_by_name("DRIVE_CMD")
+    assert drive.get_signal_by_name("v_mm_s").maximum / 1000 == MAX_SPEED_MPS
+    assert drive.get_signal_by_name("w_mrad_s").maximum / 1000 == MAX_TURN_RATE_RPS

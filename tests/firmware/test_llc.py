@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 from pathlib import Path
 
+import cantools
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -17,8 +20,9 @@ from bridge.core.registry import robot_profile
 from bridge.hosts.firmware import llc_params
 from firmware_sim.board.arduino import Board
 from firmware_sim.board.can_controller import CanController, Frame
+from firmware_sim.robots.eswarbot import llc as llc_fw
 from firmware_sim.robots.eswarbot.llc import LlcParams, LowLevelController, forward_pulses, rotation_pulses
-from swarm_logic.robots.eswarbot import eswarbot_llc_db
+from swarm_logic.robots.eswarbot import ESWARBOT_LLC_DBC, eswarbot_llc_db
 from tests.core.test_session import run as session_run
 from tests.support.harness import Plant
 
@@ -402,3 +406,49 @@ def test_ground_truth_pose_source_reports_the_world_pose(tmp_path: Path) -> None
     assert (first["x_mm"], first["y_mm"], first["theta_mrad"]) == pytest.approx((1000, 1000, 524), abs=2)
     odo1 = [fr for _, fr in frames[1] if "x_mm" in fr]
     assert (odo1[0]["x_mm"], odo1[0]["y_mm"], odo1[0]["theta_mrad"]) == (0, 0, 0)  # dead reckoning: its own frame
+
+
+# -- the DBC's cycle times ---------------------------------------------------------------------------------------
+# each periodic frame and the firmware constant it is sent by (RADIO_RSSI: on change, and at least this often)
+SEND_PERIODS_MS = {"ENCODERS": llc_fw.PERIOD_ODOM_MS, "ODOMETRY": llc_fw.PERIOD_ODOM_MS,
+                   "SONAR": llc_fw.PERIOD_SONAR_MS, "SONAR_SIDES": llc_fw.PERIOD_SONAR_MS,
+                   "LIGHT": llc_fw.PERIOD_LIGHT_MS, "BATTERY": llc_fw.PERIOD_BATTERY_MS,
+                   "STATUS": llc_fw.PERIOD_STATUS_MS, "RADIO_RSSI": llc_fw.RSSI_KEEPALIVE_MS,
+                   "MOVE_STATUS": llc_fw.PERIOD_MOVE_STATUS_MS, "CONVEYOR_STATUS": llc_fw.PERIOD_CONVEYOR_STATUS_MS}
+
+
+def test_the_dbc_declares_the_firmware_send_periods_as_cycle_times() -> None:
+    db = cantools.database.load_file(str(ESWARBOT_LLC_DBC), database_format="dbc")  # as `cantools dump` reads it
+    assert {m.name: m.cycle_time for m in db.messages if m.cycle_time} == SEND_PERIODS_MS
+    kinds = {m.name: m.send_type for m in db.messages}
+    assert {n for n, k in kinds.items() if k == "Spontaneous"} == {m.name for m in db.messages if m.senders == ["HOST"]}
+    assert kinds["RADIO_RSSI"] == "CyclicAndSpontaneous"  # on change, and at least once a second
+    assert kinds["MOVE_STATUS"] == kinds["CONVEYOR_STATUS"] == "CyclicIfActiveAndSpontaneous"
+    assert all(kinds[n] == "Cyclic" for n in SEND_PERIODS_MS if n not in ("RADIO_RSSI", "MOVE_STATUS",
+                                                                         "CONVEYOR_STATUS"))
+
+
+def test_the_firmware_sends_at_the_dbc_cycle_times() -> None:
+    """Every frame the LLC sends, with everything fitted (side sonars, RSSI input, conveyor) and a move and a belt
+    advance running: cyclic frames keep their cycle time exactly, the others while they are active."""
+    b = Board()
+    llc = LowLevelController(b, LlcParams(side_sonars=True, rssi_pwm_input=True, conveyor_slots=5))
+    b.pwm_inputs[llc_fw.PIN_RSSI] = (0.5, llc_fw.RSSI_PWM_HZ)  # a steady RSSI: sent only as the keep-alive
+    llc.setup()
+    _cmd(llc, 0, 1000, 200)  # the wheels never turn: the move runs until its stall timeout
+    conveyor = DB.get_message_by_name("CONVEYOR_CMD")
+    b.can.on_bus_frame(Frame(conveyor.frame_id, conveyor.encode({"slots": 1, "seq": 1})))
+    sent: dict[str, list[int]] = {}
+    while b.time_us < 5_000_000:
+        llc.loop()
+        for f in b.can.take_tx():
+            sent.setdefault(DB.get_message_by_frame_id(f.arbitration_id).name, []).append(f.timestamp_us)
+        b.time_us += llc.loop_period_us
+    for m in DB.messages:
+        if m.senders != ["LLC"]:
+            continue
+        gaps = {round(g / 1000) for g in np.diff(sent[m.name])}
+        if m.send_type == "Cyclic" or m.name == "RADIO_RSSI":
+            assert gaps == {m.cycle_time}, m.name
+        else:  # active for a while: the cycle time is the usual gap, state changes add frames in between
+            assert statistics.mode(np.diff(sent[m.name])) == m.cycle_time * 1000 and len(sent[m.name]) > 10, m.name

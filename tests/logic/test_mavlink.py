@@ -387,6 +387,43 @@ def test_battery_radio_and_named_values() -> None:
     assert floats == {"left_s"}
 
 
+def mavproxy_sys_status_warnings(statuses: list[Any]) -> list[str]:
+    """What MAVProxy makes of a run of SYS_STATUS: its fence module (it starts believing the fence healthy and says
+    "fence breach" when the GEOFENCE health bit is clear) and its warning module (health of AS, MAG, INS, AHRS,
+    TERR, LOG and FEN), as MAVProxy 1.8 checks them."""
+    fence = mavlink.MAV_SYS_STATUS_GEOFENCE
+    healthy, said = True, []
+    for m in statuses:
+        ok = m.onboard_control_sensors_health & fence == fence
+        if healthy and not ok:
+            said.append("fence breach")
+        healthy = ok
+        for bits in (mavlink.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE, mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG,
+                     mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO,
+                     mavlink.MAV_SYS_STATUS_AHRS, mavlink.MAV_SYS_STATUS_TERRAIN, mavlink.MAV_SYS_STATUS_LOGGING,
+                     fence):
+            if m.onboard_control_sensors_health & bits != bits:
+                said.append(f"status {mavlink.enums['MAV_SYS_STATUS_SENSOR'][bits & -bits].name}")
+    return said
+
+
+def test_sys_status_reports_the_robots_sensors_and_no_bogus_failure() -> None:
+    rig = Rig()
+    rig.at(2.05, lambda: setattr(rig.llc.state, "faults", {"stall": True, "battery_low": True}))
+    rig.run(RandomWalk(), 4.0)
+    has = (mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+           | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY)  # wheels, battery, sonar: nothing else
+    statuses = rig.gcs.of("SYS_STATUS")
+    assert len(statuses) == 5  # 1 Hz from t = 0
+    for m in statuses:
+        assert m.onboard_control_sensors_present == m.onboard_control_sensors_enabled == has
+    assert mavproxy_sys_status_warnings(statuses) == []  # MAVProxy says nothing: no fence breach, no bad sensor
+    healthy, faulty = statuses[0], rig.gcs.of("SYS_STATUS", since=2.05)[0]
+    assert healthy.onboard_control_sensors_health & has == has  # its own sensors healthy ...
+    assert faulty.onboard_control_sensors_health & has == mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY  # ... until faults
+    assert faulty.onboard_control_sensors_health | has == healthy.onboard_control_sensors_health  # the rest unchanged
+
+
 # -- arming and modes ----------------------------------------------------------------------------------------------
 def test_arm_disarm_is_acknowledged_and_shown() -> None:
     rig = Rig(boot="disarmed")
@@ -578,7 +615,7 @@ def test_param_list_has_every_numeric_parameter_with_a_unique_id(cls: type[Contr
     assert len(got) == len(numeric) and all(m.param_count == len(numeric) for m in got.values())
     assert sorted(m.param_index for m in got.values()) == list(range(len(numeric)))
     ids = param_ids(numeric)
-    assert set(got) == set(ids.values()) and all(len(i) <= 16 for i in got)
+    assert set(got) == set(ids.values()) and all(len(i) <= 16 and i == i.upper() for i in got)
     for name, pid in ids.items():
         v = cls.defaults[name]
         assert got[pid].param_value == pytest.approx(float(v), rel=1e-6)
@@ -589,11 +626,13 @@ def test_param_list_has_every_numeric_parameter_with_a_unique_id(cls: type[Contr
 def test_long_parameter_names_get_unique_stable_ids() -> None:
     names = ["stagnation_on_improve", "stagnation_on_improvement", "stagnation_on_", "short", "exactly_sixteen_"]
     ids = param_ids(names)
-    assert ids["short"] == "short" and ids["exactly_sixteen_"] == "exactly_sixteen_"
-    assert len(set(ids.values())) == len(names) and all(len(i) <= 16 for i in ids.values())
-    assert ids["stagnation_on_improve"].startswith("stagnation_on_") and ids == param_ids(names)
+    assert ids["short"] == "SHORT" and ids["exactly_sixteen_"] == "EXACTLY_SIXTEEN_"
+    assert len(set(ids.values())) == len(names) and all(len(i) <= 16 and i == i.upper() for i in ids.values())
+    assert ids["stagnation_on_improve"].startswith("STAGNATION_ON_") and ids == param_ids(names)
     crowd = [f"a_very_long_name_{i:04d}" for i in range(1296)]  # one 13-character prefix: every suffix is used
     assert len(set(param_ids(crowd).values())) == 1296
+    cased = param_ids(["gain", "Gain", "GAIN"])  # unique ignoring case: the first keeps its name
+    assert cased["gain"] == "GAIN" and len(set(cased.values())) == 3
 
 
 class LongNames(Controller):
@@ -621,9 +660,37 @@ def test_param_set_by_mapped_id_and_read_back() -> None:
     ctl = LongNames()
     rig.run(ctl, 0.5)
     values = [(m.param_id, m.param_value) for m in g.of("PARAM_VALUE")]
-    assert values == [(long_id, 7.0), ("enabled", 0.0), (ids["a_rather_long_parameter"], 1.5), ("enabled", 0.0)]
+    assert values == [(long_id, 7.0), ("ENABLED", 0.0), (ids["a_rather_long_parameter"], 1.5), ("ENABLED", 0.0)]
     assert ctl.p["a_rather_long_parameter_too"] == 7 and ctl.p["enabled"] is False
     assert rig.robot.params == {"a_rather_long_parameter_too": 7, "enabled": False}
+
+
+def test_parameter_ids_are_upper_case_and_found_in_any_case_as_mavproxy_and_qgc_use_them() -> None:
+    """MAVProxy lists what PARAM_VALUE names, matches ``param show speed_mps`` and ``param set speed_mps 0.2``
+    upper-cased against it, sends PARAM_SET as REAL32 with the upper-case id and waits for the PARAM_VALUE echo;
+    QGroundControl sends the id as listed and reads by param_index too."""
+    rig = Rig()
+    g = rig.gcs
+    rig.at(0.1, lambda: g.mav.param_request_list_send(1, 1))
+    rig.at(0.5, lambda: g.mav.param_set_send(1, 1, b"SPEED_MPS", 0.2, mavlink.MAV_PARAM_TYPE_REAL32))  # MAVProxy
+    rig.at(0.6, lambda: g.mav.param_set_send(1, 1, b"Mean_Run_S", 3.0, mavlink.MAV_PARAM_TYPE_REAL32))
+    rig.at(0.7, lambda: g.mav.param_request_read_send(1, 1, b"speed_mps", -1))  # a script using the name
+    rig.at(0.8, lambda: g.mav.param_request_read_send(1, 1, b"ignored", 3))  # by index: the id is ignored
+    ctl = Spy()
+    rig.run(ctl, 1.0)
+    names = list(RandomWalk.defaults)
+    values = g.of("PARAM_VALUE")
+    listed = [m.param_id for m in values[:len(names)]]
+    assert listed == [n.upper() for n in names]  # what MAVProxy's `param show SPEED_MPS` finds
+    after = [(m.param_id, round(m.param_value, 6), m.param_type, m.param_index, m.param_count)
+             for m in values[len(names):]]
+    real, n = mavlink.MAV_PARAM_TYPE_REAL32, len(names)
+    assert after == [("SPEED_MPS", 0.2, real, names.index("speed_mps"), n),  # the echo MAVProxy waits for
+                     ("MEAN_RUN_S", 3.0, real, names.index("mean_run_s"), n),
+                     ("SPEED_MPS", 0.2, real, names.index("speed_mps"), n),
+                     (names[3].upper(), RandomWalk.defaults[names[3]], real, 3, n)]
+    assert ctl.p["speed_mps"] == 0.2 and ctl.p["mean_run_s"] == 3.0  # the controller's names are unchanged
+    assert rig.robot.params == {"speed_mps": 0.2, "mean_run_s": 3.0}
 
 
 def test_param_set_is_applied_or_refused_with_a_reason() -> None:
@@ -637,29 +704,60 @@ def test_param_set_is_applied_or_refused_with_a_reason() -> None:
     ctl = Spy()
     rig.run(ctl, 3.0)
     values = [(m.param_id, m.param_value) for m in g.of("PARAM_VALUE")]
-    assert values == [("speed_mps", pytest.approx(0.1)), ("period_s", pytest.approx(0.1)),
-                      ("avoid_m", pytest.approx(0.45)), ("period_s", pytest.approx(0.2))]
+    assert values == [("SPEED_MPS", pytest.approx(0.1)), ("PERIOD_S", pytest.approx(0.1)),
+                      ("AVOID_M", pytest.approx(0.45)), ("PERIOD_S", pytest.approx(0.2))]
     assert ctl.p["speed_mps"] == 0.1 and rig.robot.params["speed_mps"] == 0.1  # the decimal sent, not float32's
     assert ctl.period_s == 0.2 and np.diff(ctl.steps)[-5:] == pytest.approx([0.2] * 5)
     assert {v for t, v, w in rig.llc.drives if t > 1.2 and w == 0} == {0.1}
     texts = g.texts()
-    assert "period_s refused: period_s: must be > 0, got -1.0" in texts
-    assert "avoid_m refused: not a finite number" in texts and "no parameter no_such" in texts
+    assert "PERIOD_S refused: period_s: must be > 0, got -1.0" in texts
+    assert "AVOID_M refused: not a finite number" in texts and "no parameter no_such" in texts
+
+
+def test_a_value_outside_its_declared_range_is_refused_answered_unchanged_counted_and_logged() -> None:
+    """As ArduPilot answers a PARAM_SET it refuses: the PARAM_VALUE echo carries the unchanged value (MAVProxy then
+    reports the set as failed); the range is the one a session config is checked against."""
+    rig = Rig()
+    logs: list[tuple[str, dict[str, Any]]] = []
+    rig.robot.log_sink = lambda topic, values: logs.append((topic, values))
+    g = rig.gcs
+    rig.at(0.5, lambda: g.mav.param_set_send(1, 1, b"SPEED_MPS", 50, mavlink.MAV_PARAM_TYPE_REAL32))
+    rig.at(0.6, lambda: g.mav.param_set_send(1, 1, b"TURN_RATE_RPS", 0, mavlink.MAV_PARAM_TYPE_REAL32))
+    rig.at(0.7, lambda: g.mav.param_set_send(1, 1, b"SPEED_MPS", 0.3, mavlink.MAV_PARAM_TYPE_REAL32))
+    ctl = Spy()
+    rig.run(ctl, 1.5)
+    values = [(m.param_id, round(m.param_value, 6)) for m in g.of("PARAM_VALUE")]
+    assert values == [("SPEED_MPS", 0.15), ("TURN_RATE_RPS", 1.5), ("SPEED_MPS", 0.3)]
+    assert ctl.p["speed_mps"] == 0.3 and ctl.p["turn_rate_rps"] == 1.5 and rig.robot.params == {"speed_mps": 0.3}
+    assert {v for t, v, w in rig.llc.drives if 0.5 < t < 0.7 and w == 0} <= {0.15}  # never 50 m/s
+    texts = g.texts()
+    assert "SPEED_MPS refused: speed_mps: must lie in [0, 2], got 50.0" in texts
+    assert "TURN_RATE_RPS refused: turn_rate_rps: must lie in (0, 20], got 0.0" in texts
+    assert rig.face.counters["refused_params"] == 2
+    assert logs == [("mavlink_param_refused", {"param": "speed_mps", "value": 50.0,
+                                               "reason": "speed_mps: must lie in [0, 2], got 50.0"}),
+                    ("mavlink_param_refused", {"param": "turn_rate_rps", "value": 0.0,
+                                               "reason": "turn_rate_rps: must lie in (0, 20], got 0.0"})]
+    with pytest.raises(ValueError, match=r"speed_mps: must lie in \[0, 2\], got 50"):  # the same range, directly
+        ctl.set_param("speed_mps", 50)
 
 
 def test_rdpso_parameters_resolve_and_static_ones_wait_for_a_reboot() -> None:
     rig = Rig(xbee=Radio(), params={"n_total": 4, "subgroups_init": 1})
     g = rig.gcs
-    for name, value in (("alpha", 5.0), ("alpha", 0.6), ("n_total", 6), ("fuzzy", 2), ("sc_max", 2.5)):
+    for name, value in (("alpha", 5.0), ("alpha", 0.6), ("n_total", 6), ("fuzzy", 2), ("sc_max", 2.5),
+                        ("comm_window_s", 1.5)):
         rig.at(0.5, lambda name=name, value=value: g.mav.param_set_send(1, 1, name.encode(), value, 0))
     ctl = Rdpso()
     rig.run(ctl, 2.0)
     texts = g.texts()
-    assert "alpha refused: alpha = 5.0 is outside (0, 1] (fractional order, eq. 4.8)" in texts  # two chunks
+    assert "ALPHA refused: alpha: must lie in (0, 1], got 5.0" in texts  # its declared range
+    assert ("COMM_WINDOW_S refused: comm_window_s: must lie in (0, iteration_s = 1.0), got 1.5" in texts  # resolve;
+            and ctl.p["comm_window_s"] == 0.25)  # two chunks
     assert ctl.alpha == 0.6 and ctl.p["alpha"] == 0.6
-    assert "n_total stored: a reboot applies it" in texts
+    assert "N_TOTAL stored: a reboot applies it" in texts
     assert rig.robot.params["n_total"] == 6 and ctl.p["n_total"] == 4
-    assert "fuzzy refused: 0 or 1 expected" in texts and "sc_max refused: an integer expected" in texts
+    assert "FUZZY refused: 0 or 1 expected" in texts and "SC_MAX refused: an integer expected" in texts
     tele = {m.name for m in g.of("NAMED_VALUE_INT")} | {m.name for m in g.of("NAMED_VALUE_FLOAT")}
     assert {"k", "sid", "excluded", "group_n", "hbest"} <= tele
 

@@ -1,6 +1,6 @@
 """Acceptance: MAVProxy-style use of a session. A pymavlink client on the swarm's one UDP endpoint sees every
-robot's heartbeat (each its own system id), arms one, changes one of its parameters and sends it to a position,
-which it reaches; the others, never armed, do not move."""
+robot's heartbeat (each its own system id), arms one, changes one of its parameters (and is refused a value out of
+its range) and sends it to a position, which it reaches; the others, never armed, do not move."""
 
 from __future__ import annotations
 
@@ -81,12 +81,15 @@ def test_ground_station_arms_tunes_and_sends_a_robot(tmp_path: Path) -> None:
         wait_for(gcs, "HEARTBEAT", lambda m: m.get_srcSystem() == SYSID
                  and m.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
-        gcs.mav.param_set_send(SYSID, 1, b"speed_mps", 0.25, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
-        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "speed_mps")
+        gcs.mav.param_set_send(SYSID, 1, b"SPEED_MPS", 0.25, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)  # as MAVProxy
+        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "SPEED_MPS")
         assert pv.param_value == pytest.approx(0.25)
-        gcs.mav.param_request_read_send(SYSID, 1, b"speed_mps", -1)
-        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "speed_mps")
+        gcs.mav.param_request_read_send(SYSID, 1, b"speed_mps", -1)  # any case
+        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "SPEED_MPS")
         assert pv.param_value == pytest.approx(0.25)
+        gcs.mav.param_set_send(SYSID, 1, b"SPEED_MPS", 50, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)  # out of range
+        pv = wait_for(gcs, "PARAM_VALUE", lambda m: m.get_srcSystem() == SYSID and m.param_id == "SPEED_MPS")
+        assert pv.param_value == pytest.approx(0.25)  # refused: the value it keeps
 
         gcs.mav.command_long_send(SYSID, 1, mavutil.mavlink.MAV_CMD_DO_SET_MODE, 0,
                                   mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 15, 0, 0, 0, 0, 0)
@@ -106,12 +109,14 @@ def test_ground_station_arms_tunes_and_sends_a_robot(tmp_path: Path) -> None:
     s = json.loads((out / "summary.json").read_text())
     assert not s["failures"]
     m = s["mavlink"]
-    assert m["from_gcs_packets"] == 5 and m.get("bad_packets", 0) == 0 and m["to_gcs_datagrams"] > 100
+    assert m["from_gcs_packets"] == 6 and m.get("bad_packets", 0) == 0 and m["to_gcs_datagrams"] > 100
     per = {r["id"]: r for r in s["per_robot"]}
     for r in (0, 1, 3):
         assert per[r]["distance_m"] < 0.01  # never armed: never moved
     x, y = per[ROBOT]["final_pose"][:2]
     assert math.hypot(x - GOAL_E, y - GOAL_N) < 0.15  # the ground truth agrees with its odometry, within drift
-    cmds = [json.loads(p)["type"] for topic, _t, p in iter_messages(out / "session.mcap")
-            if topic == "/mavlink/from_gcs"]
+    msgs = list(iter_messages(out / "session.mcap"))
+    cmds = [json.loads(p)["type"] for topic, _t, p in msgs if topic == "/mavlink/from_gcs"]
     assert {"COMMAND_LONG", "PARAM_SET", "SET_POSITION_TARGET_LOCAL_NED"} <= set(cmds)
+    refused = [json.loads(p) for topic, _t, p in msgs if topic == f"/r{ROBOT:03d}/log/mavlink_param_refused"]
+    assert [(r["param"], r["value"]) for r in refused] == [("speed_mps", 50.0)]

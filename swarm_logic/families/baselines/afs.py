@@ -37,16 +37,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any, ClassVar
 
-from swarm_logic.families.baselines.common import (
-    COMMON_DEFAULTS,
-    Iterated,
-    Vec,
-    at_least,
-    finite,
-    integer,
-    positive,
-    wire,
-)
+from swarm_logic.families.baselines.common import COMMON_DEFAULTS, COMMON_RANGES, Iterated, Vec, wire
 from swarm_logic.families.rdpso import motion
 
 MAGIC = 0x41  # "A"
@@ -178,20 +169,29 @@ class Afs(Iterated):
         "max_age": 10,  # iterations after which a position nobody refreshed is forgotten
         "payload_max": 92,  # bytes per frame: a ZigBee broadcast's limit (the numerical runner may raise it)
     }
+    ranges: ClassVar[dict[str, str]] = {
+        **COMMON_RANGES,
+        "a": "(0, inf)",
+        "b": "(0, inf)",  # and > a
+        "c_m2": "(0, inf)",
+        "dt_s": "(0, inf)",
+        "rho": "[0, inf)",
+        "gamma": "[0, inf)",
+        "r_w_m": "(0, inf)",
+        "grad_memory": "[1, 1000]",
+        "grad_radius_m": "[0, inf)",
+        "max_age": "[1, 1000]",
+        "payload_max": f"[{HEAD.size}, 65535]",
+    }
 
     # read only at init and reset: the clock, the swarm's size, the length of the sample memory
     static_params = frozenset({"iteration_s", "n_total", "grad_memory"})
 
     @classmethod
     def check(cls, p: dict[str, Any]) -> None:
-        finite(p, "a", "b", "c_m2", "dt_s", "rho", "gamma", "r_w_m", "grad_radius_m")
-        positive(p, "a", "c_m2", "dt_s", "r_w_m")
-        at_least(p, 0.0, "rho", "gamma", "grad_radius_m")
         if not p["b"] > p["a"]:
             raise ValueError(f"b: must exceed a = {p['a']} (else robots attract at every distance and pile up: "
                              f"no equilibrium distance sqrt(c ln(b/a))), got {p['b']!r}")
-        integer(p, 1, 1000, "grad_memory", "max_age")
-        integer(p, HEAD.size, 65535, "payload_max")
 
     @classmethod
     def warnings(cls, params: dict[str, Any]) -> list[str]:

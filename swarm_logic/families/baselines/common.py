@@ -21,7 +21,7 @@ from abc import abstractmethod
 from collections.abc import Callable, Iterable
 from typing import Any, ClassVar
 
-from swarm_logic.controller import Controller
+from swarm_logic.controller import MAX_SPEED_MPS, Controller
 from swarm_logic.families.rdpso import motion
 from swarm_logic.geometry import wrap
 from swarm_logic.iteration import IterationSchedule
@@ -38,6 +38,16 @@ COMMON_DEFAULTS: dict[str, Any] = {
     "min_move_m": 0.003,  # shorter displacements are not sent (about one encoder pulse)
     "n_total": 12,  # N_T, the number of robots (ids travel as one byte: at most 255)
     "log_every": 1,  # iterations between log records (0: none)
+}
+COMMON_RANGES: dict[str, str] = {
+    "iteration_s": "(0, inf)",
+    "comm_window_s": "(0, inf)",  # and < iteration_s
+    "send_jitter_s": "[0, inf)",  # and < comm_window_s
+    "dx_max_m": "(0, inf)",
+    "speed_mps": f"(0, {MAX_SPEED_MPS:g}]",
+    "min_move_m": "[0, inf)",
+    "n_total": "[1, 255]",
+    "log_every": "[0, inf)",
 }
 
 
@@ -112,31 +122,6 @@ def braitenberg(heading: float, facing: float, sonar_m: float, avoid_m: float, t
     return wrap(heading + side * turn_max_rad * (1.0 - max(0.0, sonar_m) / avoid_m)), True
 
 
-def positive(p: dict[str, Any], *names: str) -> None:
-    for name in names:
-        if not (isinstance(p[name], int | float) and p[name] > 0):
-            raise ValueError(f"{name}: must be > 0, got {p[name]!r}")
-
-
-def at_least(p: dict[str, Any], lo: float, *names: str) -> None:
-    for name in names:
-        if not (isinstance(p[name], int | float) and p[name] >= lo):
-            raise ValueError(f"{name}: must be >= {lo}, got {p[name]!r}")
-
-
-def finite(p: dict[str, Any], *names: str) -> None:
-    for name in names:
-        if not (isinstance(p[name], int | float) and math.isfinite(p[name])):
-            raise ValueError(f"{name}: must be a finite number, got {p[name]!r}")
-
-
-def integer(p: dict[str, Any], lo: int, hi: int, *names: str) -> None:
-    for name in names:
-        v = p[name]
-        if isinstance(v, bool) or not isinstance(v, int | float) or int(v) != v or not lo <= v <= hi:
-            raise ValueError(f"{name}: must be an integer in [{lo}, {hi}], got {v!r}")
-
-
 def within(p: dict[str, Any], name: str, lo: float, hi: float, *, lo_open: bool = False,
            hi_open: bool = False) -> None:
     v = p[name]
@@ -152,6 +137,7 @@ class Iterated(IterationSchedule, Controller):
     needs_radio = True  # a config must give its robots an XBee
     topic: ClassVar[str] = "baseline"  # the log topic and the name in messages
     defaults: ClassVar[dict[str, Any]] = COMMON_DEFAULTS
+    ranges: ClassVar[dict[str, str]] = COMMON_RANGES
     # read only at init: the iteration clock every robot shares and the swarm's size
     static_params = frozenset({"iteration_s", "n_total"})
 
@@ -175,20 +161,16 @@ class Iterated(IterationSchedule, Controller):
 
     @classmethod
     def check(cls, p: dict[str, Any]) -> None:
-        """Refuse values of the algorithm's own parameters that mean nothing (ValueError naming the parameter)."""
+        """Refuse combinations of the algorithm's own parameters that mean nothing (ValueError naming the parameter);
+        each one's kind and range are checked already (``ranges``)."""
 
     # -- parameters -----------------------------------------------------------------------------------------
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
         """Defaults merged with ``params``, checked; ValueError names the parameter and the reason."""
-        p = cls.with_defaults(params)
-        positive(p, "iteration_s", "dx_max_m", "speed_mps")
-        finite(p, "iteration_s", "dx_max_m", "speed_mps")
+        p = cls.with_defaults(params)  # each value of its kind and in its range
         within(p, "comm_window_s", 0.0, p["iteration_s"], lo_open=True, hi_open=True)
         within(p, "send_jitter_s", 0.0, p["comm_window_s"], hi_open=True)
-        at_least(p, 0.0, "min_move_m")
-        integer(p, 1, 255, "n_total")
-        integer(p, 0, 1 << 30, "log_every")
         cls.check(p)
         return p
 

@@ -24,12 +24,10 @@ from typing import Any, ClassVar
 
 from swarm_logic.families.baselines.common import (
     COMMON_DEFAULTS,
+    COMMON_RANGES,
     Iterated,
     WindowBest,
     braitenberg,
-    finite,
-    integer,
-    positive,
     pso_stability_warnings,
     pso_velocity,
     wire,
@@ -83,19 +81,16 @@ class Epso(Iterated):
         "avoid_turn_deg": 90.0,  # deflection of a move when the echo is at contact (scaled by proximity)
         "memory_iterations": 0,  # the personal best is the best of the last this many iterations (0: ever)
     }
-
-    @classmethod
-    def check(cls, p: dict[str, Any]) -> None:
-        finite(p, "w", "c1", "c2", "avoid_turn_deg")
-        if not 0.0 <= p["w"] < 1.0:
-            raise ValueError(f"w: the inertia must lie in [0, 1) (>= 1 the velocity never decays), got {p['w']!r}")
-        for name in ("c1", "c2"):
-            if p[name] < 0:
-                raise ValueError(f"{name}: must be >= 0 (an attraction coefficient), got {p[name]!r}")
-        positive(p, "range_m", "avoid_m")
-        integer(p, 0, 1 << 30, "memory_iterations")
-        if not 0.0 <= p["avoid_turn_deg"] <= 180.0:
-            raise ValueError(f"avoid_turn_deg: must lie in [0, 180], got {p['avoid_turn_deg']!r}")
+    ranges: ClassVar[dict[str, str]] = {
+        **COMMON_RANGES,
+        "w": "[0, 1)",  # the inertia: >= 1 the velocity never decays
+        "c1": "[0, inf)",  # attraction coefficients
+        "c2": "[0, inf)",
+        "range_m": "(0, inf]",
+        "avoid_m": "(0, inf)",
+        "avoid_turn_deg": "[0, 180]",
+        "memory_iterations": "[0, inf)",
+    }
 
     @classmethod
     def warnings(cls, params: dict[str, Any]) -> list[str]:

@@ -28,15 +28,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, ClassVar
 
-from swarm_logic.families.baselines.common import (
-    COMMON_DEFAULTS,
-    Iterated,
-    at_least,
-    braitenberg,
-    finite,
-    positive,
-    within,
-)
+from swarm_logic.families.baselines.common import COMMON_DEFAULTS, COMMON_RANGES, Iterated, braitenberg
 
 MAGIC = 0x47  # "G"
 FRAME = struct.Struct("<BBHfff")
@@ -113,22 +105,27 @@ class Gso(Iterated):
         "avoid_m": 0.3,  # Braitenberg reaction radius on the sonar
         "avoid_turn_deg": 90.0,  # deflection of a move when the echo is at contact (scaled by proximity)
     }
+    ranges: ClassVar[dict[str, str]] = {
+        **COMMON_RANGES,
+        "rho": "(0, 1)",
+        "gamma": "(0, 1]",
+        "beta": "[0, inf)",
+        "n_t": "[1, inf)",
+        "step_m": "(0, inf)",
+        "l0": "(-inf, inf)",
+        "r_s_m": "(0, inf)",
+        "r_d0_m": "[0, inf)",  # and <= r_s_m
+        "avoid_m": "(0, inf)",
+        "avoid_turn_deg": "[0, 180]",
+    }
 
     # read only at init and reset: the clock, the swarm's size, the starting luciferin and decision range
     static_params = frozenset({"iteration_s", "n_total", "l0", "r_d0_m"})
 
     @classmethod
     def check(cls, p: dict[str, Any]) -> None:
-        finite(p, "rho", "gamma", "beta", "step_m", "l0", "r_s_m", "r_d0_m", "avoid_turn_deg")
-        within(p, "rho", 0.0, 1.0, lo_open=True, hi_open=True)
-        within(p, "gamma", 0.0, 1.0, lo_open=True)
-        at_least(p, 0.0, "beta", "r_d0_m")
-        positive(p, "step_m", "r_s_m", "avoid_m")
-        if isinstance(p["n_t"], bool) or int(p["n_t"]) != p["n_t"] or p["n_t"] < 1:
-            raise ValueError(f"n_t: the desired number of neighbours must be a positive integer, got {p['n_t']!r}")
         if p["r_d0_m"] > p["r_s_m"]:
             raise ValueError(f"r_d0_m: the initial decision range {p['r_d0_m']} exceeds r_s_m = {p['r_s_m']}")
-        within(p, "avoid_turn_deg", 0.0, 180.0)
 
     def reset_algorithm(self) -> None:
         p = self.p

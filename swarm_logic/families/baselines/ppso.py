@@ -30,15 +30,12 @@ from typing import Any, ClassVar
 
 from swarm_logic.families.baselines.common import (
     COMMON_DEFAULTS,
+    COMMON_RANGES,
     Iterated,
     WindowBest,
-    finite,
-    integer,
-    positive,
     pso_stability_warnings,
     pso_velocity,
     wire,
-    within,
 )
 from swarm_logic.families.rdpso import motion
 from swarm_logic.geometry import wrap
@@ -105,19 +102,17 @@ class Ppso(Iterated):
         "turn_deg": 90.0,  # go_back_turn_right: then turn right (clockwise) by this
         "memory_iterations": 0,  # h_best and H_best are the bests of the last this many iterations (0: ever)
     }
-
-    @classmethod
-    def check(cls, p: dict[str, Any]) -> None:
-        finite(p, "w", "rho1", "rho2", "cone_deg", "turn_deg", "back_m", "collide_m")
-        if not 0.0 <= p["w"] < 1.0:
-            raise ValueError(f"w: the inertia must lie in [0, 1) (>= 1 the velocity never decays), got {p['w']!r}")
-        for name in ("rho1", "rho2"):
-            if p[name] < 0:
-                raise ValueError(f"{name}: must be >= 0 (an attraction coefficient), got {p[name]!r}")
-        within(p, "cone_deg", 0.0, 180.0, lo_open=True)
-        within(p, "turn_deg", 0.0, 180.0)
-        positive(p, "collide_m", "back_m")
-        integer(p, 0, 1 << 30, "memory_iterations")
+    ranges: ClassVar[dict[str, str]] = {
+        **COMMON_RANGES,
+        "w": "[0, 1)",  # the inertia: >= 1 the velocity never decays
+        "rho1": "[0, inf)",  # attraction coefficients
+        "rho2": "[0, inf)",
+        "cone_deg": "(0, 180]",
+        "collide_m": "(0, inf)",
+        "back_m": "(0, inf)",
+        "turn_deg": "[0, 180]",
+        "memory_iterations": "[0, inf)",
+    }
 
     @classmethod
     def warnings(cls, params: dict[str, Any]) -> list[str]:

@@ -23,6 +23,8 @@ ANNOUNCE = b"SURVEY-RX"
 class RadioSurvey(RandomWalk):
     defaults: ClassVar[dict[str, float]] = {**RandomWalk.defaults, "interval_s": 2.0, "announce_s": 5.0,
                                             "aps_retries": 0}
+    ranges: ClassVar[dict[str, str]] = {**RandomWalk.ranges, "interval_s": "(0, inf)", "announce_s": "(0, inf)",
+                                        "aps_retries": "[0, 1]"}  # 1: the ZigBee APS retries on (Series 2)
 
     def init(self, robot: Robot) -> None:
         if robot.xbee is None:

@@ -11,12 +11,11 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-from swarm_logic.controller import Controller
+from swarm_logic.controller import MAX_SPEED_MPS, MAX_TURN_RATE_RPS, Controller
 from swarm_logic.robot import Robot
 
 GREEN, BLUE, RED = (0, 255, 0), (0, 0, 255), (255, 0, 0)
 STATES = ("run", "tumble", "avoid")  # telemetry: the state's number
-POSITIVE = ("turn_rate_rps", "mean_run_s", "period_s")  # a run-time change must keep these > 0, the others >= 0
 
 
 class RandomWalk(Controller):
@@ -27,6 +26,14 @@ class RandomWalk(Controller):
         "clear_m": 0.7,
         "mean_run_s": 5.0,
         "period_s": 0.1,
+    }
+    ranges: ClassVar[dict[str, str]] = {
+        "speed_mps": f"[0, {MAX_SPEED_MPS:g}]",
+        "turn_rate_rps": f"(0, {MAX_TURN_RATE_RPS:g}]",
+        "avoid_m": "[0, inf)",
+        "clear_m": "[0, inf)",
+        "mean_run_s": "(0, inf)",
+        "period_s": "(0, inf)",
     }
 
     def init(self, robot: Robot) -> None:
@@ -75,11 +82,6 @@ class RandomWalk(Controller):
             self._show(RED if self.state == "avoid" else BLUE)
 
     def set_param(self, name: str, value: Any) -> None:
-        if name in RandomWalk.defaults:
-            if name in POSITIVE and not value > 0:
-                raise ValueError(f"{name}: must be > 0, got {value!r}")
-            if not value >= 0:
-                raise ValueError(f"{name}: must be >= 0, got {value!r}")
         super().set_param(name, value)
         if name == "period_s":
             self.period_s = float(value)

@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import math
 import struct
-from typing import Any, ClassVar
+from typing import ClassVar
 
+from swarm_logic.controller import DBM_RANGE
 from swarm_logic.families.demo.random_walk import RandomWalk
 from swarm_logic.robot import Robot
 
@@ -41,6 +42,20 @@ class RssiKeeper(RandomWalk):
         "uwb_nlos_bias_m": 0.6,  # mean excess of a range the module flags as NLOS (calibrate it per site)
         "uwb_accel_sigma": 0.1,  # m/s^2: how hard the range between two robots may change its rate
     }
+    ranges: ClassVar[dict[str, str]] = {
+        **RandomWalk.ranges,
+        "hello_s": "(0, inf)",
+        "q_min_dbm": DBM_RANGE,
+        "hysteresis_db": "[0, inf)",
+        "k": "[0, inf)",
+        "return_s": "(0, inf)",
+        "rssi_smoothing": "(0, 1]",
+        "log_every_s": "(0, inf)",
+        "uwb_poll_s": "(0, inf)",
+        "uwb_update_s": "(0, inf)",
+        "uwb_nlos_bias_m": "[0, inf)",
+        "uwb_accel_sigma": "(0, inf)",
+    }
     static_params = frozenset({"uwb_nlos_bias_m", "uwb_accel_sigma"})  # the range tracker is built by init
 
     def init(self, robot: Robot) -> None:
@@ -61,15 +76,6 @@ class RssiKeeper(RandomWalk):
             from swarm_logic.drivers.ranging import RangeTracker
 
             self.tracker = RangeTracker(nlos_bias_m=self.p["uwb_nlos_bias_m"], accel_sigma=self.p["uwb_accel_sigma"])
-
-    def set_param(self, name: str, value: Any) -> None:
-        if name in ("hello_s", "return_s", "log_every_s", "uwb_poll_s", "uwb_update_s") and not value > 0:
-            raise ValueError(f"{name}: must be > 0, got {value!r}")
-        if name in ("hysteresis_db", "k") and not value >= 0:
-            raise ValueError(f"{name}: must be >= 0, got {value!r}")
-        if name == "rssi_smoothing" and not 0 < value <= 1:
-            raise ValueError(f"rssi_smoothing: must lie in (0, 1], got {value!r}")
-        super().set_param(name, value)
 
     def telemetry(self) -> dict[str, float | int]:
         """The random walk's, the neighbour count, the links at ``q_min_dbm`` or better, whether it turns back."""

@@ -31,7 +31,7 @@ import struct
 import zlib
 from typing import Any, ClassVar
 
-from swarm_logic.controller import Controller
+from swarm_logic.controller import DBM_RANGE, MAX_SPEED_MPS, Controller
 from swarm_logic.families.rdpso import fuzzy, graph, motion
 from swarm_logic.families.rdpso.aodv import Router
 from swarm_logic.families.rdpso.est import ScoutDeployment
@@ -134,6 +134,43 @@ class Rdpso(IterationSchedule, Controller):
         "poll_s": 0.02,  # with routing: how often the radio is served (forwarding, TX statuses)
         "pause_on_radio": True,  # with routing: do not move until the radio has sent this iteration's packets
     }
+    ranges: ClassVar[dict[str, str]] = {
+        "iteration_s": "(0, inf)",
+        "comm_window_s": "(0, inf)",  # and < iteration_s
+        "send_jitter_s": "[0, inf)",  # and < comm_window_s
+        "alpha": "(0, 1]",  # fractional order (eq. 4.8)
+        "rho1": "[0, inf)",  # coefficients (eq. 4.5; 0 allowed, e.g. rho3 = 0 in an obstacle-free world)
+        "rho2": "[0, inf)",
+        "rho3": "[0, inf)",
+        "rho4": "[0, inf)",
+        "truncation_r": "[1, inf)",  # and 4 for the thesis' form
+        "dx_max_m": "(0, inf)",
+        "r_w_m": "(0, inf)",
+        "sc_max": "[1, inf)",
+        "d_max_m": "(0, inf)",
+        "q_min_dbm": DBM_RANGE,
+        "k_q": "(0, inf)",
+        "k_conn": "[1, inf)",
+        "n_total": "[1, 255]",  # robot ids travel as one byte
+        "subgroups_init": "[0, 15]",  # and subgroups_min <= subgroups_init <= subgroups_max
+        "subgroups_min": "[0, 255]",
+        "subgroups_max": "[0, 255]",
+        "n_init": "[0, 255]",  # 0: derived
+        "n_min": "[0, 255]",
+        "n_max": "[0, 255]",
+        "miss_limit": "[1, inf)",
+        "speed_mps": f"(0, {MAX_SPEED_MPS:g}]",
+        "min_move_m": "[0, inf)",
+        "wander_turn_deg": "[0, 180]",
+        "swarm_seed": "[0, inf)",
+        "log_every": "[0, inf)",
+        "payload_max": "[42, 65535]",
+        "first_id": "[0, 255]",
+        "route_buffer": "[1, inf)",
+        "route_ttl": "[1, 255]",  # one byte in the routing layer's frames
+        "discovery_timeout_s": "(0, inf)",
+        "poll_s": "(0, inf)",
+    }
     # read only at init and reset: the iteration clock every robot shares, the swarm's size and its initial split
     static_params = frozenset({"iteration_s", "n_total", "subgroups_init", "n_init", "n_min", "n_max", "fuzzy",
                                "first_id", "deployed"})
@@ -142,17 +179,13 @@ class Rdpso(IterationSchedule, Controller):
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
         """Defaults merged with ``params``, checked; ValueError names the parameter and the reason."""
-        p = cls.with_defaults(params)
-        motion.validate_parameters(p["alpha"], (p["rho1"], p["rho2"], p["rho3"], p["rho4"]))
+        p = cls.with_defaults(params)  # each value of its kind and in its range
         if p["fractional_form"] not in ("thesis", "exact_gl"):
             raise ValueError(f"fractional_form: {p['fractional_form']!r} is not one of thesis, exact_gl")
         if p["link_mode"] not in ("distance", "rssi"):
             raise ValueError(f"link_mode: {p['link_mode']!r} is not one of distance, rssi")
         if p["stagnation_on_improve"] not in ("decrement", "reset"):
             raise ValueError(f"stagnation_on_improve: {p['stagnation_on_improve']!r} is not decrement or reset")
-        for name in ("iteration_s", "dx_max_m", "r_w_m", "d_max_m", "speed_mps", "k_q"):
-            if not p[name] > 0:
-                raise ValueError(f"{name}: must be > 0, got {p[name]!r}")
         if not 0 < p["comm_window_s"] < p["iteration_s"]:
             raise ValueError(f"comm_window_s: must lie in (0, iteration_s = {p['iteration_s']}), "
                              f"got {p['comm_window_s']!r}")
@@ -160,32 +193,15 @@ class Rdpso(IterationSchedule, Controller):
             raise ValueError(f"comm: {p['comm']!r} is not one of gossip, regular, optimised")
         if p["routing"] not in ("aodv", "rdpso"):
             raise ValueError(f"routing: {p['routing']!r} is not one of aodv, rdpso")
-        for name in ("route_buffer", "route_ttl"):
-            if int(p[name]) != p[name] or p[name] < 1:
-                raise ValueError(f"{name}: must be a positive integer, got {p[name]!r}")
-        for name in ("discovery_timeout_s", "poll_s"):
-            if not p[name] > 0:
-                raise ValueError(f"{name}: must be > 0, got {p[name]!r}")
         if not 0 <= p["send_jitter_s"] < p["comm_window_s"]:
             raise ValueError(f"send_jitter_s: must lie in [0, comm_window_s = {p['comm_window_s']}), "
                              f"got {p['send_jitter_s']!r}")
-        for name in ("sc_max", "k_conn", "n_total", "miss_limit"):
-            if int(p[name]) != p[name] or p[name] < 1:
-                raise ValueError(f"{name}: must be a positive integer, got {p[name]!r}")
-        if p["n_total"] > 255:
-            raise ValueError(f"n_total: robot ids travel as one byte, so at most 255 robots, got {p['n_total']}")
         g_min, g_init, g_max = p["subgroups_min"], p["subgroups_init"], p["subgroups_max"]
         if not 0 <= g_min <= g_init <= g_max:
             raise ValueError(f"subgroups_min/init/max: need 0 <= min <= init <= max, got {g_min}/{g_init}/{g_max}")
         if g_init > p["n_total"]:
             raise ValueError(f"subgroups_init: {g_init} subgroups for {p['n_total']} robots (more subgroups than "
                              "robots)")
-        if g_init > 15:
-            raise ValueError(f"subgroups_init: at most 15 initial subgroups, got {g_init}")
-        for name, lo in (("payload_max", 42), ("min_move_m", 0), ("n_init", 0), ("n_min", 0), ("n_max", 0),
-                         ("log_every", 0)):
-            if not p[name] >= lo:
-                raise ValueError(f"{name}: must be >= {lo}, got {p[name]!r}")
         motion.memory_weights(p["alpha"], p["fractional_form"], int(p["truncation_r"]))  # form and r must fit
         n_i = p["n_init"] or (p["n_total"] // g_init if g_init else max(2, p["n_total"] // max(1, g_max)))
         p["n_init"] = n_i

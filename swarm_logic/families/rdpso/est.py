@@ -23,7 +23,7 @@ import struct
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from swarm_logic.controller import Controller
+from swarm_logic.controller import DBM_RANGE, MAX_SPEED_MPS, MAX_TURN_RATE_RPS, Controller
 from swarm_logic.families.rdpso.spiral import est_next, k_first_threshold_dbm
 from swarm_logic.geometry import wrap
 from swarm_logic.robot import Robot
@@ -139,31 +139,40 @@ class EstRanger(Controller):
         "area_m": None,
         "area_margin_m": 0.4,
     }
+    ranges: ClassVar[dict[str, str]] = {
+        "k": "[1, 5]",  # the ranger listens to the last k scouts
+        "q_min_dbm": DBM_RANGE,
+        "d_max_m": "(0, inf)",
+        "first_leg_min_m": "[0, inf)",  # and <= first_leg_max_m
+        "first_leg_max_m": "(0, inf)",
+        "speed_mps": f"(0, {MAX_SPEED_MPS:g}]",
+        "turn_rate_rps": f"(0, {MAX_TURN_RATE_RPS:g}]",
+        "avoid_m": "[0, inf)",
+        "reach_m": "(0, inf)",
+        "drop_back_m": "[0, inf)",
+        "rssi_smoothing": "(0, 1]",
+        "max_leg_m": "(0, inf)",
+        "max_leg_s": "(0, inf)",
+        "min_leg_m": "(0, inf)",
+        "area_margin_m": "[0, inf)",
+    }
 
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
-        p = cls.with_defaults(params)
+        p = cls.with_defaults(params)  # each value of its kind and in its range
         if p["mode"] not in ("est", "random"):
             raise ValueError(f"mode: 'est' or 'random', got {p['mode']!r}")
-        if p["k"] not in (1, 2, 3, 4, 5):
-            raise ValueError(f"k: 1 to 5 (the ranger listens to the last k scouts), got {p['k']!r}")
-        for name in ("d_max_m", "speed_mps", "turn_rate_rps", "reach_m", "max_leg_m", "max_leg_s",
-                     "first_leg_max_m", "min_leg_m"):
-            if not p[name] > 0:
-                raise ValueError(f"{name}: must be > 0, got {p[name]!r}")
-        if not 0 <= p["first_leg_min_m"] <= p["first_leg_max_m"]:
+        if not p["first_leg_min_m"] <= p["first_leg_max_m"]:
             raise ValueError("first_leg_min_m: must lie in [0, first_leg_max_m]")
         if p["mode"] == "random" and not p["d_max_m"] > p["min_leg_m"]:
             raise ValueError(f"d_max_m: must exceed min_leg_m = {p['min_leg_m']!r} (random points lie between "
                              f"the two), got {p['d_max_m']!r}")
-        if not 0 < p["rssi_smoothing"] <= 1:
-            raise ValueError(f"rssi_smoothing: must lie in (0, 1], got {p['rssi_smoothing']!r}")
         if p["area_m"] is not None:
             a = p["area_m"]
             if not (isinstance(a, list | tuple) and len(a) == 4 and all(isinstance(v, int | float) for v in a)):
                 raise ValueError(f"area_m: [x_min, y_min, x_max, y_max] expected, got {a!r}")
             m = p["area_margin_m"]
-            if not (m >= 0 and a[2] - a[0] > 2 * m and a[3] - a[1] > 2 * m):
+            if not (a[2] - a[0] > 2 * m and a[3] - a[1] > 2 * m):
                 raise ValueError(f"area_m: {list(a)} leaves no room inside area_margin_m = {m!r}")
         return p
 

@@ -80,7 +80,7 @@ def test_a_config_with_a_bad_parameter_names_file_field_and_reason(tmp_path: Pat
     text = (ROOT / "hil_configs" / "rdpso" / "rdpso_arena.toml").read_text().replace("rho2 = 0.4", "rho2 = -0.4")
     cfg = tmp_path / "bad.toml"
     cfg.write_text(text)
-    with pytest.raises(ConfigError, match=r"bad\.toml: robots\[0\]\.params: rho2"):
+    with pytest.raises(ConfigError, match=r"bad\.toml: robots\[0\]\.params\.rho2: must be >= 0, got -0\.4"):
         load_config(cfg)
 
 
