@@ -94,7 +94,7 @@ def fetch_offer(endpoint: str, session: str, timeout_s: float) -> tuple[zenoh.Se
                         "with that session.listen (and the port open in the firewall)?") from None
     deadline = max(deadline, time.monotonic() + 2.0)  # connected late: still give the world time to answer
     try:
-        asked_around = False
+        others: list[str] = []
         while True:
             left = deadline - time.monotonic()
             for reply in zs.get(transport.PLAN_KEY, timeout=max(0.2, min(2.0, left))):
@@ -105,8 +105,9 @@ def fetch_offer(endpoint: str, session: str, timeout_s: float) -> tuple[zenoh.Se
                         raise JoinError(f"the session at {endpoint} sent an unreadable plan") from None
                     if isinstance(offer, dict):
                         return zs, offer
-            if not asked_around:  # nobody by that name: which sessions are there?
-                asked_around = True
+            # Nobody by that name: which sessions are there? Asked again until some session answers, as the world
+            # accepts connections a moment before it answers (it listens, then declares its plan's queryable).
+            if not others:
                 others = sessions_at(endpoint)
                 if others and session not in others:  # (ours among them: its answer was late, ask again)
                     raise JoinError(f"no session {session!r} at {endpoint}: the session there is "

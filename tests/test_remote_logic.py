@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -176,6 +177,40 @@ def test_join_errors_and_joiners_that_die_or_are_interrupted(tmp_path: Path) -> 
     assert [r["alive"] for r in s["per_robot"]] == [True, True, False, False]
     assert s["sim_time_s"] == 8.0 and s["exit_code"] == 0  # the rest went on
     assert session_procs(out) == []
+
+
+def test_a_joiner_that_asks_before_the_world_answers_asks_again() -> None:
+    """The world accepts connections a moment before it declares its ``plan`` queryable: a joiner asking which
+    sessions are there in that window hears nobody, and asks again until a session answers. Here the window is made
+    certain: a fake world declares its queryable only after the joiner asked around (a wildcard query)."""
+    from bridge import transport
+    from bridge.join import fetch_offer
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    world = transport.open_session(ep, None, listen=True)
+    asked_around = threading.Event()
+    declared = []
+
+    def spy(query) -> None:  # hears the joiner's questions, answers none
+        if "*" in str(query.key_expr):
+            asked_around.set()
+
+    def answer_once_asked() -> None:
+        if asked_around.wait(timeout=120):
+            key = f"swarm-sitl/real/{transport.PLAN_KEY}"
+            declared.append(world.declare_queryable(
+                key, lambda q: q.reply(key, json.dumps({"session": "real"}).encode())))
+
+    world_side = threading.Thread(target=answer_once_asked, daemon=True)
+    try:
+        declared.append(world.declare_queryable(f"swarm-sitl/*/{transport.PLAN_KEY}", spy))
+        world_side.start()
+        with pytest.raises(JoinError, match=f"no session 'other' at {ep}: the session there is 'real'"):
+            fetch_offer(ep, "other", timeout_s=60)  # a safety net: the answer comes once the queryable is there
+    finally:
+        asked_around.set()
+        world_side.join(timeout=60)
+        world.close()
 
 
 def test_join_with_nobody_listening_fails_quickly_naming_the_endpoint() -> None:
