@@ -177,6 +177,7 @@ class _Watch:
         self.dropped: dict[str, Any] | None = None  # the world's failure event naming our process
         self.failed: dict[str, Any] | None = None  # our robot failed, the process goes on until the stop
         self.ended = False
+        self.left = False  # the world took our leaving before the start (its notice naming our process)
         self.world_lost_at: float | None = None
         self._lock = threading.Lock()
         self.control = transport.publisher(zs, "control")  # to tell the world we leave (it fails the robot at once)
@@ -196,6 +197,8 @@ class _Watch:
                 if not self.joined:
                     self.joined = True
                     print(self.joined_line, file=self.out, flush=True)
+        elif op == "notice" and msg.get("left") == self.proc:
+            self.left = True
         elif op == "event" and msg.get("robot") == self.robot:
             if msg.get("process") == self.proc:
                 self.dropped = msg
@@ -273,7 +276,12 @@ def join(endpoint: str, session: str, robot: int | None = None, timeout_s: float
             name = signal.Signals(watch.signal or signal.SIGINT).name
             watch.control.put(transport.pack({"op": "dead", "proc": proc,
                                               "detail": f"swarm-sitl join on another computer stopped ({name})"}))
-            time.sleep(0.2)  # let the message leave before the session closes
+            # the session stays open until the world took the message (its event or notice naming our process), so
+            # that it fails the robot at once rather than as hung; world_timeout_s bounds the wait on a lost world
+            until = time.monotonic() + world_timeout_s
+            while (watch.dropped is None and watch.failed is None and not watch.left and not watch.ended
+                   and watch.world_lost_at is None and time.monotonic() < until):
+                time.sleep(0.02)
             print(f"swarm-sitl join: interrupted ({name}); robot {robot} fails in session {session!r}; its logic: "
                   f"{ran}", file=out, flush=True)
         elif code == DROPPED:
