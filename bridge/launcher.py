@@ -227,7 +227,10 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     finally:
         for c in children:
             c.expected_exit = True
-        _terminate(children, grace_s=0.5 if stop_requests >= 2 else 2.0)
+        # Once started, every process was told to stop and leaves by itself: the grace only bounds a stuck one, and
+        # is generous so that a loaded machine does not turn a clean exit into a kill. A process that never joined
+        # (start-up failed) waits for nothing: it gets the short grace.
+        _terminate(children, grace_s=0.5 if stop_requests >= 2 else 10.0 if t_started is not None else 2.0)
         if session is not None:
             session.close()
         shutil.rmtree(session_dir, ignore_errors=True)
