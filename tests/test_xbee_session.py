@@ -98,7 +98,7 @@ def test_xbee_through_a_pseudo_terminal(tmp_path: Path) -> None:
         assert link.is_symlink()
         with serial.Serial(str(link), 115200, timeout=0) as port:
             res = probe(XBee(port, WallClock(), api_mode=1, rssi_from_db=True), WallClock(),
-                        [xbee_serial64(1), xbee_serial64(2)])
+                        [xbee_serial64(1), xbee_serial64(2)], patience_s=60)  # each wait ends on its answer
         check(res)
     finally:
         p.send_signal(signal.SIGINT)
