@@ -9,6 +9,7 @@ import json
 import signal
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from bridge.config import Config, ConfigError, load_config
 from bridge.plan import make_plan
 from bridge.recorder import iter_messages
 from tests.conftest import ROOT
-from tests.test_session import cli, wait_started
+from tests.test_session import cli, wait_line, wait_started
 
 MIXED = ROOT / "hil_configs" / "mixed_real_robot.toml"
 HAL = ROOT / "hil_configs" / "eswarbot_sitl_ports.toml"
@@ -96,9 +97,9 @@ q_min_dbm = {hal["params"]["q_min_dbm"]}
         wait_started(session)
         # the robot's companion computer: the same program a real eSwarBot runs, on the wall clock
         robot = subprocess.run([sys.executable, "-m", "swarm_logic", "--hal", str(hal_path), "--duration",
-                                str(logic_s)], cwd=ROOT, capture_output=True, text=True, timeout=logic_s + 60)
+                                str(logic_s)], cwd=ROOT, capture_output=True, text=True, timeout=logic_s + 120)
         assert robot.returncode == 0, robot.stderr[-3000:]
-        session.wait(timeout=120)
+        session.wait(timeout=240)
     finally:
         if session.poll() is None:
             session.send_signal(signal.SIGINT)
@@ -164,7 +165,8 @@ def test_a_robot_with_a_real_xbee_on_a_serial_device(tmp_path: Path) -> None:
     neighbour with RSSI and transmits through it; the simulated radio channel does not include it."""
     from tests.standins import NEIGHBOUR64, SERIAL64, EmulatedXBee
 
-    with EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5) as radio:
+    # (the neighbour talks every 0.25 s of wall time, the session lasts at least 6 s of it: 8 heard is a wide margin)
+    with EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.25) as radio:
         cfg = real_xbee_config(tmp_path, radio.path, 6)
         plan = make_plan(load_config(cfg), str(cfg))
         assert plan.robots[0].modules() == ("llc",)  # no simulated module
@@ -210,25 +212,33 @@ def test_a_real_xbee_that_disappears_fails_its_robot_only(tmp_path: Path) -> Non
     from tests.standins import EmulatedXBee
 
     radio = EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5).__enter__()
-    unplug = threading.Timer(4.0, radio.__exit__, (None, None, None))
-    cfg = real_xbee_config(tmp_path, radio.path, 8, others=1)
+
+    def pull_the_plug() -> None:  # once the logic used the module (its hellos), whatever the load
+        while radio.module.counters["tx_requests"] < 3 and p.poll() is None:
+            time.sleep(0.05)
+        radio.__exit__(None, None, None)
+
+    unplug = threading.Thread(target=pull_the_plug)
+    cfg = real_xbee_config(tmp_path, radio.path, 3600, others=1)  # far longer than the test: stopped after the failure
     out = tmp_path / "run"
     p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True)
+    unplug.start()
     try:
-        wait_started(p)
-        unplug.start()
-        p.wait(timeout=60)
+        wait_line(p, "robot 0 failed at sim t=")
+        wait_line(p, "rtf")  # the session went on
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=240)
     finally:
-        unplug.join()
         if p.poll() is None:
             p.kill()
+        unplug.join()
     s = json.loads((out / "summary.json").read_text())
-    assert s["exit_code"] == 0
+    assert s["exit_code"] == 130 and s["interrupted"]
     (fail,) = s["failures"]
     assert fail["robot"] == 0 and fail["kind"] == "raised", fail
     assert "the device failed or disappeared" in fail["detail"]
-    assert s["per_robot"][1]["alive"] and not s["per_robot"][0]["alive"]
+    assert s["per_robot"][1]["alive"] and not s["per_robot"][0]["alive"] and s["sim_time_s"] > fail["t_s"]
 
 
 def test_fault_fields_fit_their_kind(tmp_path: Path) -> None:
