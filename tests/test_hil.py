@@ -172,7 +172,7 @@ def test_a_robot_with_a_real_xbee_on_a_serial_device(tmp_path: Path) -> None:
         assert plan.robots[0].modules() == ("llc",)  # no simulated module
         out = tmp_path / "run"
         r = subprocess.run(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, capture_output=True, text=True,
-                           timeout=120)
+                           timeout=600)
         assert r.returncode == 0, r.stderr[-3000:]
         c = radio.module.counters  # the stand-in has no air to send on: its transmit buffer fills, then overflows
         tx = c["tx_requests"] + c["serial_rx_overflow"]

@@ -67,7 +67,7 @@ def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "bridge.cli", *args]
 
 
-def run(cfg: Path, out: Path, *extra: str, timeout: float = 180) -> tuple[int, dict]:
+def run(cfg: Path, out: Path, *extra: str, timeout: float = 600) -> tuple[int, dict]:
     r = subprocess.run(cli("run", str(cfg), "--out", str(out), "--quiet", *extra), cwd=ROOT,
                        capture_output=True, text=True, timeout=timeout)
     summary = json.loads((out / "summary.json").read_text())

@@ -79,7 +79,7 @@ def test_xbee_through_a_sitl_port(tmp_path: Path, api: int) -> None:
     cfg.write_text(CFG.format(duration=12, speed='"max"', probe="tests.xbee_probe:Probe", api=api, pty=""))
     out = tmp_path / "run"
     r = subprocess.run(cli("run", str(cfg), "--out", str(out), "--quiet"), cwd=ROOT, capture_output=True,
-                       text=True, timeout=180)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     logged = [json.loads(d) for topic, _t, d in iter_messages(out / "session.mcap") if topic == "/r000/log/probe"]
     assert len(logged) == 1, "the probe did not finish in the session"
