@@ -6,6 +6,7 @@ must behave like its simulated twins."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -71,7 +72,7 @@ def test_mixed_swarm_with_a_real_robot_on_ptys(tmp_path: Path) -> None:
     RSSI-keeping behaviour, and the real one stays in the swarm."""
     out = tmp_path / "run"
     hal = tomllib.loads(HAL.read_text())
-    session_s, logic_s = 34.0, 25.0
+    logic_s = 25.0
     hal_path = tmp_path / "hal.toml"
     hal_path.write_text(f"""robot_id = {hal["robot_id"]}
 behaviour = "{hal["behaviour"]}"
@@ -91,7 +92,10 @@ path = "{tmp_path / "real.jsonl"}"
 speed_mps = {hal["params"]["speed_mps"]}
 q_min_dbm = {hal["params"]["q_min_dbm"]}
 """)
-    session = subprocess.Popen(cli("run", str(MIXED), "--out", str(out), "--duration", str(session_s)), cwd=ROOT,
+    # a session far longer than the robot's program, however late that starts: stopped once the program ended and the
+    # session went on (it took the program's last frames)
+    launched = time.monotonic()
+    session = subprocess.Popen(cli("run", str(MIXED), "--out", str(out), "--duration", "3600"), cwd=ROOT,
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         wait_started(session)
@@ -99,13 +103,18 @@ q_min_dbm = {hal["params"]["q_min_dbm"]}
         robot = subprocess.run([sys.executable, "-m", "swarm_logic", "--hal", str(hal_path), "--duration",
                                 str(logic_s)], cwd=ROOT, capture_output=True, text=True, timeout=logic_s + 120)
         assert robot.returncode == 0, robot.stderr[-3000:]
-        session.wait(timeout=240)
+        # paced to wall time (speed 1), the session shows a simulated time beyond the wall time since its launch only
+        # once that much wall time passed: after the program ended
+        beyond = time.monotonic() - launched + 1
+        while float(re.search(r" sim +([0-9.]+) /", wait_line(session, "rtf"))[1]) < beyond:
+            pass
     finally:
         if session.poll() is None:
             session.send_signal(signal.SIGINT)
-            session.wait(timeout=30)
+        session.wait(timeout=240)
     s = json.loads((out / "summary.json").read_text())
-    assert s["exit_code"] == 0 and not s["failures"], s.get("error")
+    assert s["interrupted"] and not s["failures"] and s["error"] is None, s.get("error")
+    session_s = s["sim_time_s"]
     per = {r["id"]: r for r in s["per_robot"]}
     real, twins = per[5], [per[i] for i in range(5)]
 

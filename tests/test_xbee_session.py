@@ -88,7 +88,8 @@ def test_xbee_through_a_sitl_port(tmp_path: Path, api: int) -> None:
 
 def test_xbee_through_a_pseudo_terminal(tmp_path: Path) -> None:
     cfg = tmp_path / "probe.toml"
-    cfg.write_text(CFG.format(duration=60, speed=1, probe="tests.xbee_probe:Idle", api=1, pty=', pty = "xbee0"'))
+    # a session far longer than the probe, stopped after it
+    cfg.write_text(CFG.format(duration=3600, speed=1, probe="tests.xbee_probe:Idle", api=1, pty=', pty = "xbee0"'))
     out = tmp_path / "run"
     p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True)
@@ -103,7 +104,7 @@ def test_xbee_through_a_pseudo_terminal(tmp_path: Path) -> None:
     finally:
         p.send_signal(signal.SIGINT)
         try:
-            p.wait(timeout=30)
+            p.wait(timeout=240)
         except subprocess.TimeoutExpired:
             p.kill()
     assert not (out / "xbee0").exists()  # the link goes with the session
