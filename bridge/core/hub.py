@@ -86,6 +86,7 @@ class Hub:
         self._dead_detail: dict[str, str] = {}
         self.dead: set[int] = set()
         self.live_procs: set[str] = set(self.procs)
+        self.unjoined: set[str] = set()  # processes that had not joined when start-up failed
         self.pids: dict[str, int] = {}
         self.failures: list[dict[str, Any]] = []
         self.stop_reason: str | None = None
@@ -213,14 +214,15 @@ class Hub:
                         p = msg["proc"]
                         missing.add(p)
                         self.joinable = frozenset(missing & remote)
-                        self.status(op="notice", text=f"{p} left before the start ({msg.get('detail')}); waiting "
-                                                      "for it again")
+                        self.status(op="notice", left=p, text=f"{p} left before the start ({msg.get('detail')}); "
+                                                              "waiting for it again")
                     elif msg.get("op") == "dead":
                         raise RuntimeError(f"process {msg.get('proc')} exited during start-up ({msg.get('detail')})")
                     if msg.get("op") == "stop":
                         raise KeyboardInterrupt
         except BaseException:
             self.live_procs -= missing & remote  # they never joined: nobody to say stop to
+            self.unjoined = set(missing)  # nor a goodbye to wait for (the launcher ends them)
             raise
         self.startup_wall_s = time.monotonic() - t0
         self.joinable = None  # started: a late joiner is refused
@@ -521,12 +523,14 @@ class Hub:
         self._apply_deaths(t)
 
     def shutdown(self) -> None:
-        """Tell every live process to stop and wait (briefly) for their goodbyes."""
+        """Tell every live process to stop and wait for their goodbyes (with their counters): a process that joined
+        answers its stop as it answers a tick, so ``hang_timeout_s`` bounds the wait, as it bounds a quantum's."""
         stop = transport.pack({"k": self.k, "stop": True})
         waiting = set() if self.abort else set(self.live_procs)
         for p in sorted(waiting):
             self.tick_pub[p].put(stop)
-        deadline = time.monotonic() + 3.0
+        waiting -= self.unjoined
+        deadline = time.monotonic() + self.cfg.session.hang_timeout_s
         while waiting and not self.abort and time.monotonic() < deadline:  # abort: SIGTERM, they are gone
             try:
                 key, data = self.q.get(timeout=0.05)

@@ -302,7 +302,10 @@ def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, end
     finally:
         for c in children:
             c.expected_exit = True
-        _terminate(children, grace_s=2.0, hurry=stops.hurry)
+        # Once started, every process was told to stop and leaves by itself: the grace only bounds a stuck one, and
+        # is generous so that a loaded machine does not turn a clean exit into a kill. A process that never joined
+        # (start-up failed) waits for nothing: it gets the short grace; a second Ctrl-C hurries them all.
+        _terminate(children, grace_s=10.0 if t_started is not None else 2.0, hurry=stops.hurry)
         if session is not None:
             session.close()
         shutil.rmtree(session_dir, ignore_errors=True)

@@ -94,7 +94,7 @@ def fetch_offer(endpoint: str, session: str, timeout_s: float) -> tuple[zenoh.Se
                         "with that session.listen (and the port open in the firewall)?") from None
     deadline = max(deadline, time.monotonic() + 2.0)  # connected late: still give the world time to answer
     try:
-        asked_around = False
+        others: list[str] = []
         while True:
             left = deadline - time.monotonic()
             for reply in zs.get(transport.PLAN_KEY, timeout=max(0.2, min(2.0, left))):
@@ -105,8 +105,9 @@ def fetch_offer(endpoint: str, session: str, timeout_s: float) -> tuple[zenoh.Se
                         raise JoinError(f"the session at {endpoint} sent an unreadable plan") from None
                     if isinstance(offer, dict):
                         return zs, offer
-            if not asked_around:  # nobody by that name: which sessions are there?
-                asked_around = True
+            # Nobody by that name: which sessions are there? Asked again until some session answers, as the world
+            # accepts connections a moment before it answers (it listens, then declares its plan's queryable).
+            if not others:
                 others = sessions_at(endpoint)
                 if others and session not in others:  # (ours among them: its answer was late, ask again)
                     raise JoinError(f"no session {session!r} at {endpoint}: the session there is "
@@ -176,6 +177,7 @@ class _Watch:
         self.dropped: dict[str, Any] | None = None  # the world's failure event naming our process
         self.failed: dict[str, Any] | None = None  # our robot failed, the process goes on until the stop
         self.ended = False
+        self.left = False  # the world took our leaving before the start (its notice naming our process)
         self.world_lost_at: float | None = None
         self._lock = threading.Lock()
         self.control = transport.publisher(zs, "control")  # to tell the world we leave (it fails the robot at once)
@@ -195,6 +197,8 @@ class _Watch:
                 if not self.joined:
                     self.joined = True
                     print(self.joined_line, file=self.out, flush=True)
+        elif op == "notice" and msg.get("left") == self.proc:
+            self.left = True
         elif op == "event" and msg.get("robot") == self.robot:
             if msg.get("process") == self.proc:
                 self.dropped = msg
@@ -272,7 +276,12 @@ def join(endpoint: str, session: str, robot: int | None = None, timeout_s: float
             name = signal.Signals(watch.signal or signal.SIGINT).name
             watch.control.put(transport.pack({"op": "dead", "proc": proc,
                                               "detail": f"swarm-sitl join on another computer stopped ({name})"}))
-            time.sleep(0.2)  # let the message leave before the session closes
+            # the session stays open until the world took the message (its event or notice naming our process), so
+            # that it fails the robot at once rather than as hung; world_timeout_s bounds the wait on a lost world
+            until = time.monotonic() + world_timeout_s
+            while (watch.dropped is None and watch.failed is None and not watch.left and not watch.ended
+                   and watch.world_lost_at is None and time.monotonic() < until):
+                time.sleep(0.02)
             print(f"swarm-sitl join: interrupted ({name}); robot {robot} fails in session {session!r}; its logic: "
                   f"{ran}", file=out, flush=True)
         elif code == DROPPED:

@@ -83,6 +83,19 @@ class Flaky(Experiment):
         return TrialResult(metrics={"value": trial.index})
 
 
+FINISHING = 4  # the interrupted runs' trials that finish; the others only end when the run is interrupted
+
+
+def _slow_trial(trial: Trial) -> TrialResult:
+    """Note the process id; sleep a little (the first ``FINISHING`` trials) or until interrupted (the others), so
+    that an interrupt always finds exactly ``FINISHING`` trials finished, however slow the machine."""
+    (Path(trial.workdir) / "pid").write_text(str(os.getpid()))
+    time.sleep(0.4)
+    while trial.index >= FINISHING:
+        time.sleep(1.0)
+    return TrialResult(metrics={"slept": 0.4})
+
+
 @register
 class Sleepy(Experiment):
     name = "test-sleepy"
@@ -94,9 +107,7 @@ class Sleepy(Experiment):
         return [{"s": 1}]
 
     def run(self, trial: Trial) -> TrialResult:
-        (Path(trial.workdir) / "pid").write_text(str(os.getpid()))
-        time.sleep(0.4)
-        return TrialResult(metrics={"slept": 0.4})
+        return _slow_trial(trial)
 
 
 @register
@@ -106,12 +117,18 @@ class Swallowing(Sleepy):
     description = "For interrupting in-process."
 
     def run(self, trial: Trial) -> TrialResult:
-        (Path(trial.workdir) / "pid").write_text(str(os.getpid()))
         try:
-            time.sleep(0.4)
+            return _slow_trial(trial)
         except KeyboardInterrupt:
             raise RuntimeError("session interrupted") from None
-        return TrialResult(metrics={"slept": 0.4})
+
+
+def wait_until(cond, what: str, within_s: float = 120) -> None:
+    """Poll ``cond`` until it holds; ``within_s`` only bounds a hang (generous: the machine may be loaded)."""
+    deadline = time.monotonic() + within_s
+    while not cond():
+        assert time.monotonic() < deadline, f"{what} within {within_s:g} s"
+        time.sleep(0.05)
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
@@ -240,25 +257,22 @@ def test_missing_experiment_module_is_skipped_but_broken_one_raises(tmp_path: Pa
 def test_ctrl_c_keeps_what_finished_and_leaves_no_process(tmp_path: Path) -> None:
     out = tmp_path / "sleepy"
     code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_experiment; "
-            f"from bridge.tools.cli import main; main(['experiment', 'test-sleepy', '--jobs', '2', '--quiet', '--out', "
+            f"from bridge.tools.cli import main; main(['experiment', 'test-sleepy', '--jobs', '2', '--out', "
             f"{str(out)!r}])")
     p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 30
-    while len(list(out.glob("work/*/*/pid"))) < 4 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    for line in p.stderr:  # the progress line once the run has the finishing trials' results (then none comes)
+        if f"test-sleepy: {FINISHING}/40 trials" in line:
+            break
     os.killpg(p.pid, signal.SIGINT)  # as a terminal's Ctrl-C: to the whole process group
-    stdout, stderr = p.communicate(timeout=30)
+    stdout, stderr = p.communicate(timeout=120)
     assert p.returncode == 130, stderr
     done = _rows(out / "trials.csv")
-    assert 2 <= len(done) < 40 and "interrupted" in stdout
+    assert len(done) == FINISHING and "interrupted" in stdout
     assert not [r for r in done if r["error"]]  # trials cut short are not reported as failures
     assert "**Interrupted**" in (out / "report.md").read_text()
     pids = {int(f.read_text()) for f in out.glob("work/*/*/pid")}
-    deadline = time.monotonic() + 5
-    while any(psutil.pid_exists(pid) for pid in pids) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not [pid for pid in pids if psutil.pid_exists(pid)]
+    wait_until(lambda: not any(psutil.pid_exists(pid) for pid in pids), "the workers did not go")
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
@@ -269,14 +283,13 @@ def test_in_process_interrupt_ends_the_run_even_when_a_trial_catches_it(tmp_path
             f"'--out', {str(out)!r}])")
     p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 30
-    while len(list(out.glob("work/*/*/pid"))) < 3 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    # in-process, trials run one after the other: once the first that waits started, the finishing ones are done
+    wait_until(lambda: len(list(out.glob("work/*/*/pid"))) > FINISHING, "the trials did not start")
     os.kill(p.pid, sig)
-    stdout, stderr = p.communicate(timeout=30)
+    stdout, stderr = p.communicate(timeout=120)
     assert p.returncode == 130, stderr
     done = _rows(out / "trials.csv")
-    assert 2 <= len(done) < 40 and "interrupted" in stdout
+    assert len(done) == FINISHING and "interrupted" in stdout
     assert not [r for r in done if r["error"]]  # the trial cut short is not reported as a failure
 
 

@@ -320,10 +320,15 @@ class LoopIface(XBeeCommunicationInterface):
 
 
 @pytest.mark.parametrize(("series", "api_mode"), [(1, 1), (1, 2), (2, 1)])
-def test_digi_xbee_device_open_identifies_module(series, api_mode):
+def test_digi_xbee_device_open_identifies_module(series, api_mode, monkeypatch):
+    from digi.xbee.models.zdo import NodeDescriptorReader
+
+    # A Zigbee module without CE: digi-xbee asks its node descriptor (ZDO) for its role, which the emulation does not
+    # answer; rather than wait out that request's timeout, it hears "no descriptor" at once (the role stays unknown)
+    monkeypatch.setattr(NodeDescriptorReader, "get_node_descriptor", lambda self: None)
     m = make(series=series, node_id="eSwarBot-3", api_mode=api_mode, baud=115200, my16=0x0033)
     dev = XBeeDevice(comm_iface=LoopIface(m))
-    dev.set_sync_ops_timeout(0.3)
+    dev.set_sync_ops_timeout(60)  # each operation returns on its answer: the bound only catches a hang
     dev.open()
     try:
         assert dev.get_protocol() == (XBeeProtocol.RAW_802_15_4 if series == 1 else XBeeProtocol.ZIGBEE)

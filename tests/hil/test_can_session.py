@@ -30,7 +30,7 @@ FAULT_S, FAULT_END_S = 4.0, 9.0
 def bus_off_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, str]:
     out = tmp_path_factory.mktemp("bus_off") / "run"
     r = subprocess.run(cli("run", str(BUS_OFF), "--out", str(out)), cwd=ROOT, capture_output=True, text=True,
-                       timeout=180)
+                       timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     return out, json.loads((out / "summary.json").read_text()), r.stderr
 

@@ -6,9 +6,11 @@ must behave like its simulated twins."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -19,7 +21,7 @@ from bridge.core.config import Config, ConfigError, load_config
 from bridge.core.plan import make_plan
 from bridge.core.recorder import iter_messages
 from tests.conftest import ROOT
-from tests.core.test_session import cli, wait_started
+from tests.core.test_session import cli, wait_line, wait_started
 
 MIXED = ROOT / "hil_configs" / "hil" / "mixed_real_robot.toml"
 HAL = ROOT / "hil_configs" / "robots" / "eswarbot_sitl_ports.toml"
@@ -70,7 +72,7 @@ def test_mixed_swarm_with_a_real_robot_on_ptys(tmp_path: Path) -> None:
     RSSI-keeping behaviour, and the real one stays in the swarm."""
     out = tmp_path / "run"
     hal = tomllib.loads(HAL.read_text())
-    session_s, logic_s = 34.0, 25.0
+    logic_s = 25.0
     hal_path = tmp_path / "hal.toml"
     hal_path.write_text(f"""robot_id = {hal["robot_id"]}
 behaviour = "{hal["behaviour"]}"
@@ -90,21 +92,29 @@ path = "{tmp_path / "real.jsonl"}"
 speed_mps = {hal["params"]["speed_mps"]}
 q_min_dbm = {hal["params"]["q_min_dbm"]}
 """)
-    session = subprocess.Popen(cli("run", str(MIXED), "--out", str(out), "--duration", str(session_s)), cwd=ROOT,
+    # a session far longer than the robot's program, however late that starts: stopped once the program ended and the
+    # session went on (it took the program's last frames)
+    launched = time.monotonic()
+    session = subprocess.Popen(cli("run", str(MIXED), "--out", str(out), "--duration", "3600"), cwd=ROOT,
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         wait_started(session)
         # the robot's companion computer: the same program a real eSwarBot runs, on the wall clock
         robot = subprocess.run([sys.executable, "-m", "swarm_logic", "--hal", str(hal_path), "--duration",
-                                str(logic_s)], cwd=ROOT, capture_output=True, text=True, timeout=logic_s + 60)
+                                str(logic_s)], cwd=ROOT, capture_output=True, text=True, timeout=logic_s + 120)
         assert robot.returncode == 0, robot.stderr[-3000:]
-        session.wait(timeout=120)
+        # paced to wall time (speed 1), the session shows a simulated time beyond the wall time since its launch only
+        # once that much wall time passed: after the program ended
+        beyond = time.monotonic() - launched + 1
+        while float(re.search(r" sim +([0-9.]+) /", wait_line(session, "rtf"))[1]) < beyond:
+            pass
     finally:
         if session.poll() is None:
             session.send_signal(signal.SIGINT)
-            session.wait(timeout=30)
+        session.wait(timeout=240)
     s = json.loads((out / "summary.json").read_text())
-    assert s["exit_code"] == 0 and not s["failures"], s.get("error")
+    assert s["interrupted"] and not s["failures"] and s["error"] is None, s.get("error")
+    session_s = s["sim_time_s"]
     per = {r["id"]: r for r in s["per_robot"]}
     real, twins = per[5], [per[i] for i in range(5)]
 
@@ -164,13 +174,14 @@ def test_a_robot_with_a_real_xbee_on_a_serial_device(tmp_path: Path) -> None:
     neighbour with RSSI and transmits through it; the simulated radio channel does not include it."""
     from tests.support.standins import NEIGHBOUR64, SERIAL64, EmulatedXBee
 
-    with EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5) as radio:
+    # (the neighbour talks every 0.25 s of wall time, the session lasts at least 6 s of it: 8 heard is a wide margin)
+    with EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.25) as radio:
         cfg = real_xbee_config(tmp_path, radio.path, 6)
         plan = make_plan(load_config(cfg), str(cfg))
         assert plan.robots[0].modules() == ("llc",)  # no simulated module
         out = tmp_path / "run"
         r = subprocess.run(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, capture_output=True, text=True,
-                           timeout=120)
+                           timeout=600)
         assert r.returncode == 0, r.stderr[-3000:]
         c = radio.module.counters  # the stand-in has no air to send on: its transmit buffer fills, then overflows
         tx = c["tx_requests"] + c["serial_rx_overflow"]
@@ -210,25 +221,33 @@ def test_a_real_xbee_that_disappears_fails_its_robot_only(tmp_path: Path) -> Non
     from tests.support.standins import EmulatedXBee
 
     radio = EmulatedXBee(series=1, api_mode=1, baud=115200, neighbour_every_s=0.5).__enter__()
-    unplug = threading.Timer(4.0, radio.__exit__, (None, None, None))
-    cfg = real_xbee_config(tmp_path, radio.path, 8, others=1)
+
+    def pull_the_plug() -> None:  # once the logic used the module (its hellos), whatever the load
+        while radio.module.counters["tx_requests"] < 3 and p.poll() is None:
+            time.sleep(0.05)
+        radio.__exit__(None, None, None)
+
+    unplug = threading.Thread(target=pull_the_plug)
+    cfg = real_xbee_config(tmp_path, radio.path, 3600, others=1)  # far longer than the test: stopped after the failure
     out = tmp_path / "run"
     p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True)
+    unplug.start()
     try:
-        wait_started(p)
-        unplug.start()
-        p.wait(timeout=60)
+        wait_line(p, "robot 0 failed at sim t=")
+        wait_line(p, "rtf")  # the session went on
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=240)
     finally:
-        unplug.join()
         if p.poll() is None:
             p.kill()
+        unplug.join()
     s = json.loads((out / "summary.json").read_text())
-    assert s["exit_code"] == 0
+    assert s["exit_code"] == 130 and s["interrupted"]
     (fail,) = s["failures"]
     assert fail["robot"] == 0 and fail["kind"] == "raised", fail
     assert "the device failed or disappeared" in fail["detail"]
-    assert s["per_robot"][1]["alive"] and not s["per_robot"][0]["alive"]
+    assert s["per_robot"][1]["alive"] and not s["per_robot"][0]["alive"] and s["sim_time_s"] > fail["t_s"]
 
 
 def test_fault_fields_fit_their_kind(tmp_path: Path) -> None:

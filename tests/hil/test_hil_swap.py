@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import struct
 import subprocess
 import time
@@ -26,17 +27,35 @@ from bridge.hosts.firmware import CanBridge
 from swarm_logic.clock import WallClock
 from swarm_logic.drivers.xbee import XBee
 from tests.conftest import ROOT
-from tests.core.test_session import cli
+from tests.core.test_session import cli, wait_line
 from tests.support.standins import DESK64, GATEWAY64, DeskRadios, LlcStand, RoverStand
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = pytest.mark.timeout(300)
 
 
-def run(cfg: Path, out: Path, timeout: float = 90) -> dict:
+def run(cfg: Path, out: Path, timeout: float = 240) -> dict:
     r = subprocess.run(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, capture_output=True, text=True,
                        timeout=timeout)
     assert r.returncode == 0, r.stderr[-3000:]
     return json.loads((out / "summary.json").read_text())
+
+
+def run_until_failed(cfg: Path, out: Path, robot: int) -> dict:
+    """Run a session (far longer than the test) until robot ``robot`` failed and the session went on (a progress line
+    after the failure), then stop it as Ctrl-C does; its summary. The session cannot end before the failure."""
+    p = subprocess.Popen(cli("run", str(cfg), "--out", str(out), "--duration", "3600"), cwd=ROOT,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_line(p, f"robot {robot} failed at sim t=")
+        wait_line(p, "rtf")
+        p.send_signal(signal.SIGINT)
+        assert p.wait(timeout=240) == 130
+    finally:
+        if p.poll() is None:
+            p.kill()
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] and s["sim_time_s"] > max(f["t_s"] for f in s["failures"])
+    return s
 
 
 def header(duration_s: float) -> str:
@@ -318,7 +337,7 @@ def test_a_real_board_that_disappears_fails_its_robot_only(tmp_path: Path) -> No
     stand = LlcStand().__enter__()
 
     def pull_the_plug() -> None:  # once the session drives the board (its start-up time varies with the load)
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 240  # (only bounds a hang: the test fails then)
         while stand.frames_in < 50 and time.monotonic() < deadline:
             time.sleep(0.05)
         stand.__exit__(None, None, None)
@@ -328,13 +347,13 @@ def test_a_real_board_that_disappears_fails_its_robot_only(tmp_path: Path) -> No
     board_config(cfg, stand.path)
     unplug.start()
     try:
-        s = run(cfg, tmp_path / "run")
+        s = run_until_failed(cfg, tmp_path / "run", 2)
     finally:
         unplug.join()
     alive = [r["alive"] for r in s["per_robot"]]
     assert alive == [True, True, False]
     (failure,) = s["failures"]
-    assert failure["robot"] == 2 and failure["kind"] == "raised" and 0.5 < failure["t_s"] < 7.0
+    assert failure["robot"] == 2 and failure["kind"] == "raised" and failure["t_s"] > 0.5
     assert "the real board's bus failed or disappeared" in failure["detail"]
 
 
@@ -346,7 +365,7 @@ def test_a_gateway_whose_xbee_disappears_fails_alone(tmp_path: Path) -> None:
     desk = DeskRadios(series=2, baud=115200).__enter__()
 
     def pull_the_plug() -> None:  # once the session's twin has joined and the relay carried something
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 240  # (only bounds a hang: the test fails then)
         while desk.frames[0] < 3 and time.monotonic() < deadline:
             time.sleep(0.05)
         desk.__exit__(None, None, None)
@@ -354,7 +373,7 @@ def test_a_gateway_whose_xbee_disappears_fails_alone(tmp_path: Path) -> None:
     unplug = threading.Thread(target=pull_the_plug)
     unplug.start()
     try:
-        s = run(gateway_config(tmp_path, desk.gateway_path, 8), tmp_path / "run")
+        s = run_until_failed(gateway_config(tmp_path, desk.gateway_path, 8), tmp_path / "run", 4)
     finally:
         unplug.join()
     assert [r["alive"] for r in s["per_robot"]] == [True, True, True, True, False]

@@ -40,7 +40,7 @@ def run(tmp_path: Path, name: str, *extra: str, duration: float = 12, seed: int 
     cfg = tmp_path / f"radios-{name}.toml"
     cfg.write_text(CFG.format(duration=duration, seed=seed))
     out = tmp_path / name
-    code, s = session_run(cfg, out, *extra, timeout=240)
+    code, s = session_run(cfg, out, *extra, timeout=600)
     assert code == 0, s.get("error")
     s["_out"] = out
     return s

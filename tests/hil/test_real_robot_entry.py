@@ -15,6 +15,45 @@ from tests.logic.test_llc_client import VirtualWiredLlc
 DRIVE_CMD = 0x100
 
 
+class LockStepClock:
+    """The robot program's clock, moved by the test: a sleep of the program ends once the test has run the LLC board
+    up to its end, and the board runs only while the program sleeps. The program and the board take turns, so what
+    they exchange does not depend on how fast either thread gets the CPU."""
+
+    def __init__(self) -> None:
+        self.t_ms = 0
+        self.until_ms: int | None = None  # the program sleeps until then (None: it runs)
+        self.cond = threading.Condition()
+
+    def now(self) -> float:
+        with self.cond:
+            return self.t_ms / 1000
+
+    def sleep(self, dt: float) -> None:
+        self.sleep_until(self.now() + dt)
+
+    def sleep_until(self, t: float) -> None:
+        with self.cond:
+            self.until_ms = max(self.t_ms, round(t * 1000))
+            self.cond.notify_all()
+            self.cond.wait_for(lambda: self.until_ms is None)
+
+    def run_board(self, llc: VirtualWiredLlc, program: threading.Thread) -> None:
+        """Until the program ends: each time it sleeps, run the board 20 ms at a time to the end of its sleep."""
+        while program.is_alive():
+            with self.cond:
+                if self.until_ms is None:
+                    self.cond.wait(0.01)  # the program runs (or ends: checked again)
+                    continue
+                until = self.until_ms
+            while self.t_ms < until:
+                llc.loop_ms(20)
+                self.t_ms += 20
+            with self.cond:
+                self.until_ms = None
+                self.cond.notify_all()
+
+
 def test_runs_behaviour_over_a_real_python_can_interface(tmp_path: Path) -> None:
     ch = f"robot-{uuid.uuid4().hex}"
     hal = tmp_path / "hal.toml"
@@ -28,16 +67,16 @@ def test_runs_behaviour_over_a_real_python_can_interface(tmp_path: Path) -> None
         orig(frame)
 
     llc.board.can.on_bus_frame = spy
-    t = threading.Thread(target=main, args=(["--hal", str(hal), "--duration", "0.5"],))
+    clock = LockStepClock()
+    t = threading.Thread(target=main, args=(["--hal", str(hal), "--duration", "0.5"],), kwargs={"clock": clock})
     t.start()
     try:
-        while t.is_alive():
-            llc.loop_ms(20)
-            t.join(timeout=0.02)
+        clock.run_board(llc, t)
     finally:
-        t.join(timeout=5)
+        t.join(timeout=60)
         llc.loop_ms(20)
         llc.bus.shutdown()
+    assert not t.is_alive()
     assert seen.count(DRIVE_CMD) >= 2  # it drove the LLC...
     assert llc.llc.v_cmd == 0.0  # ...and stopped the motors when it ended (Controller.destroy)
 

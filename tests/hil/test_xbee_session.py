@@ -79,7 +79,7 @@ def test_xbee_through_a_sitl_port(tmp_path: Path, api: int) -> None:
     cfg.write_text(CFG.format(duration=12, speed='"max"', probe="tests.support.xbee_probe:Probe", api=api, pty=""))
     out = tmp_path / "run"
     r = subprocess.run(cli("run", str(cfg), "--out", str(out), "--quiet"), cwd=ROOT, capture_output=True,
-                       text=True, timeout=180)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     logged = [json.loads(d) for topic, _t, d in iter_messages(out / "session.mcap") if topic == "/r000/log/probe"]
     assert len(logged) == 1, "the probe did not finish in the session"
@@ -88,8 +88,9 @@ def test_xbee_through_a_sitl_port(tmp_path: Path, api: int) -> None:
 
 def test_xbee_through_a_pseudo_terminal(tmp_path: Path) -> None:
     cfg = tmp_path / "probe.toml"
-    cfg.write_text(CFG.format(duration=60, speed=1, probe="tests.support.xbee_probe:Idle",
-                              api=1, pty=', pty = "xbee0"'))
+    # a session far longer than the probe, stopped after it
+    cfg.write_text(CFG.format(duration=3600, speed=1, probe="tests.support.xbee_probe:Idle", api=1,
+                              pty=', pty = "xbee0"'))
     out = tmp_path / "run"
     p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True)
@@ -99,12 +100,12 @@ def test_xbee_through_a_pseudo_terminal(tmp_path: Path) -> None:
         assert link.is_symlink()
         with serial.Serial(str(link), 115200, timeout=0) as port:
             res = probe(XBee(port, WallClock(), api_mode=1, rssi_from_db=True), WallClock(),
-                        [xbee_serial64(1), xbee_serial64(2)])
+                        [xbee_serial64(1), xbee_serial64(2)], patience_s=60)  # each wait ends on its answer
         check(res)
     finally:
         p.send_signal(signal.SIGINT)
         try:
-            p.wait(timeout=30)
+            p.wait(timeout=240)
         except subprocess.TimeoutExpired:
             p.kill()
     assert not (out / "xbee0").exists()  # the link goes with the session

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import msgpack
 import numpy as np
 import pytest
@@ -294,20 +292,18 @@ def test_determinism_and_mean_rssi_draws_nothing() -> None:
     assert a != session(2, False)
 
 
-def test_idle_quanta_cost_nothing_and_query_no_geometry() -> None:
+def test_idle_quanta_query_no_geometry() -> None:
+    # (what quanta cost is measured by the benchmarks, not asserted here: a test must not depend on the machine)
     m, g = medium([(float(i), 0.0) for i in range(50)])
-    t0 = time.perf_counter()
     for k in range(1, 20001):
         assert m.advance(k * 10 * MS) == []
-    assert time.perf_counter() - t0 < 0.5
     assert g.calls == 0 and m.next_event_ns() is None
 
 
-def test_busy_swarm_is_fast_enough() -> None:
+def test_busy_swarm_takes_every_frame() -> None:
     rng = np.random.default_rng(4)
     n = 30
     m, _ = medium([tuple(p) for p in rng.uniform(0, 20, (n, 2))], seed=3)
-    t0 = time.perf_counter()
     k_frames = 0
     for q in range(500):  # 5 s: every robot sends 2 frames/s (unicast to its neighbour in index)
         t = q * 10 * MS
@@ -316,8 +312,8 @@ def test_busy_swarm_is_fast_enough() -> None:
                 m.submit(r, t, frame(q * n + r, r, dst=(r + 1) % n))
                 k_frames += 1
         m.advance(t + 10 * MS)
-    dt = time.perf_counter() - t0
-    assert dt < 5.0, f"{k_frames} frames took {dt:.2f} s"
+    tx = m.stats()["totals"]["tx"]
+    assert tx["frames"] == k_frames and tx["attempts"] >= k_frames
 
 
 def test_stats_layout_is_msgpack_friendly() -> None:

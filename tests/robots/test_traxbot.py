@@ -68,7 +68,7 @@ def test_a_ranger_unloads_its_scouts_one_by_one(tmp_path: Path) -> None:
     every 3 s behind the ranger, which keeps driving; on board the scouts ride along, then each drives off."""
     cfg = ranger_config(tmp_path)
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     rel = s["releases"]
@@ -108,7 +108,7 @@ def test_a_dead_ranger_keeps_its_scouts_on_board(tmp_path: Path) -> None:
     cfg = ranger_config(tmp_path, duration=10)
     cfg.write_text(cfg.read_text() + "[[faults]]\nrobot = 0\nat_s = 5.0\n")
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert [e["robot"] for e in s["releases"]] == [1]  # one dropped at 4 s, then the ranger died
@@ -142,7 +142,7 @@ def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: 
     cfg.write_text(EST.format(duration=100, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="est")
                    .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14"))
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
-                       text=True, timeout=180)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     dep = s["deployment"]
@@ -176,7 +176,7 @@ def test_the_random_baseline_drops_each_scout_within_d_max_of_the_last(tmp_path:
                    .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14")
                    .replace('mode = "random" }', 'mode = "random", d_max_m = 2.0 }'))
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
-                       text=True, timeout=180)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert s["deployment"]["done"] == 1 and len(s["releases"]) == 5

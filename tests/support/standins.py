@@ -101,7 +101,7 @@ class _Stand:
 
     def __exit__(self, *exc: object) -> None:
         self._stop.set()
-        self._thread.join(timeout=5)
+        self._thread.join(timeout=60)  # it stops at its next step; the bound only catches a hang
         assert not self._thread.is_alive()
         self.close()
 
@@ -201,6 +201,9 @@ class EmulatedXBee(_Stand):
                                  rng=np.random.default_rng(7), api_mode=api_mode, baud=baud)
         self.neighbour_every_ns = None if neighbour_every_s is None else int(neighbour_every_s * 1e9)
         self.next_air, self.seq = 0, 0
+        self.writes = 0  # times the module wrote to the line
+        self.steps = 0
+        self.quiet_step = 0  # the last step that read nothing, wrote nothing and had nothing left to send
 
     def host_baud(self) -> int | None:
         """The line speed the host set on its side of the terminal (the settings belong to the device)."""
@@ -231,6 +234,24 @@ class EmulatedXBee(_Stand):
             tx = uart_resample(tx, own, host or 38400)
         if tx:
             self.pty.write(tx)
+            self.writes += 1
+        self.steps += 1
+        if not data and not tx and not self.module._uart:
+            self.quiet_step = self.steps
+
+    def wait_writes(self, n: int) -> None:
+        """Until the module wrote to the line ``n`` times more than it had when called (the writes of a step that
+        was under way at the call are not counted)."""
+        first = self.writes + 1 + n
+        while self.writes < first and self._thread.is_alive():
+            time.sleep(0.001)
+
+    def settle(self) -> None:
+        """Until the module took what the host wrote before the call and answered it in full: a quiet step (nothing
+        read, written or left to send) that began after the call."""
+        after = self.steps + 1
+        while self.quiet_step <= after and self._thread.is_alive():
+            time.sleep(0.001)
 
     def close(self) -> None:
         self.pty.close()

@@ -11,20 +11,24 @@ from swarm_logic.drivers.xbee import XBee
 from swarm_logic.families.demo.random_walk import RandomWalk
 
 
-def probe(xb: XBee, clock: Clock, peers64: list[int]) -> dict[str, Any]:
-    """Identify the module, wait until it joined, unicast to the first peer, broadcast to all, collect echoes."""
+def probe(xb: XBee, clock: Clock, peers64: list[int], patience_s: float | None = None) -> dict[str, Any]:
+    """Identify the module, wait until it joined, unicast to the first peer, broadcast to all, collect echoes.
+    ``patience_s``: how long any one wait may last, for a program on the wall clock (a loaded machine's session may
+    lag); by default the simulated-time bounds a robot's program uses in a session. Every wait ends on its event."""
+    at_s = patience_s or 1.0
     t0 = clock.now()
-    while xb.at("AI")[0] != 0:  # Series 2: associated (joined) is AI = 0
-        if clock.now() - t0 > 15:
+    while xb.at("AI", timeout=at_s)[0] != 0:  # Series 2: associated (joined) is AI = 0
+        if clock.now() - t0 > (patience_s or 15):
             raise TimeoutError("module did not join")
         clock.sleep(0.2)
-    info = xb.identify()
+    info = xb.identify(timeout=at_s)
     res: dict[str, Any] = {
-        "sh": xb.at("SH").hex(), "sl": xb.at("SL").hex(), "ni": xb.at("NI").decode(), "series": info.series}
+        "sh": xb.at("SH", timeout=at_s).hex(), "sl": xb.at("SL", timeout=at_s).hex(),
+        "ni": xb.at("NI", timeout=at_s).decode(), "series": info.series}
     echoes: list[dict] = []
 
     def collect(n: int) -> None:
-        deadline = clock.now() + 4.0
+        deadline = clock.now() + (patience_s or 4.0)
         want = len(echoes) + n
         while clock.now() < deadline and len(echoes) < want:
             pkt = xb.recv(timeout=max(0.0, deadline - clock.now()))
@@ -32,12 +36,12 @@ def probe(xb: XBee, clock: Clock, peers64: list[int]) -> dict[str, Any]:
                 echoes.append({"src64": pkt.src64, "data": pkt.data.decode(), "rssi_dbm": pkt.rssi_dbm,
                                "broadcast": pkt.broadcast})
 
-    res["unicast_status"] = xb.send(peers64[0], b"ping-unicast", timeout=8).status
+    res["unicast_status"] = xb.send(peers64[0], b"ping-unicast", timeout=patience_s or 8).status
     collect(1)
-    res["broadcast_status"] = xb.send(None, b"ping-broadcast", timeout=8).status
+    res["broadcast_status"] = xb.send(None, b"ping-broadcast", timeout=patience_s or 8).status
     collect(len(peers64))
     res["echoes"] = echoes
-    res["db"] = xb.at("DB")[0]  # -dBm of the last packet received
+    res["db"] = xb.at("DB", timeout=at_s)[0]  # -dBm of the last packet received
     return res
 
 

@@ -124,7 +124,7 @@ def real_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     r = subprocess.run(swarm_sitl_cmd("run", str(ROOT / "hil_configs" / "demos" / "random_walk.toml"),
                                        "--duration", "2",
                                       "--robots", "3", "--quiet", "--out", str(out)),
-                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+                       cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     return out / "session.mcap"
 

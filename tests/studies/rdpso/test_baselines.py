@@ -472,7 +472,7 @@ def test_a_baseline_runs_in_the_co_simulation(tmp_path: Path) -> None:
     cfg = tmp_path / "gso.toml"
     cfg.write_text(to_toml(raw))
     out = tmp_path / "run"
-    code, s = run(cfg, out, "--duration", "10", timeout=300)
+    code, s = run(cfg, out, "--duration", "10", timeout=600)
     assert code == 0, s.get("error")
     assert s["failures"] == [] and [r["alive"] for r in s["per_robot"]] == [True] * 4
     assert s["radio"]["totals"]["tx"]["frames"] >= 4 * 5  # iterations at 1.5, 3.0, ... 9.0 s

@@ -55,7 +55,7 @@ def test_a_battery_death_stops_the_robot_and_silences_its_radio(tmp_path: Path) 
     cfg = tmp_path / "battery.toml"
     cfg.write_text(CFG)
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     (failure,) = s["failures"]

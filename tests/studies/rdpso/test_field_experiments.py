@@ -216,7 +216,7 @@ def test_a_deployment_only_session_ends_after_the_start_and_reports_links(tmp_pa
     cfg = tmp_path / "dep.toml"
     cfg.write_text(SESSION)
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     dep = s["deployment"]

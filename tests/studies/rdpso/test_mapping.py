@@ -138,7 +138,7 @@ def test_a_mapping_session_grows_eta_and_reports_it(tmp_path: Path) -> None:
     raw["session"] |= {"duration_s": 8.0, "name": "mapping-smoke"}
     cfg = tmp_path / "mapping.toml"
     cfg.write_text(to_toml(raw))
-    code, s = run(cfg, tmp_path / "run", "--duration", "8", timeout=300)
+    code, s = run(cfg, tmp_path / "run", "--duration", "8", timeout=600)
     assert code == 0, s.get("error")
     m = s["mapping"]
     assert m["scans"] == 16  # every 0.5 s from t = 0 (the start poses) to 7.5 s

@@ -23,7 +23,7 @@ def test_two_firmware_crashes_are_noticed_within_three_hellos_and_the_swarm_goes
     raw["faults"] = [{"robot": 1, "at_s": crash_s}, {"robot": 6, "at_s": crash_s}]
     cfg.write_text(to_toml(raw))
     out = tmp_path / "run"
-    code, s = run(cfg, out, timeout=400)
+    code, s = run(cfg, out, timeout=600)
     assert code == 0, s.get("error")
     assert sorted((f["robot"], f["kind"]) for f in s["failures"]) == [(1, "raised"), (6, "raised")]
     assert all("injected fault" in f["detail"] for f in s["failures"])
@@ -48,7 +48,7 @@ def test_two_firmware_crashes_are_noticed_within_three_hellos_and_the_swarm_goes
 def test_the_arena_swarm_climbs_the_light(tmp_path: Path) -> None:
     cfg = arena_variant(tmp_path / "arena.toml", 6, seed=4, duration=40.0)
     out = tmp_path / "run"
-    code, s = run(cfg, out, timeout=400)
+    code, s = run(cfg, out, timeout=600)
     assert code == 0, s.get("error")
     res = score_arena(out, cfg, 6, 40.0)
     curve = res.curves["best_light"]
