@@ -513,7 +513,7 @@ class MavlinkCfg(_Model):
     @classmethod
     def _endpoint(cls, v: str | None) -> str | None:
         if v is not None:
-            from bridge.hil.mavlink_gateway import parse_endpoint
+            from bridge.core.endpoints import parse_endpoint
 
             parse_endpoint(v)
         return v
@@ -718,12 +718,12 @@ def config_warnings(cfg: Config) -> list[str]:
 
     out = []
     if cfg.mavlink.endpoint is not None:
-        from bridge.hil.mavlink_gateway import is_loopback, parse_endpoint
+        from bridge.core.endpoints import is_loopback, parse_endpoint
 
         if not is_loopback(parse_endpoint(cfg.mavlink.endpoint).host):
             out.append(f"mavlink.endpoint: {cfg.mavlink.endpoint} is not on this machine: MAVLink traffic leaves it")
     if cfg.session.listen is not None:
-        from bridge.hil.mavlink_gateway import is_loopback
+        from bridge.core.endpoints import is_loopback
 
         host = cfg.session.listen.removeprefix("tcp/").rpartition(":")[0].removeprefix("[").removesuffix("]")
         if not is_loopback(host):

@@ -38,7 +38,7 @@ from bridge.core.config import Config
 from bridge.core.entities import entity, robot_of
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.medium import Medium, route_table
-from bridge.core.plan import Plan
+from bridge.core.plan import Plan, plan_offer
 from bridge.core.recorder import Recorder
 from bridge.core.registry import MEDIA, STUDIES, robot_spec
 from bridge.core.world import World
@@ -161,8 +161,6 @@ class Hub:
         # join twice or late
         self.joinable: frozenset[str] | None = frozenset(p for p, pp in self.procs.items() if pp.remote)
         if listen:
-            from bridge.hil.join import plan_offer
-
             def offer(query: Any) -> None:  # a zenoh thread: reads the plan and a frozenset (or None)
                 query.reply(transport.PLAN_KEY, plan_offer(self.plan, self.joinable))
 
@@ -585,8 +583,12 @@ class Hub:
                 for r in range(self.n)
             ],
         }
+        sections: list[str] = []
         for lf in self.loop_functions:
-            out.update(lf.summary())
+            part = lf.summary()
+            sections += list(part)
+            out.update(part)
+        out["study_sections"] = sections
         for m in self._media:
             m.report(out)
         return out

@@ -31,6 +31,7 @@ from typing import Any, TextIO
 from bridge.core import transport
 from bridge.core.config import ConfigError, config_warnings, load_config
 from bridge.core.plan import Plan, make_plan
+from bridge.core.registry import PREFLIGHT, STUDIES
 
 # One worker thread per zenoh runtime: a session runs tens of processes on a few cores, and fewer
 # runtime threads mean fewer context switches per quantum (about 5% faster at 10 robots, measured).
@@ -163,11 +164,8 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     if progress is not None:
         for w in config_warnings(cfg):
             say(progress, f"{config_path}: warning: {w}\n")
-    from bridge.hil.devices import session_devices  # pymavlink and python-can: only when a session starts
-
-    for d in session_devices(cfg):  # a real device that does not answer stops the session before it starts
-        if d.real and not (rep := d.check()).ok:
-            raise ConfigError(f"{config_path}: {d.field}: {rep.detail}")
+    for _, check in PREFLIGHT.items():  # e.g. a real device that does not answer stops the session before it starts
+        check(cfg, config_path)
     if cfg.session.listen and (why := _cannot_listen(cfg.session.listen)):  # before anything starts, as devices
         raise ConfigError(f"{config_path}: session.listen: cannot listen on {cfg.session.listen}: {why}")
     out = Path(out_dir)
@@ -195,7 +193,7 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
 
     def spawn(role: str, name: str) -> subprocess.Popen:
         log = open(logs / f"{name}.log", "wb")  # noqa: SIM115 - owned by the child
-        cmd = [sys.executable, "-m", "bridge.core.proc", role, "--plan", str(plan_path), "--session-dir", session_dir,
+        cmd = [sys.executable, "-m", "bridge.hosts.proc", role, "--plan", str(plan_path), "--session-dir", session_dir,
                "--namespace", namespace, "--out", str(out), "--proc", name, "--parent-pid", str(os.getpid())]
         env = {k: v for k, v in os.environ.items() if not k.startswith("CAN_")}  # python-can config
         env = {"ZENOH_RUNTIME": ZENOH_RUNTIME, **env, "PYTHONUNBUFFERED": "1", "MAVLINK20": "1"}
@@ -436,6 +434,14 @@ def _draw(out: Path, plan: Plan, prog: _Progress, stops: _Stops) -> bool:
     return png.exists()
 
 
+def _study_sections(world_res: dict[str, Any]) -> dict[str, Any]:
+    """The summary sections of every study (null where its loop functions did not run), then any other section the
+    session's loop functions wrote."""
+    keys = [k for _, study in STUDIES.items() for k in study.sections]
+    keys += [k for k in world_res.get("study_sections", []) if k not in keys]
+    return {k: world_res.get(k) for k in keys}
+
+
 def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None, interrupted: bool, wall: float,
             t_started: float | None, t_launch: float, prog: _Progress, plot: bool,
             startup_error: str | None, stops: _Stops) -> SessionResult:
@@ -470,9 +476,7 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "wall_lag": world_res.get("wall_lag"),
         "can_events": world_res.get("can_events", []),
         "releases": world_res.get("releases"),  # scouts dropped off carriers' conveyors (sessions with carriers)
-        "deployment": world_res.get("deployment"),  # the rangers' deployments: time, dispersion, coverage
-        "comm": world_res.get("comm"),  # the RDPSO routing layer: bridge/studies/rdpso/comm_stats.py
-        "mapping": world_res.get("mapping"),  # eta_exp and its AUC: bridge/studies/rdpso/mapping.py
+        **_study_sections(world_res),  # what the studies' loop functions measured (bridge/studies/<study>)
         "mavlink": world_res.get("mavlink"),
         "cpu_s_total": round(cpu_total, 3),
         "cpu_s_per_robot_per_sim_s": round(cpu_total / n / sim_t, 5) if sim_t and n else None,

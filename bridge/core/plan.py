@@ -6,6 +6,8 @@ Everything in it follows from the config and the seed alone.
 
 from __future__ import annotations
 
+import importlib.metadata
+import json
 import math
 from dataclasses import asdict, dataclass, field, replace
 
@@ -16,6 +18,7 @@ from bridge.core.arena_map import occupancy
 from bridge.core.config import Config, ConfigError, CylinderObstacle
 from bridge.core.entities import entity
 from bridge.core.rng import stream
+from swarm_logic.geometry import theodorus_spiral
 
 
 @dataclass(frozen=True)
@@ -202,8 +205,6 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
                                   "obstacle (or closer to one than the robot's radius)")
         return [(x, y, math.radians(yd)) for x, y, yd in pl.poses]
     if pl.kind == "spiral":
-        from swarm_logic.families.rdpso.spiral import theodorus_spiral
-
         blocks = len(pl.centres)
         for b, centre in enumerate(pl.centres):
             n_b = sum(1 for i in range(g.count) if i * blocks // g.count == b)
@@ -251,3 +252,23 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
         pts = np.vstack([pts, [x, y]])
         out.append((x, y, yaw()))
     return out
+
+
+# between a world and a joiner (swarm-sitl join): the tick/done/plan exchange; bump on any incompatible change (the
+# version check catches the rest)
+PROTOCOL = 1
+
+
+def version() -> str:
+    """This computer's swarm-sitl version (the installed package's)."""
+    try:
+        return importlib.metadata.version("swarm-sitl")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def plan_offer(plan: Plan, joinable: frozenset[str] | None) -> bytes:
+    """The world's answer to a joiner's ``plan`` query (JSON): the session's name, the software version and protocol,
+    the plan, and which remote logic processes may still join (``None``: the session has started)."""
+    return json.dumps({"session": plan.config["session"]["name"], "version": version(), "protocol": PROTOCOL,
+                       "joinable": None if joinable is None else sorted(joinable), "plan": plan.to_json()}).encode()

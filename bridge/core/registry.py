@@ -17,21 +17,30 @@ from swarm_logic.plugins import PluginError, Registry
 if TYPE_CHECKING:
     from bridge.core.loop_functions import LoopFunctions
     from bridge.core.medium import Medium
-    from bridge.robots.profiles import RobotProfile
+    from bridge.core.profile import RobotProfile
 
-__all__ = ["MEDIA", "ROBOTS", "STUDIES", "PluginError", "RobotSpec", "Study", "register_medium", "register_robot",
-           "register_study", "robot_profile", "robot_spec"]
+__all__ = ["MEDIA", "PREFLIGHT", "ROBOTS", "STUDIES", "PluginError", "RobotSpec", "Study", "register_medium",
+           "register_robot", "register_study", "robot_profile", "robot_spec"]
 
 
 @dataclass(frozen=True)
 class RobotSpec:
-    """A robot model: its body, drive, sensors and firmware figures (``profile``) and the interface its boards speak on
-    the robot's CAN bus (``can_db``: a function returning its cantools database, for names in the recording)."""
+    """A robot model: its body, drive, sensors and firmware figures (``profile``), the interface its boards speak on
+    the robot's CAN bus (``can_db``: a function returning its cantools database, for names in the recording) and its
+    LLC's firmware (``board``)."""
 
     name: str
     profile: RobotProfile
     can_db: Callable[[], Any] | None = None
     title: str = ""
+    # its LLC's firmware: (profile, the robot's plan entry) -> an object whose ``run(t_ns, inputs)`` answers a tick
+    board: Callable[[RobotProfile, Any], Any] | None = None
+
+    def make_board(self, rp: Any) -> Any:
+        """The firmware of robot ``rp``'s low-level controller, as the firmware host runs it."""
+        if self.board is None:
+            raise PluginError(f"robot {self.name!r} declares no LLC firmware (RobotSpec.board)")
+        return self.board(self.profile, rp)
 
     def frame_names(self) -> dict[int, str]:
         """CAN id -> frame name, from the robot's DBC (empty without one)."""
@@ -57,9 +66,13 @@ def _is_medium(obj: Any) -> bool:
     return isinstance(obj, type) and issubclass(obj, Medium)
 
 
+Preflight = Callable[[Any, str], None]  # (config, its path): raise ConfigError naming the field if it cannot start
+
 ROBOTS: Registry[RobotSpec] = Registry("swarm_sitl.robots", "robot", lambda o: isinstance(o, RobotSpec))
 MEDIA: Registry[type[Medium]] = Registry("swarm_sitl.media", "medium", _is_medium)
 STUDIES: Registry[Study] = Registry("swarm_sitl.studies", "study", lambda o: isinstance(o, Study))
+# checks the launcher runs before it starts anything (the hardware bridges: does each real device answer?)
+PREFLIGHT: Registry[Preflight] = Registry("swarm_sitl.preflight", "preflight check", callable)
 
 
 def register_robot(spec: RobotSpec) -> RobotSpec:

@@ -263,7 +263,7 @@ class SessionDevice:
 def session_devices(cfg: Any, out_dir: str = "runs/<config name>") -> list[SessionDevice]:
     """What a session of ``cfg`` (a ``bridge.core.config.Config``) would open, in robot order, then the MAVLink
     endpoint. Pseudo-terminal links are relative to the session's output directory ``out_dir``."""
-    from bridge.hil.mavlink_gateway import parse_endpoint
+    from bridge.core.endpoints import parse_endpoint
 
     found: list[SessionDevice] = []
     r = 0
@@ -321,3 +321,13 @@ def session_devices(cfg: Any, out_dir: str = "runs/<config name>") -> list[Sessi
                                    False, f"UDP: the swarm's MAVLink endpoint {what}; systems "
                                           f"{m.system_id_base}..{m.system_id_base + cfg.robot_count - 1}"))
     return found
+
+
+def preflight(cfg: Any, config_path: str) -> None:
+    """The launcher's check before a session starts (entry point ``swarm_sitl.preflight``): every real device the
+    config names must answer, else a config error naming its field."""
+    from bridge.core.config import ConfigError
+
+    for d in session_devices(cfg):
+        if d.real and not (rep := d.check()).ok:
+            raise ConfigError(f"{config_path}: {d.field}: {rep.detail}")

@@ -13,7 +13,6 @@ Both ends of the exchange live here: the world's answer (``plan_offer``) and the
 from __future__ import annotations
 
 import contextlib
-import importlib.metadata
 import json
 import signal
 import sys
@@ -26,28 +25,11 @@ from pydantic import ValidationError
 
 from bridge.core import transport
 from bridge.core.config import SessionCfg
-from bridge.core.plan import Plan
-
-PROTOCOL = 1  # the tick/done/plan exchange; bump on any incompatible change (the version check catches the rest)
+from bridge.core.plan import PROTOCOL, Plan, version
 
 
 class JoinError(Exception):
     """The joiner cannot join: the message says why, naming the endpoint, the session or the robot."""
-
-
-def version() -> str:
-    """This computer's swarm-sitl version (the installed package's)."""
-    try:
-        return importlib.metadata.version("swarm-sitl")
-    except importlib.metadata.PackageNotFoundError:
-        return "unknown"
-
-
-def plan_offer(plan: Plan, joinable: frozenset[str] | None) -> bytes:
-    """The world's answer to a joiner's ``plan`` query (JSON): the session's name, the software version and protocol,
-    the plan, and which remote logic processes may still join (``None``: the session has started)."""
-    return json.dumps({"session": plan.config["session"]["name"], "version": version(), "protocol": PROTOCOL,
-                       "joinable": None if joinable is None else sorted(joinable), "plan": plan.to_json()}).encode()
 
 
 def choose(offer: dict[str, Any], endpoint: str, session: str, robot: int | None) -> tuple[Plan, int, str]:

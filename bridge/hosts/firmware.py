@@ -1,9 +1,10 @@
-"""Hosts the firmware of one or more robots: per robot an Arduino board with the LLC sketch, and the radio
-modules it carries (an XBee, a UWB module), each an entity with its own schedule.
+"""Hosts the firmware of one or more robots: per robot its LLC board (as its robot plugin builds it:
+``RobotSpec.make_board``), and the radio modules it carries (an XBee, a UWB module), each an entity with its own
+schedule.
 
-Per tick the host sets a due board's clock and pin inputs from the world's physical values, hands it the CAN
-frames the bus delivered, runs ``loop()`` (``setup()`` first, once) and returns the frames it transmitted,
-its pin outputs when they changed, and its next loop time. A module gets the bytes its UART received and the
+Per tick the host hands a due board the world's physical values and the CAN frames the bus delivered, and returns
+what the board answers (the frames it transmitted, its pin outputs when they changed, its next loop time). A module
+gets the bytes its UART received and the
 radio events the medium delivered, and returns the bytes it sent to its host, what it puts on the air, and
 when it next needs to run.
 """
@@ -20,59 +21,14 @@ from typing import TYPE_CHECKING, Any
 from bridge.core.config import Config
 from bridge.core.entities import entity, robot_of, uwb_addr16, xbee_serial64
 from bridge.core.plan import Plan
-from bridge.core.profile import RobotProfile
-from bridge.core.registry import robot_profile
+from bridge.core.registry import robot_spec
 from bridge.core.rng import stream
-from firmware_sim.board import sensors
-from firmware_sim.board.arduino import Board
-from firmware_sim.board.can_controller import Frame
 from firmware_sim.modules.slcan import SlcanAdapter
 from firmware_sim.modules.uwb import UwbModule
 from firmware_sim.modules.xbee import XBeeModule
-from firmware_sim.robots.eswarbot.llc import (
-    PIN_BATTERY,
-    PIN_DIR,
-    PIN_LDR,
-    PIN_PWM,
-    PIN_RSSI,
-    PIN_SONAR,
-    PIN_SONAR_LEFT,
-    PIN_SONAR_RIGHT,
-    RSSI_PWM_HZ,
-    LlcParams,
-    LowLevelController,
-)
 
 if TYPE_CHECKING:
     from bridge.hil.xbee_gateway import XBeeGateway
-
-
-def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
-    # the wheel PI was tuned on the eSwarBot's 48-pulse encoders: the same gains per radian of wheel angle
-    per_pulse = 48 / p.encoder_cpr
-    return LlcParams(
-        kp=LlcParams.kp * per_pulse,
-        ki=LlcParams.ki * per_pulse,
-        max_err_pulses=LlcParams.max_err_pulses / per_pulse,
-        wheel_radius_m=p.wheel_radius_m,
-        half_track_m=p.half_track_m,
-        encoder_cpr=p.encoder_cpr,
-        loop_hz=p.llc_loop_hz,
-        max_wheel_rad_s=p.motor_max_wheel_rad_s,
-        deadband_pwm=p.motor_deadband_pwm,
-        motor_time_constant_s=p.motor_time_constant_s,
-        battery_cells=p.battery_cells,
-        sonar_min_mm=round(p.sonar_min_range_m * 1000),
-        sonar_max_mm=round(p.sonar_max_range_m * 1000),
-        side_sonars=len(p.sonar_angles_deg) == 3,
-        conveyor_slots=p.conveyor_slots,
-        conveyor_pitch_mm=p.conveyor_pitch_m * 1000,
-        conveyor_speed_mm_s=p.conveyor_speed_m_s * 1000,
-        belt_mm_per_step=p.conveyor_m_per_step * 1000,
-        rssi_pwm_input=xbee is not None,
-        # the firmware inverts eq. 3.9 with the sensitivity of the module it is built for
-        xbee_sensitivity_dbm=-92.0 if xbee is not None and xbee["series"] == 1 else -94.0,
-    )
 
 
 class PtyLink:
@@ -175,10 +131,7 @@ class FirmwareHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
         cfg = Config.model_validate(plan.config)
         seed = cfg.session.seed
-        self.boards: dict[int, Board] = {}
-        self.llcs: dict[int, LowLevelController] = {}
-        self.nominal_ns: dict[int, int] = {}  # the loop's own fixed-rate schedule (millis()-based, as on the board)
-        self.last_pins: dict[int, tuple] = {}
+        self.llcs: dict[int, Any] = {}  # each robot's LLC board, as its robot plugin builds it (RobotSpec.board)
         self.xbees: dict[int, XBeeModule] = {}
         self.xbee_baud: dict[int, int] = {}
         self.ptys: dict[int, PtyLink] = {}
@@ -192,10 +145,7 @@ class FirmwareHost:
         for r in robots:
             rp = plan.robots[r]
             if rp.llc_role == "llc":
-                board = Board()
-                self.boards[r] = board
-                self.llcs[r] = LowLevelController(board, llc_params(robot_profile(rp.profile),
-                                                                   rp.xbee if rp.sim_xbee else None))
+                self.llcs[r] = robot_spec(rp.profile).make_board(rp)
             elif rp.llc_role == "can_bridge":
                 self.bridges[r] = CanBridge(rp.can_device)
             if rp.sim_xbee:
@@ -235,50 +185,7 @@ class FirmwareHost:
         return self._uwb(r, t_ns, inputs)
 
     def _llc(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
-        b, llc = self.boards[r], self.llcs[r]
-        b.time_us = t_ns // 1000
-        s = inputs["sens"]
-        b.encoder_counts = [s["enc"][0], s["enc"][1]]
-        b.analog_volts[PIN_SONAR] = sensors.sonar_volts(s["sonar_m"])
-        for pin, m in zip((PIN_SONAR_LEFT, PIN_SONAR_RIGHT), s.get("sides", ()), strict=False):
-            b.analog_volts[pin] = sensors.sonar_volts(m)
-        b.analog_volts[PIN_LDR] = sensors.ldr_volts(s["lux"])
-        b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(s["battery_v"])
-        b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
-        pose = s.get("pose")  # a ground-truth robot's motion-capture receiver: the world pose (x, y, yaw)
-        b.external_pose = (float(pose[0]), float(pose[1]), float(pose[2])) if pose is not None else None
-        for item in inputs["in"]:
-            if item[0] == "can0_state":  # the bus changed this node's fault-confinement state (its EFLG register)
-                b.can.set_error_state(item[1], item[2], item[3])
-            elif len(item) == 5:  # a frame from another node (error frames only move the counters above)
-                _bus, arb_id, data, ext, ts = item
-                b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
-        if r not in self.nominal_ns:  # first tick: power-up
-            self.nominal_ns[r] = t_ns
-            llc.setup()
-        llc.loop()
-        # Next loop on the nominal schedule; the world rounds it up to a quantum boundary, so when the
-        # quantum does not divide the period the loop jitters but keeps its average rate.
-        period = llc.loop_period_us * 1000
-        nominal = self.nominal_ns[r] + period
-        while nominal <= t_ns:
-            nominal += period
-        self.nominal_ns[r] = nominal
-        pwm = tuple(
-            b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1) for i in (0, 1)
-        )
-        pins = (pwm, b.led_rgb, b.stepper_steps)
-        out: dict[str, Any] = {
-            "out": [["can0", f.arbitration_id, f.data, f.is_extended_id] for f in b.can.take_tx()],
-            "wake": nominal,
-            "wom": False,
-        }
-        if pins != self.last_pins.get(r):
-            self.last_pins[r] = pins
-            out["pins"] = {"pwm": list(pwm), "led": list(b.led_rgb)}
-            if llc.p.conveyor_slots:  # the belt's stepper: how far it has turned
-                out["pins"]["belt_steps"] = b.stepper_steps
-        return out
+        return self.llcs[r].run(t_ns, inputs)
 
     def _xbee(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         m = self.xbees[r]

@@ -78,7 +78,7 @@ def session_procs(out: Path) -> list[psutil.Process]:
     found = []
     for p in psutil.process_iter(["cmdline"]):
         cmd = p.info["cmdline"] or []
-        if "bridge.core.proc" in cmd and str(out) in cmd:
+        if "bridge.hosts.proc" in cmd and str(out) in cmd:
             found.append(p)
     return found
 

@@ -17,7 +17,7 @@ from mcap.reader import make_reader
 
 from bridge.core.config import Config
 from bridge.core.registry import robot_profile
-from bridge.hosts.firmware import llc_params
+from bridge.robots.eswarbot.board import llc_params
 from firmware_sim.board.arduino import Board
 from firmware_sim.board.can_controller import CanController, Frame
 from firmware_sim.robots.eswarbot import llc as llc_fw

@@ -20,9 +20,9 @@ from mcap.reader import make_reader
 
 from bridge.core.config import ConfigError, config_warnings, load_config
 from bridge.core.launcher import join_commands
-from bridge.core.plan import make_plan
+from bridge.core.plan import make_plan, plan_offer
 from bridge.core.transport import namespace_for
-from bridge.hil.join import JoinError, choose, plan_offer
+from bridge.hil.join import JoinError, choose
 from tests.conftest import ROOT
 
 CONFIG = """
@@ -109,7 +109,7 @@ def wait_lines(stream, texts: list[str], proc: subprocess.Popen) -> None:
 
 
 def session_procs(out: Path) -> list[psutil.Process]:
-    return [p for p in psutil.process_iter(["cmdline"]) if "bridge.core.proc" in (p.info["cmdline"] or [])
+    return [p for p in psutil.process_iter(["cmdline"]) if "bridge.hosts.proc" in (p.info["cmdline"] or [])
             and str(out) in p.info["cmdline"]]
 
 

@@ -193,7 +193,7 @@ def test_the_random_baseline_drops_each_scout_within_d_max_of_the_last(tmp_path:
 def test_the_conveyor_command_is_checked_and_advances_whole_slots() -> None:
     """On the TraxBot's LLC: CONVEYOR_CMD with 0 slots is a bad frame; 2 slots advance the belt 2 pitches at the
     belt's speed, reported in CONVEYOR_STATUS; the stepper's steps are what the world sees."""
-    from bridge.hosts.firmware import llc_params
+    from bridge.robots.eswarbot.board import llc_params
     from bridge.robots.traxbot import TRAXBOT
     from firmware_sim.board.arduino import Board
     from firmware_sim.board.can_controller import Frame

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from bridge.core.registry import robot_profile
-from bridge.hosts.firmware import llc_params
+from bridge.robots.eswarbot.board import llc_params
 from firmware_sim.board import sensors
 from firmware_sim.board.arduino import Board
 from firmware_sim.board.can_controller import Frame

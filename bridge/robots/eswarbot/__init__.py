@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
+from bridge.robots.eswarbot.board import LlcBoard
 from swarm_logic.robots.eswarbot import eswarbot_llc_db
 
 ESWARBOT = RobotProfile(
@@ -42,4 +43,5 @@ ESWARBOT = RobotProfile(
     llc_loop_hz=50.0,  # the thesis digest recommends a 50-100 Hz motor/encoder loop
 )
 
-SPEC = RobotSpec("eswarbot", ESWARBOT, eswarbot_llc_db, "eSwarBot: differential drive, Arduino LLC on CAN, XBee, UWB")
+SPEC = RobotSpec("eswarbot", ESWARBOT, eswarbot_llc_db, "eSwarBot: differential drive, Arduino LLC on CAN, XBee, UWB",
+                 LlcBoard)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
+from bridge.robots.eswarbot.board import LlcBoard
 from swarm_logic.robots.eswarbot import eswarbot_llc_db
 
 TRAXBOT = RobotProfile(
@@ -43,4 +44,5 @@ TRAXBOT = RobotProfile(
     conveyor_speed_m_s=0.05,  # stepper-driven belt, step resolution < 1 mm (Table 3.4; speed assumed)
 )
 
-SPEC = RobotSpec("traxbot", TRAXBOT, eswarbot_llc_db, "TraxBot: tracked ranger, three sonars, conveyor of five scouts")
+SPEC = RobotSpec("traxbot", TRAXBOT, eswarbot_llc_db, "TraxBot: tracked ranger, three sonars, conveyor of five scouts",
+                 LlcBoard)  # the eSwarBot's LLC sketch, with its side sonars and conveyor

@@ -38,7 +38,7 @@ from functools import lru_cache
 from typing import Any, ClassVar
 
 from swarm_logic.families.baselines.common import COMMON_DEFAULTS, COMMON_RANGES, Iterated, Vec, wire
-from swarm_logic.families.rdpso import motion
+from swarm_logic.geometry import clamp
 
 MAGIC = 0x41  # "A"
 HEAD = struct.Struct("<BBHfffB")
@@ -147,7 +147,7 @@ def descent_step(grad_h: Vec, grad_g: Vec, j: Vec, rho: float, gamma: float, dt:
     """dt (-grad sigma + J) with sigma = gamma g - rho h, clamped to dx_max."""
     vx = dt * (rho * grad_h[0] - gamma * grad_g[0] + j[0])
     vy = dt * (rho * grad_h[1] - gamma * grad_g[1] + j[1])
-    return motion.clamp(vx, vy, dx_max)
+    return clamp(vx, vy, dx_max)
 
 
 class Afs(Iterated):

@@ -22,8 +22,7 @@ from collections.abc import Callable, Iterable
 from typing import Any, ClassVar
 
 from swarm_logic.controller import MAX_SPEED_MPS, Controller
-from swarm_logic.families.rdpso import motion
-from swarm_logic.geometry import wrap
+from swarm_logic.geometry import clamp, wrap
 from swarm_logic.iteration import IterationSchedule
 from swarm_logic.robot import Robot
 
@@ -230,7 +229,7 @@ class Iterated(IterationSchedule, Controller):
     # -- moving ---------------------------------------------------------------------------------------------
     def move_by(self, vx: float, vy: float) -> Vec:
         """Drive the displacement (vx, vy), clamped to dx_max (rotate-then-go); returns what was commanded."""
-        vx, vy = motion.clamp(vx, vy, self.p["dx_max_m"])
+        vx, vy = clamp(vx, vy, self.p["dx_max_m"])
         return self.move_along(math.atan2(vy, vx), math.hypot(vx, vy))
 
     def move_along(self, heading: float, dist: float) -> Vec:

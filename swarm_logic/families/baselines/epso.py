@@ -32,7 +32,7 @@ from swarm_logic.families.baselines.common import (
     pso_velocity,
     wire,
 )
-from swarm_logic.families.rdpso import motion
+from swarm_logic.geometry import clamp
 
 MAGIC = 0x45  # "E"
 FRAME = struct.Struct("<BBHfffff")
@@ -133,7 +133,7 @@ class Epso(Iterated):
         rng = self.robot.rng_py
         v = pso_velocity(self.v, (self.x, self.y), p["w"], ((p["c1"], self.pbest_at), (p["c2"], self.nbest_at)),
                          rng.random)
-        vx, vy = self.v = motion.clamp(*v, p["dx_max_m"])  # |v| <= dx_max (the PSO's V_max)
+        vx, vy = self.v = clamp(*v, p["dx_max_m"])  # |v| <= dx_max (the PSO's V_max)
         heading, avoided = braitenberg(math.atan2(vy, vx), self.theta, self.sonar, p["avoid_m"],
                                        math.radians(p["avoid_turn_deg"]), tie=rng.random() - 0.5)
         self.move_along(heading, math.hypot(vx, vy))

@@ -37,8 +37,7 @@ from swarm_logic.families.baselines.common import (
     pso_velocity,
     wire,
 )
-from swarm_logic.families.rdpso import motion
-from swarm_logic.geometry import wrap
+from swarm_logic.geometry import clamp, wrap
 
 MAGIC = 0x50  # "P"
 HEAD = struct.Struct("<BBHfB")
@@ -169,7 +168,7 @@ class Ppso(Iterated):
         self.social_update()
         v = pso_velocity(self.v, (self.x, self.y), p["w"], ((p["rho1"], self.chi1), (p["rho2"], self.chi2)),
                          self.robot.rng_py.random)
-        self.v = motion.clamp(*v, p["dx_max_m"])
+        self.v = clamp(*v, p["dx_max_m"])
         reference = self.theta if self.reference is None else self.reference
         collided = self.sonar < p["collide_m"]
         if collided:  # go_back_turn_right: back off along -heading, and face right of where it was going

@@ -23,6 +23,10 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from swarm_logic.geometry import clamp
+
+__all__ = ["clamp"]  # a step's length limit (eq. 4.6): one definition, in swarm_logic.geometry
+
 FORMS = ("thesis", "exact_gl")
 
 # Deceleration bound as printed (eq. 7.11). The exact root of eq. 7.10 is 0.631994...; at 0.632 the memory weights
@@ -101,15 +105,6 @@ def memory_term(weights: tuple[float, ...], history: Iterable[tuple[float, float
         mx += w * v[0]
         my += w * v[1]
     return mx, my
-
-
-def clamp(vx: float, vy: float, dx_max: float) -> tuple[float, float]:
-    """Scale (vx, vy) down to length dx_max if longer, keeping its direction (|v| <= dx_max, eq. 4.6)."""
-    n2 = vx * vx + vy * vy
-    if n2 <= dx_max * dx_max:
-        return vx, vy
-    s = dx_max / math.sqrt(n2)
-    return vx * s, vy * s
 
 
 def _thesis_memory_sum(alpha: float) -> float:

@@ -10,35 +10,9 @@ from __future__ import annotations
 
 import math
 
+from swarm_logic.geometry import check_sigma, theodorus_angles, theodorus_spiral
 
-def _check_sigma(sigma: int) -> None:
-    if sigma not in (1, -1):
-        raise ValueError(f"sigma (spiral turn direction) must be +1 or -1, got {sigma!r}")
-
-
-def theodorus_angles(n: int, sigma: int = 1) -> list[float]:
-    """phi_1..phi_n of eq. 5.1: phi_m = sigma sum_{k=1..m} arctan(1/sqrt(k)) [rad] (45°, 80.26°, 110.26°, ...)."""
-    _check_sigma(sigma)
-    if n < 0:
-        raise ValueError(f"n must be >= 0, got {n}")
-    out: list[float] = []
-    acc = 0.0
-    for k in range(1, n + 1):
-        acc += math.atan(1.0 / math.sqrt(k))
-        out.append(sigma * acc)
-    return out
-
-
-def theodorus_spiral(n: int, d_max: float, x0: tuple[float, float] = (0.0, 0.0), phi0: float = 0.0,
-                     sigma: int = 1) -> list[tuple[float, float]]:
-    """Positions of robots 1..n on the spiral of Theodorus with legs d_max (eq. 5.2).
-
-    x_m = x0 + d_max sqrt(m+1) [cos(phi_m + phi0), sin(phi_m + phi0)]: consecutive robots are d_max apart and
-    robot m is d_max sqrt(m+1) from the centre x0.
-    """
-    return [(x0[0] + d_max * math.sqrt(m + 1) * math.cos(phi + phi0),
-             x0[1] + d_max * math.sqrt(m + 1) * math.sin(phi + phi0))
-            for m, phi in enumerate(theodorus_angles(n, sigma), start=1)]
+__all__ = ["theodorus_angles", "theodorus_spiral"]  # plane geometry: one definition, in swarm_logic.geometry
 
 
 def est_next(x_i: tuple[float, float], x_i1: tuple[float, float], theta_i1: float | None, d: float, i: int,
@@ -57,7 +31,7 @@ def est_next(x_i: tuple[float, float], x_i1: tuple[float, float], theta_i1: floa
     the leg heading; ``x_i1`` supplies that heading (bearing x_i -> x_i1) when ``theta_i1`` is None. ``d`` is the
     measured leg length |x_{i+1} - x_i| (each pair gets its own spiral, so unequal legs are allowed).
     """
-    _check_sigma(sigma)
+    check_sigma(sigma)
     if i < 1:
         raise ValueError(f"spiral index i must be >= 1 (scout i at radius sqrt(i+1)), got {i}")
     if theta_i1 is None:

@@ -1,4 +1,4 @@
-"""Entry point of every child process of a session: ``python -m bridge.core.proc ROLE ...``.
+"""Entry point of every child process of a session: ``python -m bridge.hosts.proc ROLE ...``.
 
 Roles: ``world`` (the hub: clock, physics, router, recorder), ``firmware`` and ``logic`` (participants).
 Children never read the terminal's signals (the launcher owns Ctrl-C); they die with the launcher.
@@ -84,7 +84,7 @@ def _participant(args: argparse.Namespace, plan) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="bridge.core.proc")
+    ap = argparse.ArgumentParser(prog="bridge.hosts.proc")
     ap.add_argument("role", choices=["world", "firmware", "logic"])
     ap.add_argument("--plan", required=True)
     ap.add_argument("--session-dir", required=True)

@@ -1,0 +1,116 @@
+"""The eSwarBot's Arduino board with its LLC sketch, wired as the real robot is: which physical value reaches which
+pin (encoders, the sonars' analog outputs, the light-dependent resistor, the battery divider, the XBee's RSSI PWM
+output, a motion-capture receiver), which pins drive the motors, the LED strip and a TraxBot's conveyor stepper.
+
+The firmware host runs one per robot whose LLC the session simulates (``RobotSpec.make_board``); the sketch itself
+is ``firmware_sim.robots.eswarbot.llc``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from bridge.core.plan import RobotPlan
+from bridge.core.profile import RobotProfile
+from firmware_sim.board import sensors
+from firmware_sim.board.arduino import Board
+from firmware_sim.board.can_controller import Frame
+from firmware_sim.robots.eswarbot.llc import (
+    PIN_BATTERY,
+    PIN_DIR,
+    PIN_LDR,
+    PIN_PWM,
+    PIN_RSSI,
+    PIN_SONAR,
+    PIN_SONAR_LEFT,
+    PIN_SONAR_RIGHT,
+    RSSI_PWM_HZ,
+    LlcParams,
+    LowLevelController,
+)
+
+
+def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
+    # the wheel PI was tuned on the eSwarBot's 48-pulse encoders: the same gains per radian of wheel angle
+    per_pulse = 48 / p.encoder_cpr
+    return LlcParams(
+        kp=LlcParams.kp * per_pulse,
+        ki=LlcParams.ki * per_pulse,
+        max_err_pulses=LlcParams.max_err_pulses / per_pulse,
+        wheel_radius_m=p.wheel_radius_m,
+        half_track_m=p.half_track_m,
+        encoder_cpr=p.encoder_cpr,
+        loop_hz=p.llc_loop_hz,
+        max_wheel_rad_s=p.motor_max_wheel_rad_s,
+        deadband_pwm=p.motor_deadband_pwm,
+        motor_time_constant_s=p.motor_time_constant_s,
+        battery_cells=p.battery_cells,
+        sonar_min_mm=round(p.sonar_min_range_m * 1000),
+        sonar_max_mm=round(p.sonar_max_range_m * 1000),
+        side_sonars=len(p.sonar_angles_deg) == 3,
+        conveyor_slots=p.conveyor_slots,
+        conveyor_pitch_mm=p.conveyor_pitch_m * 1000,
+        conveyor_speed_mm_s=p.conveyor_speed_m_s * 1000,
+        belt_mm_per_step=p.conveyor_m_per_step * 1000,
+        rssi_pwm_input=xbee is not None,
+        # the firmware inverts eq. 3.9 with the sensitivity of the module it is built for
+        xbee_sensitivity_dbm=-92.0 if xbee is not None and xbee["series"] == 1 else -94.0,
+    )
+
+
+class LlcBoard:
+    """One robot's board: each tick sets its clock and pins from the world's physical values, hands it the CAN
+    frames the bus delivered, runs ``loop()`` (``setup()`` first, once) and answers with the frames it sent, its pin
+    outputs when they changed, and its next loop time."""
+
+    def __init__(self, profile: RobotProfile, rp: RobotPlan) -> None:
+        self.board = Board()
+        self.llc = LowLevelController(self.board, llc_params(profile, rp.xbee if rp.sim_xbee else None))
+        self.nominal_ns: int | None = None  # the loop's own fixed-rate schedule (millis()-based, as on the board)
+        self.last_pins: tuple | None = None
+
+    def run(self, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        b, llc = self.board, self.llc
+        b.time_us = t_ns // 1000
+        s = inputs["sens"]
+        b.encoder_counts = [s["enc"][0], s["enc"][1]]
+        b.analog_volts[PIN_SONAR] = sensors.sonar_volts(s["sonar_m"])
+        for pin, m in zip((PIN_SONAR_LEFT, PIN_SONAR_RIGHT), s.get("sides", ()), strict=False):
+            b.analog_volts[pin] = sensors.sonar_volts(m)
+        b.analog_volts[PIN_LDR] = sensors.ldr_volts(s["lux"])
+        b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(s["battery_v"])
+        b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
+        pose = s.get("pose")  # a ground-truth robot's motion-capture receiver: the world pose (x, y, yaw)
+        b.external_pose = (float(pose[0]), float(pose[1]), float(pose[2])) if pose is not None else None
+        for item in inputs["in"]:
+            if item[0] == "can0_state":  # the bus changed this node's fault-confinement state (its EFLG register)
+                b.can.set_error_state(item[1], item[2], item[3])
+            elif len(item) == 5:  # a frame from another node (error frames only move the counters above)
+                _bus, arb_id, data, ext, ts = item
+                b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
+        if self.nominal_ns is None:  # first tick: power-up
+            self.nominal_ns = t_ns
+            llc.setup()
+        llc.loop()
+        # Next loop on the nominal schedule; the world rounds it up to a quantum boundary, so when the
+        # quantum does not divide the period the loop jitters but keeps its average rate.
+        period = llc.loop_period_us * 1000
+        nominal = self.nominal_ns + period
+        while nominal <= t_ns:
+            nominal += period
+        self.nominal_ns = nominal
+        pwm = tuple(
+            b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1) for i in (0, 1)
+        )
+        pins = (pwm, b.led_rgb, b.stepper_steps)
+        out: dict[str, Any] = {
+            "out": [["can0", f.arbitration_id, f.data, f.is_extended_id] for f in b.can.take_tx()],
+            "wake": nominal,
+            "wom": False,
+        }
+        if pins != self.last_pins:
+            self.last_pins = pins
+            out["pins"] = {"pwm": list(pwm), "led": list(b.led_rgb)}
+            if llc.p.conveyor_slots:  # the belt's stepper: how far it has turned
+                out["pins"]["belt_steps"] = b.stepper_steps
+        return out

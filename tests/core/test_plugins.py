@@ -1,0 +1,181 @@
+"""Plugins from outside the project: a robot, a behaviour and a study in a package of their own, found by entry point,
+run in a whole session with no file of swarm-sitl edited; and the in-process registry calls."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from bridge.core.registry import MEDIA, ROBOTS, STUDIES, RobotSpec, register_robot, robot_profile
+from swarm_logic.behaviours import BEHAVIOURS, load_behaviour, register_behaviour
+from swarm_logic.controller import Controller
+from swarm_logic.plugins import PluginError
+from tests.conftest import ROOT
+
+PACKAGE = '''
+"""A lab's own swarm-sitl plugins: the minibot robot, the circler behaviour, the laps study."""
+
+from typing import Any, ClassVar
+
+from bridge.core.loop_functions import LoopFunctions
+from bridge.core.registry import RobotSpec, Study, robot_profile
+from swarm_logic.controller import Controller
+
+MINIBOT = RobotSpec("minibot", robot_profile("eswarbot").model_copy(update={"name": "minibot", "radius_m": 0.05,
+                                                                            "mass_kg": 0.4}),
+                    title="Minibot: a smaller eSwarBot")
+
+
+class Circler(Controller):
+    """Drives in a circle and logs its odometry every step."""
+
+    defaults: ClassVar[dict[str, Any]] = {"speed_mps": 0.1, "turn_rate_rps": 0.5, "period_s": 0.1}
+    ranges: ClassVar[dict[str, str]] = {"speed_mps": "[0, 2]", "turn_rate_rps": "[0, 20]", "period_s": "(0, 10]"}
+
+    def init(self, robot):
+        super().init(robot)
+        self.p = self.with_defaults(robot.params)
+        self.period_s = self.p["period_s"]
+
+    def step(self):
+        self.robot.llc.drive(self.p["speed_mps"], self.p["turn_rate_rps"])
+        self.robot.log("lap", t=self.robot.clock.now())
+
+
+class Laps(LoopFunctions):
+    """Counts the circlers' log records, and ends the session early once it has enough."""
+
+    @classmethod
+    def wanted(cls, cfg):
+        return any(g.behaviour == "circler" for g in cfg.robots)
+
+    def __init__(self, hub):
+        super().__init__(hub)
+        self.records = {}
+        self.pre_steps = 0
+
+    def pre_step(self, t):
+        self.pre_steps += 1
+
+    def on_log(self, robot, topic, values, t):
+        if topic == "lap":
+            self.records[robot] = self.records.get(robot, 0) + 1
+            if sum(self.records.values()) >= 40:
+                self.hub.end_ns = min(self.hub.end_ns, t + 1_000_000_000)
+
+    def summary(self):
+        return {"laps": {"records": {str(r): n for r, n in sorted(self.records.items())},
+                         "pre_steps": self.pre_steps}}
+
+
+LAPS = Study("laps", "Laps: how often the circlers report", loop_functions=Laps, sections=("laps",))
+'''
+
+ENTRY_POINTS = '''
+[swarm_sitl.robots]
+minibot = labplugins:MINIBOT
+
+[swarm_sitl.behaviours]
+circler = labplugins:Circler
+
+[swarm_sitl.studies]
+laps = labplugins:LAPS
+'''
+
+CONFIG = '''
+[session]
+name = "outside"
+duration_s = 30
+seed = 5
+
+[arena]
+width_m = 3
+length_m = 3
+
+[[robots]]
+count = 2
+profile = "minibot"
+behaviour = "circler"
+placement = { kind = "grid", origin = [1.0, 1.0], spacing_m = 0.8 }
+'''
+
+
+@pytest.fixture
+def lab_package(tmp_path: Path) -> Path:
+    """An installed package outside the project's folders: its module and its dist-info with entry points."""
+    site = tmp_path / "site"
+    (site / "labplugins").mkdir(parents=True)
+    (site / "labplugins" / "__init__.py").write_text(textwrap.dedent(PACKAGE))
+    info = site / "labplugins-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: labplugins\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(ENTRY_POINTS)
+    return site
+
+
+def _env(site: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(ROOT)])}
+
+
+def test_a_robot_behaviour_and_study_from_outside_run_a_session(lab_package: Path, tmp_path: Path) -> None:
+    cfg = tmp_path / "outside.toml"
+    cfg.write_text(CONFIG)
+    listed = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "list", "--json"], env=_env(lab_package),
+                            capture_output=True, text=True, timeout=600)
+    assert listed.returncode == 0, listed.stderr
+    found = {kind: {row["name"]: row["from"] for row in rows} for kind, rows in json.loads(listed.stdout).items()}
+    assert found["robots"]["minibot"] == "labplugins:MINIBOT" and "eswarbot" in found["robots"]
+    assert found["behaviours"]["circler"] == "labplugins:Circler" and "rdpso" in found["behaviours"]
+    assert found["studies"]["laps"] == "labplugins:LAPS" and "rdpso" in found["studies"]
+    out = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "run", str(cfg), "--out", str(out), "--quiet"],
+                       env=_env(lab_package), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert [rr["profile"] for rr in s["per_robot"]] == ["minibot", "minibot"]
+    assert all(rr["distance_m"] > 0.1 for rr in s["per_robot"])  # the circlers drove
+    laps = s["laps"]  # the study's section, written by its loop functions
+    assert sum(laps["records"].values()) >= 40 and set(laps["records"]) == {"0", "1"}
+    assert s["sim_time_s"] < 30  # its end condition stopped the session before duration_s
+    assert laps["pre_steps"] == s["quanta"]
+    assert s["deployment"] is None and s["comm"] is None  # the RDPSO study's sections, not measured here
+
+
+def test_plugins_not_installed_are_unknown(tmp_path: Path) -> None:
+    cfg = tmp_path / "outside.toml"
+    cfg.write_text(CONFIG)
+    r = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "validate", str(cfg)], capture_output=True,
+                       text=True, timeout=600, cwd=ROOT)
+    assert r.returncode == 2
+    assert "robots[0].profile: unknown robot profile 'minibot'; known: eswarbot, traxbot" in r.stderr, r.stderr
+
+
+def test_the_registry_calls(monkeypatch: pytest.MonkeyPatch) -> None:
+    class Still(Controller):
+        """Stays where it is."""
+
+        def step(self) -> None:
+            self.robot.llc.stop()
+
+    spec = RobotSpec("stillbot", robot_profile("eswarbot").model_copy(update={"name": "stillbot"}))
+    try:
+        assert register_robot(spec) is spec and ROBOTS.get("stillbot") is spec
+        assert register_behaviour("still", Still) is Still and load_behaviour("still") is Still
+        assert ROBOTS.origin("stillbot") == "registered" and "still" in BEHAVIOURS.names()
+        with pytest.raises(PluginError, match="registered already"):
+            register_behaviour("still", type("Other", (Still,), {}))
+        with pytest.raises(PluginError, match="is not a robot"):
+            ROBOTS.register("notaspec", object())  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match=r"is not a swarm_logic\.controller\.Controller subclass"):
+            load_behaviour("json:dumps")
+    finally:
+        ROBOTS.unregister("stillbot")
+        BEHAVIOURS.unregister("still")
+    assert "still" not in BEHAVIOURS.names()
+    assert {"can", "uart", "radio", "uwb", "mavlink"} <= set(MEDIA.names()) and "rdpso" in STUDIES.names()
