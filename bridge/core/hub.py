@@ -105,6 +105,7 @@ class Hub:
         self._topics = {r: (f"/r{r:03d}/can0", f"/r{r:03d}/llc/pins") for r in range(self.n)}
         self.pin_inputs: list[dict[str, Any]] = [{} for _ in range(self.n)]  # values media put on an LLC's pins
         self.ideal_pose = {r for r, rp in enumerate(plan.robots) if rp.pose_source == "ground_truth"}
+        self.pin_io = [self.robot_spec(r).pins for r in range(self.n)]  # each LLC's wiring in the world
         self.releases: list[dict[str, Any]] = []
         self.carriers = {rp.carrier for rp in plan.robots if rp.carrier is not None}  # robots with scouts on board
         # battery deaths to come: (time, robot)
@@ -269,15 +270,11 @@ class Hub:
                 handler(t, *args)
 
     def _pins(self, t: int, r: int, pins: dict[str, Any]) -> None:
-        """A delivery: the pin writes of the LLC's previous loop take effect (motors, LEDs, a conveyor's stepper)."""
+        """A delivery: the pin writes of the LLC's previous loop take effect, as its robot is wired."""
         self.counts["pin_writes"] += 1
         if r in self.dead:
             return
-        world = self.world
-        world.set_pwm(r, *pins["pwm"])
-        world.set_led(r, tuple(pins["led"]))
-        if "belt_steps" in pins:
-            world.set_belt(r, pins["belt_steps"])
+        self.pin_io[r].actuate(self.world, r, pins)
 
     def _due(self, t: int) -> dict[str, list[str]]:
         due: dict[str, list[str]] = defaultdict(list)
@@ -371,7 +368,7 @@ class Hub:
                 self.robot_failed(r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
                 continue
             pins = res.get("pins")
-            pins_ok = pins is None or _valid_pins(pins)
+            pins_ok = pins is None or self.pin_io[r].valid(pins)
             if e in sensed:  # one record per LLC loop: what its pins read, and what it wrote
                 pins_io = dict(sensed[e])
                 if pins is not None and pins_ok:
@@ -456,19 +453,10 @@ class Hub:
                     self.wakeups[e[e.index("/") + 1:]] += 1
                     entry: dict[str, Any] = {"in": self.inbox[e]}
                     self.inbox[e] = []
-                    if e.endswith("/llc"):
+                    if e.endswith("/llc"):  # the board's pins, as its robot is wired
                         r = robot_of(e)
-                        s = world.sensors(r)
-                        entry["sens"] = {"enc": list(s.encoders), "sonar_m": s.sonar_m, "lux": s.lux,
-                                         "battery_v": s.battery_v}
-                        if s.side_sonars_m:
-                            entry["sens"]["sides"] = list(s.side_sonars_m)
-                        if self.pin_inputs[r]:  # what media put on its pins (an XBee's RSSI PWM output)
-                            entry["sens"].update(self.pin_inputs[r])
-                        sensed[e] = entry["sens"]  # recorded as the pins' values; the pose is in /world/poses
-                        if r in self.ideal_pose:  # its mocap receiver: the true pose in the world frame
-                            entry["sens"] = {**entry["sens"], "pose": [
-                                float(world.pos[r, 0]), float(world.pos[r, 1]), float(world.yaw[r])]}
+                        entry["sens"], sensed[e] = self.pin_io[r].sense(world, r, self.pin_inputs[r],
+                                                                         r in self.ideal_pose)
                     run[e] = entry
                 self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
                 self.proc_ticks += 1
@@ -641,12 +629,3 @@ def _valid_reply(res: dict) -> bool:
     """The shape of one entity's answer: ``out`` a list, ``wake`` an int or None, ``err`` a str or None."""
     return (isinstance(res.get("out", []), list) and (res.get("wake") is None or type(res.get("wake")) is int)
             and (res.get("err") is None or isinstance(res.get("err"), str)))
-
-
-def _valid_pins(pins: Any) -> bool:
-    if not isinstance(pins, dict):
-        return False
-    pwm, led, belt = pins.get("pwm"), pins.get("led"), pins.get("belt_steps", 0)
-    return (isinstance(pwm, list) and len(pwm) == 2 and all(isinstance(v, int) and -255 <= v <= 255 for v in pwm)
-            and isinstance(led, list) and len(led) == 3 and all(isinstance(v, int) and 0 <= v <= 255 for v in led)
-            and type(belt) is int and belt >= 0)

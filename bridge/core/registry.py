@@ -26,8 +26,8 @@ __all__ = ["MEDIA", "PREFLIGHT", "ROBOTS", "STUDIES", "PluginError", "RobotSpec"
 @dataclass(frozen=True)
 class RobotSpec:
     """A robot model: its body, drive, sensors and firmware figures (``profile``), the interface its boards speak on
-    the robot's CAN bus (``can_db``: a function returning its cantools database, for names in the recording) and its
-    LLC's firmware (``board``)."""
+    the robot's CAN bus (``can_db``: a function returning its cantools database, for names in the recording), its
+    LLC's firmware (``board``) and that board's wiring in the world (``pins``)."""
 
     name: str
     profile: RobotProfile
@@ -35,6 +35,13 @@ class RobotSpec:
     title: str = ""
     # its LLC's firmware: (profile, the robot's plan entry) -> an object whose ``run(t_ns, inputs)`` answers a tick
     board: Callable[[RobotProfile, Any], Any] | None = None
+    # what that board's pins meet in the world: ``sense(world, r, media, ideal_pose)``, ``valid(pins)``,
+    # ``actuate(world, r, pins)`` (the hub asks it each tick)
+    pins: Any = None
+
+    def __post_init__(self) -> None:
+        if (self.board is None) != (self.pins is None):
+            raise PluginError(f"robot {self.name!r}: an LLC firmware (board) and its wiring (pins) go together")
 
     def make_board(self, rp: Any) -> Any:
         """The firmware of robot ``rp``'s low-level controller, as the firmware host runs it."""

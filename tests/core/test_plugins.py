@@ -21,15 +21,16 @@ from tests.conftest import ROOT
 PACKAGE = '''
 """A lab's own swarm-sitl plugins: the minibot robot, the circler behaviour, the laps study."""
 
+from dataclasses import replace
 from typing import Any, ClassVar
 
 from bridge.core.loop_functions import LoopFunctions
-from bridge.core.registry import RobotSpec, Study, robot_profile
+from bridge.core.registry import Study, robot_spec
 from swarm_logic.controller import Controller
 
-MINIBOT = RobotSpec("minibot", robot_profile("eswarbot").model_copy(update={"name": "minibot", "radius_m": 0.05,
-                                                                            "mass_kg": 0.4}),
-                    title="Minibot: a smaller eSwarBot")
+ESWARBOT = robot_spec("eswarbot")  # its board, wiring and CAN interface; a smaller, lighter body
+MINIBOT = replace(ESWARBOT, name="minibot", title="Minibot: a smaller eSwarBot",
+                  profile=ESWARBOT.profile.model_copy(update={"name": "minibot", "radius_m": 0.05, "mass_kg": 0.4}))
 
 
 class Circler(Controller):
@@ -164,6 +165,8 @@ def test_the_registry_calls(monkeypatch: pytest.MonkeyPatch) -> None:
             self.robot.llc.stop()
 
     spec = RobotSpec("stillbot", robot_profile("eswarbot").model_copy(update={"name": "stillbot"}))
+    with pytest.raises(PluginError, match="go together"):
+        RobotSpec("halfbot", spec.profile, board=lambda profile, rp: None)
     try:
         assert register_robot(spec) is spec and ROBOTS.get("stillbot") is spec
         assert register_behaviour("still", Still) is Still and load_behaviour("still") is Still

@@ -11,6 +11,7 @@ from __future__ import annotations
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
 from bridge.robots.eswarbot.board import LlcBoard
+from bridge.robots.eswarbot.pins import LLC_PINS
 from swarm_logic.robots.eswarbot import eswarbot_llc_db
 
 ESWARBOT = RobotProfile(
@@ -44,4 +45,4 @@ ESWARBOT = RobotProfile(
 )
 
 SPEC = RobotSpec("eswarbot", ESWARBOT, eswarbot_llc_db, "eSwarBot: differential drive, Arduino LLC on CAN, XBee, UWB",
-                 LlcBoard)
+                 LlcBoard, LLC_PINS)

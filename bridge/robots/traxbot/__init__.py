@@ -6,6 +6,7 @@ from __future__ import annotations
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
 from bridge.robots.eswarbot.board import LlcBoard
+from bridge.robots.eswarbot.pins import LLC_PINS
 from swarm_logic.robots.eswarbot import eswarbot_llc_db
 
 TRAXBOT = RobotProfile(
@@ -45,4 +46,4 @@ TRAXBOT = RobotProfile(
 )
 
 SPEC = RobotSpec("traxbot", TRAXBOT, eswarbot_llc_db, "TraxBot: tracked ranger, three sonars, conveyor of five scouts",
-                 LlcBoard)  # the eSwarBot's LLC sketch, with its side sonars and conveyor
+                 LlcBoard, LLC_PINS)  # the eSwarBot's LLC sketch, with its side sonars and conveyor

@@ -147,7 +147,7 @@ class Rdpso(IterationSchedule, Controller):
         "dx_max_m": "(0, inf)",
         "r_w_m": "(0, inf)",
         "sc_max": "[1, inf)",
-        "d_max_m": "(0, inf)",
+        "d_max_m": "(0, inf]",  # inf: no communication constraint (infrastructure, E1)
         "q_min_dbm": DBM_RANGE,
         "k_q": "(0, inf)",
         "k_conn": "[1, inf)",

@@ -294,3 +294,12 @@ def assert_device_protocols_only(mod: object) -> None:
     used = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Attribute)
             and n.value.attr in ("llc", "xbee")}
     assert used <= {"state", "move", "set_led", "stop", "set_odometry", "send_nowait", "recv"}
+
+
+def test_an_infinite_communication_range_is_a_valid_d_max() -> None:
+    """E1's infrastructure cell (d_max = inf: no communication constraint) passes the parameter checks."""
+    from swarm_logic.families.rdpso.controller import Rdpso
+
+    assert Rdpso.param_error("d_max_m", math.inf) is None
+    assert Rdpso.param_error("d_max_m", 0.0) is not None and Rdpso.param_error("d_max_m", math.nan) is not None
+    Rdpso.resolve({"d_max_m": math.inf})
