@@ -74,6 +74,9 @@ class Range:
 class Controller(ABC):
     period_s: float = 0.1
     defaults: ClassVar[dict[str, Any]] = {}  # parameters and their defaults: configs are checked against them
+    # the log topic of its one record per iteration (k, sid, improved, x, y): what the numerical runner scores
+    # (subgroups, exclusions, ruptures); None for a controller without iterations
+    iteration_log: ClassVar[str | None] = None
     # the numeric parameters' ranges, in interval notation ("(0, 2]"); made ``Range``s when the class is defined
     ranges: ClassVar[Mapping[str, str | Range]] = {}
     # parameters read only by ``init``: ``set_param`` stores them for the next start (a reboot) and no sooner

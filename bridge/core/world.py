@@ -123,6 +123,14 @@ class World:
         n = len(robots)
         self.n = n
         self.profiles: list[RobotProfile] = [robot_profile(r.profile) for r in robots]
+        self._spawn_bodies(robots)
+        self._drivetrains(robots)
+        self._sonar_rays()
+
+    def _spawn_bodies(self, robots: list[RobotPlan]) -> None:
+        """One rigid cylinder per robot (a gateway's antenna: a point nothing touches), the stated motions, and the
+        robots that start on a carrier's conveyor."""
+        n = self.n
         self.bodies: list[int] = []
         shapes: dict[str, int] = {}
         for r, prof in zip(robots, self.profiles, strict=True):
@@ -153,7 +161,11 @@ class World:
         self.released: list[dict] = []  # releases since the hub last took them (t_ns, robot, carrier, pose)
         for i in self.carried:  # on board nothing touches them and they touch nothing
             pb.setCollisionFilterGroupMask(self.bodies[i], -1, 0, 0, physicsClientId=self.cid)
-        p = self.profiles
+
+    def _drivetrains(self, robots: list[RobotPlan]) -> None:
+        """Every robot's motors, wheels, battery and sensors as numpy arrays (one vectorised model for all), with
+        each robot's own spread of wheel radius and motor gain from its seeded stream."""
+        n, p = self.n, self.profiles
         self.wheel_r = np.empty((n, 2))
         self.gain = np.empty((n, 2))
         for i, prof in enumerate(p):
@@ -190,6 +202,10 @@ class World:
         self._light_noise = [q.light_noise_rel for q in p]
         self._sampled: tuple | None = None
         self._walls_rows: dict[int, np.ndarray] = {}
+
+    def _sonar_rays(self) -> None:
+        """The sonar ray batch: a cone of rays per sonar, every robot's sonars numbered consecutively."""
+        n, p = self.n, self.profiles
         self._sonar_period_ns = round(1e9 / max(q.sonar_rate_hz for q in p)) if n else 0
         self._next_sonar_ns = 0
         # rays: a cone per sonar; ``_ray_sonar`` numbers every robot's sonars consecutively (robot i's first is

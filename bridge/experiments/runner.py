@@ -628,30 +628,13 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     cells = select_cells(all_cells, only)
     default_out = Path("runs/experiments") / (f"{name}-smoke" if smoke else name)
     out_dir = Path(out) if out is not None else default_out
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for f in _RESULT_FILES:
-        (out_dir / f).unlink(missing_ok=True)
-    for d in _RESULT_DIRS:
-        shutil.rmtree(out_dir / d, ignore_errors=True)
-
+    _clear_outputs(out_dir)
     work = (out_dir / "work").absolute()
     plan = [Trial(name, dict(c), i, trial_seed(seed, name, c, i), smoke, str(work / _slug(c) / str(i)))
             for c in cells for i in range(n)]
     ref = _ref(cls)
     _INSTANCES.setdefault(ref, exp)
-    bar = _Progress(name, len(plan), progress)
-    old_term = old_int = None
-    _STOP.clear()
-    if threading.current_thread() is threading.main_thread():  # SIGTERM ends a run as Ctrl-C does: no orphans
-        old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
-        old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
-    try:
-        done, interrupted = _execute(ref, plan, jobs, bar)
-    finally:
-        bar.close()
-        if old_term is not None:
-            signal.signal(signal.SIGTERM, old_term)
-            signal.signal(signal.SIGINT, old_int)
+    done, interrupted = _execute_interruptible(ref, plan, jobs, _Progress(name, len(plan), progress))
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
             d.rmdir()
@@ -660,6 +643,70 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     by_cell: list[list[Outcome]] = [[] for _ in cells]
     for k, o in zip(sorted(done), outcomes, strict=True):
         by_cell[k // n].append(o)  # plan is cell-major
+    metric_keys = _write_tables(out_dir, plan, done, cells, outcomes, by_cell)
+    plot_lines: list[str] = []
+    if exp.curves or exp.boxes:
+        (out_dir / "plots").mkdir()
+        plot_lines = _plots(exp, cells, by_cell, out_dir / "plots")
+    verdicts, target_error = _judge(exp, outcomes)
+    failed = sum(o.error is not None for o in outcomes)
+    wall = time.monotonic() - t_start
+    chosen = ""
+    if only:
+        which = "; ".join(f"{k} in {', '.join(v)}" for k, v in only.items())
+        chosen = f" (the cells with {which}: {len(cells)} of {len(all_cells)})"
+    lines = [f"# {exp.title}", "", " ".join(exp.description.split()), "",
+             f"Reproduce: `{_command(name, trials, out, default_out, smoke, seed, only)}` (any `--jobs` gives the "
+             f"same trials.csv).", "",
+             f"- experiment `{name}`{' (smoke run)' if smoke else ''}: {_count(len(cells), 'cell')} x "
+             f"{_count(n, 'trial')}, seed {seed}{chosen}",
+             f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"]
+    if interrupted:
+        lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
+                      "cover only the trials that finished."]
+    lines += _target_lines(verdicts, target_error)
+    if plot_lines:
+        lines += ["", "## Plots", "", *plot_lines]
+    lines += _cell_lines(cells, by_cell, metric_keys) + _failure_lines(outcomes, failed)
+    walls = [d[2] for d in done.values()]
+    lines += ["", "---", "",
+              f"Wall time {wall:.1f} s with {jobs} job{'s' if jobs != 1 else ''} "
+              f"({'in-process' if jobs == 1 else _start_method() + ' workers'}); trials took "
+              f"{float(np.median(walls)) if walls else 0:.3g} s median, {sum(walls):.1f} s in all "
+              f"(per trial: timings.csv).{' Curves per trial: curves/.' if (out_dir / 'curves').exists() else ''}"]
+    (out_dir / "report.md").write_text(re.sub(r"\n{3,}", "\n\n", "\n".join(lines)).rstrip() + "\n")
+    return ExperimentRun(out_dir, outcomes, len(plan), failed, interrupted, wall, verdicts)
+
+
+def _clear_outputs(out_dir: Path) -> None:
+    """The output directory, without an earlier run's results (a partial rerun must not mix with them)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for f in _RESULT_FILES:
+        (out_dir / f).unlink(missing_ok=True)
+    for d in _RESULT_DIRS:
+        shutil.rmtree(out_dir / d, ignore_errors=True)
+
+
+def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: int,
+                           bar: _Progress) -> tuple[dict[int, tuple], bool]:
+    """``_execute`` with SIGTERM ending the run as Ctrl-C does (no orphans), the handlers restored after."""
+    old_term = old_int = None
+    _STOP.clear()
+    if threading.current_thread() is threading.main_thread():
+        old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+        old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
+    try:
+        return _execute(ref, plan, jobs, bar)
+    finally:
+        bar.close()
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+            signal.signal(signal.SIGINT, old_int)
+
+
+def _write_tables(out_dir: Path, plan: list[Trial], done: dict[int, tuple], cells: list[dict[str, Any]],
+                  outcomes: list[Outcome], by_cell: list[list[Outcome]]) -> list[str]:
+    """trials.csv, timings.csv and the per-cell curves; returns the metric columns, in first-seen order."""
     cell_keys = list(dict.fromkeys(k for c in cells for k in c))
     metric_keys = list(dict.fromkeys(k for o in outcomes if o.result for k in o.result.metrics))
     _write_csv(out_dir / "trials.csv", [*cell_keys, *RESERVED_COLUMNS, *metric_keys],
@@ -675,11 +722,11 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         if rows:
             (out_dir / "curves").mkdir(exist_ok=True)
             _write_csv(out_dir / "curves" / f"{_slug(cell)}.csv", ["index", "x", "curve", "value"], rows)
-    plot_lines: list[str] = []
-    if exp.curves or exp.boxes:
-        (out_dir / "plots").mkdir()
-        plot_lines = _plots(exp, cells, by_cell, out_dir / "plots")
+    return metric_keys
 
+
+def _judge(exp: Experiment, outcomes: list[Outcome]) -> tuple[list[tuple[Target, str, bool | None, str]], str]:
+    """Each target's verdict on the outcomes; a target that raises is "not judged" with the reason."""
     verdicts: list[tuple[Target, str, bool | None, str]] = []
     target_error = ""
     try:
@@ -692,24 +739,11 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         except Exception as e:
             ours, ok, note = "error", None, f"evaluate() raised {_error_text(e).splitlines()[0]}"
         verdicts.append((t, str(ours), ok, str(note)))
+    return verdicts, target_error
 
-    failed = sum(o.error is not None for o in outcomes)
-    wall = time.monotonic() - t_start
-    walls = [d[2] for d in done.values()]
-    chosen = ""
-    if only:
-        which = "; ".join(f"{k} in {', '.join(v)}" for k, v in only.items())
-        chosen = f" (the cells with {which}: {len(cells)} of {len(all_cells)})"
-    lines = [f"# {exp.title}", "", " ".join(exp.description.split()), "",
-             f"Reproduce: `{_command(name, trials, out, default_out, smoke, seed, only)}` (any `--jobs` gives the "
-             f"same trials.csv).", "",
-             f"- experiment `{name}`{' (smoke run)' if smoke else ''}: {_count(len(cells), 'cell')} x "
-             f"{_count(n, 'trial')}, seed {seed}{chosen}",
-             f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"]
-    if interrupted:
-        lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
-                      "cover only the trials that finished."]
-    lines += ["", "## Targets", ""]
+
+def _target_lines(verdicts: list[tuple[Target, str, bool | None, str]], target_error: str) -> list[str]:
+    lines = ["", "## Targets", ""]
     if verdicts:
         lines += ["| id | what | thesis | ours | tolerance | result | note |", "|---|---|---|---|---|---|---|"]
         for t, ours, ok, note in verdicts:
@@ -721,9 +755,11 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
                       "that fails is a finding of the experiment, not an error of the run."]
     else:
         lines.append(f"targets() raised {_md(target_error)}" if target_error else "No targets.")
-    if plot_lines:
-        lines += ["", "## Plots", "", *plot_lines]
-    lines += ["", "## Results per cell"]
+    return lines
+
+
+def _cell_lines(cells: list[dict[str, Any]], by_cell: list[list[Outcome]], metric_keys: list[str]) -> list[str]:
+    lines = ["", "## Results per cell"]
     for cell, outs in zip(cells, by_cell, strict=True):
         bad = sum(o.error is not None for o in outs)
         lines += ["", f"### {_md(_label(cell))}", "", f"{len(outs)} trials, {bad} failed.", ""]
@@ -731,19 +767,18 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         if keys:
             lines += ["| metric | median | IQR (25-75 %) | n |", "|---|---|---|---|"]
             lines += ["| " + " | ".join(_summary(k, outs)) + " |" for k in keys]
-    if failed:
-        lines += ["", "## Failures", "", f"{failed} trials raised:", ""]
-        for o in outcomes:
-            if o.error:
-                lines += [f"- {_md(_label(o.trial.cell))}, trial {o.trial.index} (seed {o.trial.seed}):", "",
-                          "  ```", *("  " + s for s in o.error.splitlines()), "  ```", ""]
-    lines += ["", "---", "",
-              f"Wall time {wall:.1f} s with {jobs} job{'s' if jobs != 1 else ''} "
-              f"({'in-process' if jobs == 1 else _start_method() + ' workers'}); trials took "
-              f"{float(np.median(walls)) if walls else 0:.3g} s median, {sum(walls):.1f} s in all "
-              f"(per trial: timings.csv).{' Curves per trial: curves/.' if (out_dir / 'curves').exists() else ''}"]
-    (out_dir / "report.md").write_text(re.sub(r"\n{3,}", "\n\n", "\n".join(lines)).rstrip() + "\n")
-    return ExperimentRun(out_dir, outcomes, len(plan), failed, interrupted, wall, verdicts)
+    return lines
+
+
+def _failure_lines(outcomes: list[Outcome], failed: int) -> list[str]:
+    if not failed:
+        return []
+    lines = ["", "## Failures", "", f"{failed} trials raised:", ""]
+    for o in outcomes:
+        if o.error:
+            lines += [f"- {_md(_label(o.trial.cell))}, trial {o.trial.index} (seed {o.trial.seed}):", "",
+                      "  ```", *("  " + s for s in o.error.splitlines()), "  ```", ""]
+    return lines
 
 
 def run_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,

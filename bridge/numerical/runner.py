@@ -182,11 +182,43 @@ def chain_deployment(n: int, groups: list[list[int]], size: tuple[float, float],
     return pos
 
 
+def _fill_gaps(arr: np.ndarray, world: NumericalWorld) -> None:
+    for k in range(len(arr)):
+        if np.isnan(arr[k]):
+            arr[k] = arr[k - 1] if k else float(np.max(_f_at(world)))
+
+
+def _iteration_stats(per_iter: dict[int, list[tuple[int, int, bool, float, float]]], k0: int, iterations: int,
+                     link: LinkModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """From the controllers' iteration records: subgroups and excluded robots per iteration, subgroup ruptures (a
+    subgroup whose members are out of each other's reach), improvements and robot-iterations in all."""
+    subgroups = np.zeros(iterations, int)
+    excluded = np.zeros(iterations, int)
+    ruptures = np.zeros(iterations, int)
+    improvements = 0
+    robot_iters = 0
+    reach = link.range_m if link.mode == "distance" else 10 ** (
+        (link.tx_dbm - link.pl0_db - link.sensitivity_dbm) / (10 * link.exponent))
+    for kk, rows in per_iter.items():
+        k = kk - k0
+        if not 0 <= k < iterations:
+            continue
+        sids = [row[1] for row in rows]
+        improvements += sum(1 for row in rows if row[2])
+        robot_iters += len(rows)
+        subgroups[k] = len({s for s in sids if s})
+        excluded[k] = sum(1 for s in sids if s == 0)
+        if math.isfinite(reach):
+            ruptures[k] = subgroup_ruptures(np.array([(row[3], row[4]) for row in rows]), sids, reach)
+    return subgroups, excluded, ruptures, improvements, robot_iters
+
+
 def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, iterations: int,
         objective: Field, size: tuple[float, float], obstacles: np.ndarray | None = None,
         link: LinkModel | None = None, seed: int = 0, start: np.ndarray | None = None,
         keep_logs: bool = False, deaths: dict[int, float] | None = None) -> RunResult:
-    """Run ``n`` robots of ``behaviour`` for ``iterations`` RDPSO iterations; score them against ``objective``.
+    """Run ``n`` robots of ``behaviour`` for ``iterations`` iterations of their schedule; score them against
+    ``objective``.
 
     ``deaths``: robot -> simulated time from which it is dead (stops, says nothing: a battery death)."""
     cls = load_behaviour(behaviour) if isinstance(behaviour, str) else behaviour
@@ -205,9 +237,11 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
     logs: list[dict[str, Any]] = []
     per_iter: dict[int, list[tuple[int, int, bool, float, float]]] = {}
 
+    iteration_log = getattr(cls, "iteration_log", None)
+
     def sink_for(i: int):
         def sink(topic: str, values: dict[str, Any]) -> None:
-            if topic == "rdpso":
+            if topic == iteration_log:
                 per_iter.setdefault(values["k"], []).append((i, values["sid"], values["improved"], values["x"],
                                                              values["y"]))
             if keep_logs:
@@ -271,29 +305,9 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
                 k_done = max(k_done, k + 1)
     for c in ctls:
         c.destroy()
-    # fill iterations where nobody moved with the last values
-    for arr in (best, cur, mean):
-        for k in range(iterations):
-            if np.isnan(arr[k]):
-                arr[k] = arr[k - 1] if k else float(np.max(_f_at(world)))
-    subgroups = np.zeros(iterations, int)
-    excluded = np.zeros(iterations, int)
-    ruptures = np.zeros(iterations, int)
-    improvements = 0
-    robot_iters = 0
-    reach = link.range_m if link.mode == "distance" else 10 ** (
-        (link.tx_dbm - link.pl0_db - link.sensitivity_dbm) / (10 * link.exponent))
-    for kk, rows in per_iter.items():
-        k = kk - (k0 or 0)
-        if not 0 <= k < iterations:
-            continue
-        sids = [row[1] for row in rows]
-        improvements += sum(1 for row in rows if row[2])
-        robot_iters += len(rows)
-        subgroups[k] = len({s for s in sids if s})
-        excluded[k] = sum(1 for s in sids if s == 0)
-        if math.isfinite(reach):
-            ruptures[k] = subgroup_ruptures(np.array([(row[3], row[4]) for row in rows]), sids, reach)
+    for arr in (best, cur, mean):  # iterations where nobody moved keep the last values
+        _fill_gaps(arr, world)
+    subgroups, excluded, ruptures, improvements, robot_iters = _iteration_stats(per_iter, k0 or 0, iterations, link)
     return RunResult(iterations, best, cur, mean, subgroups, excluded, ruptures, world.collisions, world.packets,
                      world.deliveries, improvements, robot_iters, world.pos.copy(), logs)
 

@@ -235,27 +235,28 @@ def cmd_canlog(a: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
+def _session_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", help="session config (TOML), e.g. hil_configs/demo.toml")
+    p.add_argument("--robots", type=int, help="robot count (configs with one [[robots]] group)")
+    p.add_argument("--duration", type=float, help="simulated seconds")
+    p.add_argument("--seed", type=int)
+    p.add_argument("--speed", type=_speed, help="real-time factor to pace to, or 'max'")
+    p.add_argument("--robots-per-process", type=int, help="pack K robots into each firmware/logic process")
+    p.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="ENDPOINT",
+                   help="give every robot a MAVLink face behind one UDP endpoint (default udpout:127.0.0.1:14550, "
+                        "where MAVProxy and QGroundControl listen)")
 
-    def session_args(p: argparse.ArgumentParser) -> None:
-        p.add_argument("config", help="session config (TOML), e.g. hil_configs/demo.toml")
-        p.add_argument("--robots", type=int, help="robot count (configs with one [[robots]] group)")
-        p.add_argument("--duration", type=float, help="simulated seconds")
-        p.add_argument("--seed", type=int)
-        p.add_argument("--speed", type=_speed, help="real-time factor to pace to, or 'max'")
-        p.add_argument("--robots-per-process", type=int, help="pack K robots into each firmware/logic process")
-        p.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="ENDPOINT",
-                       help="give every robot a MAVLink face behind one UDP endpoint (default udpout:127.0.0.1:14550, "
-                            "where MAVProxy and QGroundControl listen)")
 
+
+def _parser_run(sub: Any) -> None:
     p = sub.add_parser("run", help="run one session")
-    session_args(p)
+    _session_args(p)
     p.add_argument("--out", help="output directory (default runs/<config name>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(fn=cmd_run)
 
+
+def _parser_join(sub: Any) -> None:
     p = sub.add_parser("join", help="run a remote robot's swarm logic on this computer for a session on another one "
                                     "(its config: session.listen, the robot's logic = \"remote\")")
     p.add_argument("endpoint", help="where the session's world listens: its session.listen with that computer's "
@@ -268,10 +269,14 @@ def main(argv: list[str] | None = None) -> None:
                    help="wall seconds the world may be unreachable before the join gives up (default 10)")
     p.set_defaults(fn=cmd_join)
 
+
+def _parser_validate(sub: Any) -> None:
     p = sub.add_parser("validate", help="check a config without running it")
-    session_args(p)
+    _session_args(p)
     p.set_defaults(fn=cmd_validate)
 
+
+def _parser_bench(sub: Any) -> None:
     p = sub.add_parser("bench", help="real-time factor and barrier cost at several robot counts and packings")
     p.add_argument("--quick", action="store_true", help="a small smoke subset (for CI)")
     p.add_argument("--duration", type=float, help="simulated seconds per case")
@@ -283,6 +288,8 @@ def main(argv: list[str] | None = None) -> None:
                                                          "the 12-robot arena's real-time factor")
     p.set_defaults(fn=cmd_bench)
 
+
+def _parser_radio_survey(sub: Any) -> None:
     p = sub.add_parser("radio-survey", help="the thesis' RSSI-vs-distance survey (Fig. 3.7) in a config's arena")
     p.add_argument("config", help="session config whose arena (and robots' XBee settings) to survey in")
     p.add_argument("--duration", type=float, default=3600.0, help="simulated seconds (default 3600)")
@@ -295,6 +302,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(fn=cmd_radio_survey)
 
+
+def _parser_radio_fit(sub: Any) -> None:
     p = sub.add_parser("radio-fit", help="fit path loss and shadowing to RSSI-vs-distance pairs (a CSV)")
     p.add_argument("csv", help="columns distance_m, rssi_dbm (empty: lost), optional walls")
     p.add_argument("--out", help="write the fitted [radio] config fragment (TOML) here")
@@ -303,6 +312,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--d0", type=float, default=1.0, help="reference distance, m")
     p.set_defaults(fn=cmd_radio_fit)
 
+
+def _parser_experiment(sub: Any) -> None:
     p = sub.add_parser("experiment", help="run a named, seeded experiment: many trials in parallel, CSV, plots and a "
                                           "report against the thesis' figures")
     p.add_argument("name", nargs="?", help="experiment name (--list shows them)")
@@ -318,10 +329,14 @@ def main(argv: list[str] | None = None) -> None:
                         "--only n=15,30); trial seeds stay those of the full run")
     p.set_defaults(fn=cmd_experiment)
 
+
+def _parser_digest(sub: Any) -> None:
     p = sub.add_parser("digest", help="recompute the digest of a recording")
     p.add_argument("recording")
     p.set_defaults(fn=cmd_digest)
 
+
+def _parser_devices(sub: Any) -> None:
     p = sub.add_parser("devices", help="what a config would open to the outside world (pseudo-terminals, real "
                                        "devices, the MAVLink endpoint); checks that each real device answers")
     p.add_argument("config")
@@ -329,6 +344,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--no-check", action="store_true", help="only list; do not open the real devices")
     p.set_defaults(fn=cmd_devices)
 
+
+def _parser_canlog(sub: Any) -> None:
     p = sub.add_parser("canlog", help="a session's CAN traffic as a python-can log (ASC, BLF, candump .log, CSV, "
                                       "TRC): for cantools, SavvyCAN, Vector tools")
     p.add_argument("recording", help="session.mcap, or the session's output directory")
@@ -336,15 +353,28 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--robot", type=int, action="append", help="only this robot's bus (repeat for more; default all)")
     p.set_defaults(fn=cmd_canlog)
 
-    from bridge.tools.catalogue import add_parser as add_list
 
-    add_list(sub)
-
+def _parser_plot(sub: Any) -> None:
     p = sub.add_parser("plot", help="draw trajectories.png from a recording (plan.json beside it)")
     p.add_argument("recording")
     p.add_argument("--out")
     p.set_defaults(fn=cmd_plot)
 
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``swarm-sitl`` command line: one parser per subcommand, each beside its ``cmd_*``."""
+    from bridge.tools.catalogue import add_parser as add_list
+
+    ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    for add in (_parser_run, _parser_join, _parser_validate, _parser_bench, _parser_radio_survey, _parser_radio_fit,
+                _parser_experiment, _parser_digest, _parser_devices, _parser_canlog, add_list, _parser_plot):
+        add(sub)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = build_parser()
     a = ap.parse_args(argv)
     try:
         code = a.fn(a)

@@ -85,6 +85,7 @@ class Rdpso(IterationSchedule, Controller):
     """One robot of the RDPSO swarm. Parameters (``defaults``) follow the digest's master table (4.1)."""
 
     needs_radio = True  # a config must give its robots an XBee
+    iteration_log = "rdpso"
 
     defaults: ClassVar[dict[str, Any]] = {
         "iteration_s": 1.0,  # RDPSO iteration period (A13)
