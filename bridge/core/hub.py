@@ -102,7 +102,7 @@ class Hub:
         self.k = 0
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.status_pub: Any = None
-        self._topics = {r: (f"/r{r:03d}/can0", f"/r{r:03d}/llc/pins") for r in range(self.n)}
+        self._pins_topics = [f"/r{r:03d}/llc/pins" for r in range(self.n)]  # the CAN medium keeps its own
         self.pin_inputs: list[dict[str, Any]] = [{} for _ in range(self.n)]  # values media put on an LLC's pins
         self.ideal_pose = {r for r, rp in enumerate(plan.robots) if rp.pose_source == "ground_truth"}
         self.pin_io = [self.robot_spec(r).pins for r in range(self.n)]  # each LLC's wiring in the world
@@ -373,7 +373,7 @@ class Hub:
                 pins_io = dict(sensed[e])
                 if pins is not None and pins_ok:
                     pins_io.update(pins)
-                self.rec.write(t, self._topics[r][1], "swarm_sitl.LlcPins", pins_io)
+                self.rec.write(t, self._pins_topics[r], "swarm_sitl.LlcPins", pins_io)
             if res.get("err"):
                 self.robot_failed(r, t, "raised", res["err"])
                 continue
