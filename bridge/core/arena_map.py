@@ -1,4 +1,4 @@
-"""Monochrome bitmap maps (as the thesis' MRSim used): dark pixels are obstacles.
+"""Monochrome bitmap maps (as MRSim and Stage use): dark pixels are obstacles.
 
 One loader for the world (collision boxes), placement (free space) and the plot.
 """

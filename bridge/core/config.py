@@ -14,10 +14,19 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 from bridge.core.profile import RobotProfile
-from bridge.core.registry import PluginError, robot_profile, robot_spec
+from bridge.core.registry import STUDIES, PluginError, default_robot, robot_profile, robot_spec
 from bridge.media.radio import RadioCfg
 from bridge.media.uwb import UwbCfg
 
@@ -37,6 +46,11 @@ class _Model(BaseModel):
             raise ValueError(f"{', '.join(stray)} do(es) not apply to kind = {kind!r}")
 
 
+class Section(_Model):
+    """A config section's base: a study's own sections (``Study.config``) derive from it, so theirs refuse unknown
+    fields as the core's do."""
+
+
 class SessionCfg(_Model):
     name: str = "session"
     duration_s: float = Field(60.0, gt=0, le=30 * 24 * 3600)
@@ -48,8 +62,9 @@ class SessionCfg(_Model):
     hang_timeout_s: float = Field(20.0, gt=0, description="wall seconds a process may take for one quantum")
     startup_timeout_s: float = Field(120.0, gt=0)
     poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
-    end_after_deployment: bool = Field(False, description="end the session 1 s after the last ranger has deployed "
-                                                          "its scouts (deployment studies need no mission)")
+    end_after_deployment: bool = Field(False, description="end the session 1 s after the study's loop functions "
+                                                          "say the deployment is done (deployment studies need no "
+                                                          "mission)")
     listen: str | None = Field(None, description="tcp/HOST:PORT: the world also listens here (besides its private "
                                                  "unix socket), so the swarm logic of robots with logic = \"remote\" "
                                                  "joins from another computer (swarm-sitl join); HOST is an address of "
@@ -119,7 +134,7 @@ Obstacle = Annotated[BoxObstacle | CylinderObstacle, Field(discriminator="type")
 
 
 class RandomObstaclesCfg(_Model):
-    """Boxes scattered at random (the thesis' pavilion trials moved their obstacles): drawn from the session seed
+    """Boxes scattered at random (field trials move their obstacles between runs): drawn from the session seed
     when the config is loaded and added to ``obstacles``, so one seed gives one layout and the world sees
     ordinary boxes."""
 
@@ -129,7 +144,7 @@ class RandomObstaclesCfg(_Model):
     clearance_m: float = Field(0.8, ge=0, description="free gap kept to the robots' start poses, the walls and "
                                                       "the other obstacles")
     keep_clear: list[tuple[float, float, float]] = Field([], description="(x, y, radius) discs kept free of boxes, "
-                                                                         "e.g. the rangers' entrance")
+                                                                         "e.g. an entrance")
 
     @field_validator("side_m")
     @classmethod
@@ -160,32 +175,6 @@ class LightCfg(_Model):
         return total
 
 
-class ObjectiveCfg(_Model):
-    """What the robots' light sensor reads: the light field, or the chapter 8 mapping objective
-    (bridge/studies/rdpso/mapping.py):
-    eq. 8.1 on an entropy map the world keeps from the robots' true poses, as lux from ``lux_min`` (nothing to map
-    nearby) to ``lux_max`` (the best frontier)."""
-
-    kind: Literal["light", "mapping"] = "light"
-    r_w_m: float = Field(1.0, gt=0, description="mapping: sensing radius R_w of each robot's scan")
-    cell_m: float = Field(0.1, gt=0, description="mapping: occupancy-grid cell size")
-    sigma_m: float | None = Field(None, gt=0, description="mapping: entropy smoothing for the gradient (R_w / 2)")
-    scan_period_s: float = Field(0.5, gt=0, description="mapping: simulated seconds between the robots' scans")
-    lux_min: float = Field(10.0, ge=0, description="mapping: lux read where the objective is 0")
-    lux_max: float = Field(200.0, gt=0, description="mapping: lux read where the objective is 1")
-
-    @model_validator(mode="after")
-    def _consistent(self) -> ObjectiveCfg:
-        if self.kind == "light":
-            self._only_for_kind(self.kind, set(), {"kind"})
-            return self
-        if self.r_w_m < self.cell_m:
-            raise ValueError(f"r_w_m = {self.r_w_m} is smaller than one cell (cell_m = {self.cell_m})")
-        if self.lux_max <= self.lux_min:
-            raise ValueError(f"lux_max = {self.lux_max} must exceed lux_min = {self.lux_min}")
-        return self
-
-
 class Placement(_Model):
     kind: Literal["grid", "random", "explicit", "spiral"] = "grid"
     origin: tuple[float, float] = (1.0, 1.0)
@@ -197,8 +186,8 @@ class Placement(_Model):
     min_separation_m: float = Field(0.3, gt=0)
     poses: list[tuple[float, float, float]] = Field([], description="explicit [x, y, yaw_deg] per robot")
     centres: list[tuple[float, float]] = Field([], description="spiral: one spiral of Theodorus per centre; the "
-                                               "robots are split into as many consecutive blocks (as the RDPSO "
-                                               "splits them into initial subgroups), spacing_m apart")
+                                               "robots are split into as many consecutive blocks (initial "
+                                               "subgroups), spacing_m apart")
     yaw_deg: float | Literal["random"] = "random"
 
     @model_validator(mode="after")
@@ -229,7 +218,7 @@ class XBeeCfg(_Model):
     """A robot's XBee module: which firmware it runs and how its UART is set up (as configured with XCTU)."""
 
     series: Literal[1, 2] = Field(2, description="1: 802.15.4 firmware (frames 0x00/0x01/0x80/0x81/0x89); "
-                                                 "2: ZigBee firmware (0x10/0x8B/0x90), the eSwarBot's module")
+                                                 "2: ZigBee firmware (0x10/0x8B/0x90)")
     api_mode: Literal[1, 2] = Field(1, description="AP: 1 plain API frames, 2 API frames with escaped bytes")
     baud: XBeeBaud = Field(9600, description="BD: UART rate in bit/s (the modules' default is 9600)")
     power_level: int = Field(4, ge=0, le=4, description="PL: transmit power level, 4 is the highest")
@@ -323,8 +312,13 @@ class VehicleCfg(_Model):
     timeout_s: float = Field(10.0, gt=0, description="how long the logic waits for the vehicle's first heartbeat")
 
 
+class _NoOptions(_Model):
+    """The options of a robot model that declares none."""
+
+
 class RobotGroup(_Model):
-    profile: str = "eswarbot"
+    profile: str = Field(default_factory=default_robot, description="the robot model (swarm-sitl list robots); "
+                                                                   "without it, the installed default")
     count: int = Field(1, ge=1, le=10000)
     behaviour: str = "random_walk"
     params: dict[str, Any] = {}
@@ -348,12 +342,26 @@ class RobotGroup(_Model):
     vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
                                                          "over MAVLink (state the body's motion)")
     motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
-    conveyor_slots: int | None = Field(None, ge=1, le=255, description="scouts each robot of this group carries "
-                                        "(overrides its profile's conveyor, e.g. 20 to put 60 scouts on 3 rangers)")
     carried_by: int | None = Field(None, ge=0, description="index of the robot group whose robots carry these on "
-                                                           "their conveyor (TraxBot rangers): they start on board, "
-                                                           "filled ranger by ranger in robot order, and are "
-                                                           "released when the carrier's belt advances")
+                                                           "board (e.g. on a conveyor): they start on "
+                                                           "board, filled carrier by carrier in robot order, and go "
+                                                           "down when the carrier's part releases them")
+
+    # fields beyond these are the robot model's own options (RobotSpec.options)
+    model_config = ConfigDict(extra="allow", frozen=False)
+
+    @model_validator(mode="after")
+    def _robot_options(self) -> RobotGroup:
+        """Fields beyond a group's own are options of its robot model: its plugin's model validates them (an error
+        names the field, as for the group's own)."""
+        extra = self.model_extra or {}
+        if extra:
+            try:
+                spec = robot_spec(self.profile)
+            except PluginError:
+                return self  # the profile's own error says why
+            (spec.options or _NoOptions).model_validate(extra)
+        return self
 
     @model_validator(mode="after")
     def _pty_per_robot(self) -> RobotGroup:
@@ -395,12 +403,10 @@ class RobotGroup(_Model):
             if self.pose_source == "ground_truth":
                 raise ValueError(f"pose_source: with {what} the LLC that would report the true pose is not simulated")
         if self.carried_by is not None and self.placement != Placement():
-            raise ValueError("placement: robots carried by a ranger start on board; where they go down is the "
-                             "ranger's to decide")
+            raise ValueError("placement: carried robots start on board; where they go down is their carrier's to "
+                             "decide")
         if self.carried_by is not None and not simulated_llc:
             raise ValueError("carried_by: a carried robot is a simulated one")
-        if self.conveyor_slots is not None and not robot_profile(self.profile).conveyor_slots:
-            raise ValueError(f"conveyor_slots: a {self.profile} has no conveyor to resize")
         if self.motion.kind == "scripted" and self.count > 1:
             raise ValueError("motion: scripted waypoints are one body's path: give the robot a group of its own "
                              "(count = 1)")
@@ -461,10 +467,9 @@ class FaultCfg(_Model):
     """An injected fault, from ``at_s`` on.
 
     ``battery_depleted``: the robot's battery is exhausted: its motors stop and its radio falls silent, for good
-    (the thesis' battery deaths). ``firmware_crash``: the robot's firmware crashes and the robot is dead from then on
-    (as a battery death in the
-    thesis: motors stop, its radio goes silent, its logic stops). ``can_bus_off``: every frame the robot's CAN node
-    ``node`` transmits is destroyed (a failing transceiver, a loose CAN_H/CAN_L wire at its connector), so its
+    (battery deaths). ``firmware_crash``: the robot's firmware crashes and the robot is dead from then on (as a
+    battery death: motors stop, its radio goes silent, its logic stops). ``can_bus_off``: every frame the robot's CAN
+    node ``node`` transmits is destroyed (a failing transceiver, a loose CAN_H/CAN_L wire at its connector), so its
     error counter climbs to bus-off within a few milliseconds and again after each recovery, for ``duration_s``.
     ``can_noise``: every frame on the robot's bus is destroyed with ``probability`` (EMI), for ``duration_s``.
     """
@@ -520,6 +525,9 @@ class MavlinkCfg(_Model):
 
 
 class Config(_Model):
+    # top-level sections beyond these are studies' own (Study.config)
+    model_config = ConfigDict(extra="allow", frozen=False)
+
     session: SessionCfg = SessionCfg()
     world: WorldCfg = WorldCfg()
     arena: ArenaCfg = ArenaCfg()
@@ -527,8 +535,6 @@ class Config(_Model):
     random_obstacles: RandomObstaclesCfg | None = Field(None, description="boxes drawn from the session seed at "
                                                                           "load, added to obstacles")
     light: LightCfg = LightCfg()
-    objective: ObjectiveCfg = Field(ObjectiveCfg(), description="what the light sensor reads "
-                                                                "(bridge/studies/rdpso/mapping.py)")
     radio: RadioCfg = Field(RadioCfg(), description="the 2.4 GHz channel the XBees share (docs/radio.md)")
     uwb: UwbCfg = Field(UwbCfg(), description="UWB ranging noise and TDMA budget (docs/uwb.md)")
     robots: list[RobotGroup] = Field(min_length=1)
@@ -567,10 +573,10 @@ class Config(_Model):
                 raise ValueError(f"robots[{i}].carried_by = {c}: not another robot group (there are "
                                  f"{len(self.robots)})")
             carrier = self.robots[c]
-            slots = self.profile(carrier).conveyor_slots
+            slots = self.profile(carrier).capacity
             if not slots or carrier.carried_by is not None:
                 raise ValueError(f"robots[{i}].carried_by = {c}: robots[{c}] ({carrier.profile}) has no conveyor "
-                                 "to carry robots on")
+                                 "or other part to carry robots on")
             capacity[c] = capacity.get(c, 0) + g.count
             if capacity[c] > carrier.count * slots:
                 raise ValueError(f"robots[{i}].count: robots[{c}] carries at most {carrier.count} x {slots} = "
@@ -584,16 +590,41 @@ class Config(_Model):
                 )
         return self
 
+    @model_validator(mode="after")
+    def _study_sections(self) -> Config:
+        """Top-level sections beyond the core's are the studies' (``Study.config``): each study validates its own,
+        and a section no study declares is refused as an unknown field."""
+        extra = self.model_extra or {}
+        if extra:
+            _study_sections_model().model_validate(extra)
+        return self
+
+    def section(self, name: str) -> Any:
+        """A study's config section, validated (its defaults if the file does not set it)."""
+        model = study_section(name)
+        return model.model_validate((self.model_extra or {}).get(name, {}))
+
     @property
     def robot_count(self) -> int:
         return sum(g.count for g in self.robots)
 
     def profile(self, group: RobotGroup) -> RobotProfile:
-        """The group's robot profile, with its own conveyor size if it sets one."""
-        prof = robot_profile(group.profile)
-        if group.conveyor_slots is not None:
-            return prof.model_copy(update={"conveyor_slots": group.conveyor_slots})
-        return prof
+        """The group's robot profile, as its robot model's options make it."""
+        return robot_profile(group.profile, group.model_extra)
+
+
+def study_section(name: str) -> type[BaseModel]:
+    """The model of a study's config section ``name`` (a ``PluginError`` if no study declares it)."""
+    for _, study in STUDIES.items():
+        if name in study.config:
+            return study.config[name]
+    raise PluginError(f"no study declares a config section {name!r}")
+
+
+def _study_sections_model() -> type[BaseModel]:
+    """Every study's config sections as one model that refuses any other field."""
+    fields: dict[str, Any] = {n: (m | None, None) for _, st in STUDIES.items() for n, m in st.config.items()}
+    return create_model("StudySections", __base__=_Model, **fields)
 
 
 def _loc(loc: tuple[Any, ...]) -> str:

@@ -107,7 +107,7 @@ class Hub:
         self.ideal_pose = {r for r, rp in enumerate(plan.robots) if rp.pose_source == "ground_truth"}
         self.pin_io = [self.robot_spec(r).pins for r in range(self.n)]  # each LLC's wiring in the world
         self.releases: list[dict[str, Any]] = []
-        self.carriers = {rp.carrier for rp in plan.robots if rp.carrier is not None}  # robots with scouts on board
+        self.carriers = {rp.carrier for rp in plan.robots if rp.carrier is not None}  # robots with robots on board
         # battery deaths to come: (time, robot)
         self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
         self.module_stats: dict[str, dict] = {}
@@ -373,7 +373,7 @@ class Hub:
                 pins_io = dict(sensed[e])
                 if pins is not None and pins_ok:
                     pins_io.update(pins)
-                self.rec.write(t, self._pins_topics[r], "swarm_sitl.LlcPins", pins_io)
+                self.rec.write(t, self._pins_topics[r], self.pin_io[r].schema, pins_io)
             if res.get("err"):
                 self.robot_failed(r, t, "raised", res["err"])
                 continue
@@ -468,7 +468,7 @@ class Hub:
                     poses["carried"] = [r in world.carried for r in range(self.n)]
                 rec.write(t, "/world/poses", "swarm_sitl.Poses", poses)
             world.step_quantum(t, q)
-            for ev in world.released:  # scouts that dropped off a carrier's conveyor in this quantum
+            for ev in world.released:  # robots that went down from their carriers in this quantum
                 rel = {k: ev[k] for k in ("robot", "carrier", "slot", "pose")}
                 self.deliver_at(ev["t_ns"], self.record, "/world/releases", "swarm_sitl.Release", rel)
                 self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})

@@ -475,7 +475,7 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "barrier_us_p99": world_res.get("barrier_us_p99"),
         "wall_lag": world_res.get("wall_lag"),
         "can_events": world_res.get("can_events", []),
-        "releases": world_res.get("releases"),  # scouts dropped off carriers' conveyors (sessions with carriers)
+        "releases": world_res.get("releases"),  # robots that went down from their carriers (sessions with carriers)
         **_study_sections(world_res),  # what the studies' loop functions measured (bridge/studies/<study>)
         "mavlink": world_res.get("mavlink"),
         "cpu_s_total": round(cpu_total, 3),

@@ -38,9 +38,10 @@ class RobotPlan:
     vehicle: dict | None = None  # a MAVLink vehicle stands for it (VehicleCfg)
     motion: dict | None = None  # how the body moves when nothing simulated drives it (MotionCfg): kind, waypoints
     gateway: dict | None = None  # an XBee gateway, not a robot: the real module's settings (XBeeGatewayCfg)
-    carrier: int | None = None  # it starts on this robot's conveyor (RobotGroup.carried_by) ...
+    carrier: int | None = None  # it starts on board this robot (RobotGroup.carried_by) ...
     slot: int = 0  # ... in this slot, 1 being the first to drop off
-    payload: tuple[int, ...] = ()  # a carrier: the robots on its conveyor, by slot
+    payload: tuple[int, ...] = ()  # a carrier: the robots on board, by slot
+    options: dict = field(default_factory=dict)  # its robot model's options (the group's extra fields)
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
@@ -123,7 +124,7 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
         prof = cfg.profile(group)
         carriers: list[tuple[int, int]] = []  # (carrier id, slot) per robot of a carried group
         if group.carried_by is not None:
-            slots = cfg.profile(cfg.robots[group.carried_by]).conveyor_slots
+            slots = cfg.profile(cfg.robots[group.carried_by]).capacity
             for _ in range(group.count):
                 k = load.get(group.carried_by, 0)
                 load[group.carried_by] = k + 1
@@ -141,7 +142,8 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
                                     group.xbee.model_dump() if group.xbee else None, group.uwb, group.pose_source,
                                     group.logic, group.can.slcan_pty, group.can.device,
                                     group.vehicle.model_dump() if group.vehicle else None,
-                                    group.motion.model_dump(mode="json"), carrier=carrier, slot=slot))
+                                    group.motion.model_dump(mode="json"), carrier=carrier, slot=slot,
+                                    options=dict(group.model_extra or {})))
     for i, rp in enumerate(robots):  # a carried robot starts where its carrier is
         if rp.carrier is not None:
             robots[i] = replace(rp, pose=robots[rp.carrier].pose)
@@ -208,7 +210,7 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
         blocks = len(pl.centres)
         for b, centre in enumerate(pl.centres):
             n_b = sum(1 for i in range(g.count) if i * blocks // g.count == b)
-            # a random orientation and turning sense per spiral (as the thesis' placements varied), redrawn
+            # a random orientation and turning sense per spiral (placements vary between trials), redrawn
             # while a robot would land outside the arena or in an obstacle
             for _attempt in range(200):
                 phi0 = float(rng.uniform(-math.pi, math.pi))

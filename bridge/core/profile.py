@@ -1,4 +1,5 @@
-"""A robot model's physical and electrical figures, as the world, the firmware host and the config checks read them.
+"""A robot model's figures as the world, the firmware host and the config checks read them: its body, its battery,
+its firmware's loop rate, and its parts (``bridge.core.parts``: a drive, sensors, a conveyor...) with their own.
 
 Each robot plugin (``bridge/robots/<robot>/``) declares one; the figures and their sources are in ``docs/models.md``.
 """
@@ -6,54 +7,50 @@ Each robot plugin (``bridge/robots/<robot>/``) declares one; the figures and the
 
 from __future__ import annotations
 
-import math
+from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict
+
+from bridge.core.parts import Part
+
+P = TypeVar("P", bound=Part)
 
 
 class RobotProfile(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     name: str
-    # body (world)
+    # body (world): a cylinder
     radius_m: float
     height_m: float
     mass_kg: float
-    # drive train
-    wheel_radius_m: float
-    half_track_m: float
-    encoder_cpr: int
-    motor_max_wheel_rad_s: float  # no-load wheel speed at full PWM and nominal battery voltage
-    motor_time_constant_s: float
-    motor_deadband_pwm: int
-    motor_gain_spread: float  # relative 1-sigma spread of motor gain between wheels/robots
-    wheel_radius_spread: float
-    # sonar (front ultrasonic, analog output)
-    sonar_max_range_m: float
-    sonar_min_range_m: float
-    sonar_half_beam_deg: float
-    sonar_rays: int
-    sonar_rate_hz: float
-    sonar_noise_m: float
-    sonar_noise_rel: float
-    sonar_outlier_p: float  # probability of a spurious echo per reading while the robot moves
-    sonar_angles_deg: tuple[float, ...] = (0.0,)  # one sonar per angle from the heading; the first is the front
-    # light sensor
-    light_noise_rel: float
     # battery
     battery_capacity_mah: float
     battery_cells: int
     battery_internal_ohm: float
-    current_idle_ma: float
-    current_motor_max_ma: float
+    current_idle_ma: float  # the boards, with the parts idle (each part adds what it draws)
     # firmware
     llc_loop_hz: float
-    # marsupial carrier: a conveyor belt of ``conveyor_slots`` scouts, ``conveyor_pitch_m`` of belt each
-    conveyor_slots: int = 0
-    conveyor_pitch_m: float = 0.15
-    conveyor_speed_m_s: float = 0.05
-    conveyor_m_per_step: float = 0.0005  # belt travel per stepper step
+    parts: tuple[Any, ...] = ()  # its Parts, at most one of each kind
+
+    def model_post_init(self, __context: Any) -> None:
+        kinds = [type(p) for p in self.parts]
+        if not all(isinstance(p, Part) for p in self.parts) or len(set(kinds)) != len(kinds):
+            raise ValueError(f"robot profile {self.name!r}: parts must be Parts, at most one of each kind")
+
+    def part(self, kind: type[P]) -> P | None:
+        """Its part of this kind, None if it has none."""
+        return next((p for p in self.parts if isinstance(p, kind)), None)
+
+    def part_named(self, name: str) -> Part | None:
+        """Its part simulated by the world model called ``name`` (``"conveyor"``), None if it has none."""
+        return next((p for p in self.parts if type(p).world_model.name == name), None)
+
+    def with_part(self, part: Part) -> RobotProfile:
+        """This profile with ``part`` in place of its part of the same kind."""
+        return self.model_copy(update={"parts": tuple(part if type(p) is type(part) else p for p in self.parts)})
 
     @property
-    def metres_per_pulse(self) -> float:
-        return 2 * math.pi * self.wheel_radius_m / self.encoder_cpr
+    def capacity(self) -> int:
+        """Robots it carries on board (its parts' slots)."""
+        return sum(p.capacity for p in self.parts)

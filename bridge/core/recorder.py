@@ -43,23 +43,6 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                        "time)",
         "properties": {"robot": {"type": "integer"}, "type": {"type": "string"}, "data": {"type": "string"}},
     },
-    "swarm_sitl.LlcPins": {
-        "type": "object",
-        "description": "One loop() of the LLC board: physical values at its input pins, and its pin writes "
-                       "(signed motor PWM, LED colour; only when they changed), which act from the next quantum",
-        "properties": {
-            "enc": {"type": "array", "items": {"type": "integer"}},
-            "sonar_m": {"type": "number"},
-            "lux": {"type": "number"},
-            "battery_v": {"type": "number"},
-            "rssi_pwm": {"type": "number", "description": "XBee RSSI PWM duty (0..1) at the board's pin"},
-            "pwm": {"type": "array", "items": {"type": "integer"}},
-            "led": {"type": "array", "items": {"type": "integer"}},
-            "sides": {"type": "array", "items": {"type": "number"},
-                      "description": "a robot with three sonars: the left and right ranges (m)"},
-            "belt_steps": {"type": "integer", "description": "a carrier's conveyor stepper, steps since power-up"},
-        },
-    },
     "swarm_sitl.Poses": {
         "type": "object",
         "description": "Ground-truth planar poses of all robots",
@@ -70,25 +53,14 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "alive": {"type": "array", "items": {"type": "boolean"}},
             "led": {"type": "array", "items": {"type": "array", "items": {"type": "integer"}}},
             "carried": {"type": "array", "items": {"type": "boolean"},
-                        "description": "on a carrier's conveyor (sessions with carried robots only)"},
+                        "description": "on board another robot (sessions with carried robots only)"},
         },
     },
     "swarm_sitl.Release": {
         "type": "object",
-        "description": "A carried robot dropped off its carrier's conveyor onto the floor",
+        "description": "A carried robot went down from its carrier onto the floor",
         "properties": {"robot": {"type": "integer"}, "carrier": {"type": "integer"}, "slot": {"type": "integer"},
                        "pose": {"type": "array", "items": {"type": "number"}}},
-    },
-    "swarm_sitl.Mapping": {
-        "type": "object",
-        "description": "The chapter 8 mapping objective after a scan of all live robots (objective kind mapping)",
-        "properties": {
-            "eta_exp": {"type": "number", "description": "exploration ratio: explored free cells / free cells"},
-            "scans": {"type": "integer", "description": "scans so far, this one included"},
-            "explored_free_cells": {"type": "integer"},
-            "free_cells": {"type": "integer"},
-            "entropy_bits": {"type": "number", "description": "the map's total entropy, eq. 8.2 summed over cells"},
-        },
     },
     "swarm_sitl.Uart": {
         "type": "object",
@@ -139,6 +111,13 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     },
 }
 
+
+
+def register_schema(name: str, schema: dict[str, Any]) -> None:
+    """A plugin's message schema (a robot's pins, a study's metric), by the name its writes give."""
+    SCHEMAS[name] = schema
+
+
 _TIME = struct.Struct("<q")
 
 
@@ -156,9 +135,7 @@ class Recorder:
         self._f: BinaryIO = open(self.path, "wb")  # noqa: SIM115 - closed in finish()
         self._w = Writer(self._f, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
         self._w.start(profile="", library="swarm-sitl")
-        self._schema_ids = {
-            name: self._w.register_schema(name, "jsonschema", json.dumps(s).encode()) for name, s in SCHEMAS.items()
-        }
+        self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._hash = hashlib.sha256()
         self.count = 0
@@ -170,7 +147,11 @@ class Recorder:
     def channel(self, topic: str, schema: str) -> int:
         cid = self._channels.get(topic)
         if cid is None:
-            cid = self._w.register_channel(topic, "json", self._schema_ids[schema])
+            sid = self._schema_ids.get(schema)
+            if sid is None:  # a schema is written before the first channel that uses it
+                sid = self._schema_ids[schema] = self._w.register_schema(schema, "jsonschema",
+                                                                         json.dumps(SCHEMAS[schema]).encode())
+            cid = self._w.register_channel(topic, "json", sid)
             self._channels[topic] = cid
         return cid
 

@@ -12,6 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from pydantic import BaseModel
+
 from swarm_logic.plugins import PluginError, Registry
 
 if TYPE_CHECKING:
@@ -19,15 +21,30 @@ if TYPE_CHECKING:
     from bridge.core.medium import Medium
     from bridge.core.profile import RobotProfile
 
-__all__ = ["MEDIA", "PREFLIGHT", "ROBOTS", "STUDIES", "PluginError", "RobotSpec", "Study", "register_medium",
-           "register_robot", "register_study", "robot_profile", "robot_spec"]
+__all__ = [
+    "MEDIA",
+    "PREFLIGHT",
+    "ROBOTS",
+    "STUDIES",
+    "PluginError",
+    "RobotSpec",
+    "Study",
+    "default_robot",
+    "register_medium",
+    "register_robot",
+    "register_study",
+    "robot_profile",
+    "robot_spec",
+]
 
 
 @dataclass(frozen=True)
 class RobotSpec:
-    """A robot model: its body, drive, sensors and firmware figures (``profile``), the interface its boards speak on
-    the robot's CAN bus (``can_db``: a function returning its cantools database, for names in the recording), its
-    LLC's firmware (``board``) and that board's wiring in the world (``pins``)."""
+    """A robot model: its body, battery and firmware figures and its parts (``profile``), the interface its boards
+    speak on the robot's CAN bus (``can_db``: a function returning its cantools database, for names in the
+    recording), its LLC's firmware (``board``), that board's wiring in the world (``pins``), and the options a
+    robot group of this model may set in a session config (``options``: a pydantic model of the extra group
+    fields; ``configure(profile, options)`` returns the profile they make)."""
 
     name: str
     profile: RobotProfile
@@ -38,16 +55,27 @@ class RobotSpec:
     # what that board's pins meet in the world: ``sense(world, r, media, ideal_pose)``, ``valid(pins)``,
     # ``actuate(world, r, pins)`` (the hub asks it each tick)
     pins: Any = None
+    options: type[BaseModel] | None = None
+    configure: Callable[[RobotProfile, Any], RobotProfile] | None = None
+    default: bool = False  # the model a robot group without ``profile`` gets (one installed robot says so)
 
     def __post_init__(self) -> None:
         if (self.board is None) != (self.pins is None):
             raise PluginError(f"robot {self.name!r}: an LLC firmware (board) and its wiring (pins) go together")
+        if (self.options is None) != (self.configure is None):
+            raise PluginError(f"robot {self.name!r}: config options and what they configure go together")
+
+    def profile_with(self, options: dict[str, Any] | None) -> RobotProfile:
+        """The profile a group's options make (its own figures without any)."""
+        if not options or self.configure is None or self.options is None:
+            return self.profile
+        return self.configure(self.profile, self.options.model_validate(options))
 
     def make_board(self, rp: Any) -> Any:
         """The firmware of robot ``rp``'s low-level controller, as the firmware host runs it."""
         if self.board is None:
             raise PluginError(f"robot {self.name!r} declares no LLC firmware (RobotSpec.board)")
-        return self.board(self.profile, rp)
+        return self.board(self.profile_with(rp.options), rp)
 
     def frame_names(self) -> dict[int, str]:
         """CAN id -> frame name, from the robot's DBC (empty without one)."""
@@ -56,7 +84,7 @@ class RobotSpec:
 
 @dataclass(frozen=True)
 class Study:
-    """A thesis' simulation side: its experiments (modules that register them when imported), the loop functions its
+    """A study's simulation side: its experiments (modules that register them when imported), the loop functions its
     sessions run, and where its session configs are."""
 
     name: str
@@ -65,6 +93,7 @@ class Study:
     loop_functions: type[LoopFunctions] | None = None
     configs: str = ""  # its session configs, relative to the repository
     sections: tuple[str, ...] = field(default=())  # the summary.json sections its loop functions write
+    config: dict[str, Any] = field(default_factory=dict)  # its own top-level config sections: name -> pydantic model
 
 
 def _is_medium(obj: Any) -> bool:
@@ -98,6 +127,16 @@ def robot_spec(name: str) -> RobotSpec:
     return ROBOTS.get(name)
 
 
-def robot_profile(name: str) -> RobotProfile:
-    """The profile of robot model ``name`` (a ``PluginError`` names the models there are)."""
-    return ROBOTS.get(name).profile
+def default_robot() -> str:
+    """The robot model a group that names none gets: the one whose plugin declares itself the default."""
+    names = [name for name, spec in ROBOTS.items() if spec.default]
+    if len(names) != 1:
+        raise PluginError(f"robot groups must name their profile: {len(names)} installed robot plugins declare "
+                          f"themselves the default ({', '.join(names) or 'none'})")
+    return names[0]
+
+
+def robot_profile(name: str, options: dict[str, Any] | None = None) -> RobotProfile:
+    """The profile of robot model ``name`` with a group's ``options`` (a ``PluginError`` names the models there
+    are)."""
+    return ROBOTS.get(name).profile_with(options)

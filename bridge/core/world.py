@@ -1,11 +1,9 @@
 """The physical world: one pybullet DIRECT client with the arena, obstacles, light field and robots.
 
-Each eSwarBot is one rigid cylinder (126 mm x 100 mm, 600 g). Its two DC motors are modelled in numpy for
-all robots at once (first-order speed response to PWM and battery voltage, a dead band, per-wheel gain
-and wheel-radius spread); the resulting differential-drive twist is imposed on the body every physics
-step and pybullet resolves contacts with walls, obstacles and other robots. Encoders count the wheels'
-rotation in 48-CPR pulses (a wheel that spins against a wall keeps counting, as a real one slips).
-The sonar is one batched ray test for all robots, a cone of rays per sensor, at the sensor's rate.
+Each robot is one rigid cylinder of its profile's size and mass; what moves it and what it senses are its parts
+(``bridge.core.parts``: a differential drive, sonars, a conveyor, ... from the robot's plugin), each simulated by one
+world model for every robot that has it. The world keeps what every robot has: its pose, whether it is alive, its
+LEDs, its battery, a stated motion for bodies the session does not drive, and robots riding on board another.
 
 Nothing here reads the wall clock or an unseeded random source; pybullet's banner goes to stdout, which
 is never parsed.
@@ -14,7 +12,6 @@ is never parsed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -22,27 +19,15 @@ import pybullet as pb
 
 from bridge.core.arena_map import occupancy
 from bridge.core.config import ArenaCfg, BoxObstacle, Config
+from bridge.core.parts import WorldModel
 from bridge.core.plan import RobotPlan
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import robot_profile
-from bridge.core.rng import stream
 from swarm_logic.geometry import wrap
 
 # Li-ion open-circuit voltage per cell against state of charge (typical curve).
 _OCV_SOC = np.array([0.0, 0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0])
 _OCV_V = np.array([3.0, 3.45, 3.6, 3.68, 3.76, 3.86, 4.0, 4.08, 4.2])
-_V_NOMINAL_PER_CELL = 3.7
-
-
-@dataclass
-class Sensors:
-    """Physical sensor values for one robot at one instant (what the board's pins are exposed to)."""
-
-    encoders: tuple[int, int]
-    sonar_m: float
-    lux: float
-    battery_v: float
-    side_sonars_m: tuple[float, ...] = ()  # a robot with more sonars (TraxBot): the others, left then right
 
 
 class World:
@@ -71,7 +56,7 @@ class World:
             self._load_map(cfg.arena)
         self._build_robots(robots)
         # what the light sensors read instead of the light field, when a study installs one (an objective with
-        # ``lux(x, y)``: the RDPSO study's mapping objective)
+        # ``lux(x, y)``)
         self.lux_field: Any = None
 
     # -- scene ------------------------------------------------------------------------------------
@@ -122,15 +107,21 @@ class World:
     def _build_robots(self, robots: list[RobotPlan]) -> None:
         n = len(robots)
         self.n = n
-        self.profiles: list[RobotProfile] = [robot_profile(r.profile) for r in robots]
+        self.profiles: list[RobotProfile] = [robot_profile(r.profile, r.options) for r in robots]
         self._spawn_bodies(robots)
-        self._drivetrains(robots)
-        self._sonar_rays()
+        self._batteries()
+        self.pos = np.array([[r.pose[0], r.pose[1]] for r in robots], dtype=float).reshape(n, 2)
+        self.yaw = np.array([r.pose[2] for r in robots], dtype=float)
+        self.odometer = np.zeros(n)
+        self.alive = np.ones(n, dtype=bool)
+        self.led = np.zeros((n, 3), dtype=np.uint8)
+        self.drive_speed = np.zeros(n)  # how fast each robot's drive is driving it (m/s), per quantum
+        self._walls_rows: dict[int, np.ndarray] = {}
+        self._models()
 
     def _spawn_bodies(self, robots: list[RobotPlan]) -> None:
         """One rigid cylinder per robot (a gateway's antenna: a point nothing touches), the stated motions, and the
-        robots that start on a carrier's conveyor."""
-        n = self.n
+        robots that start on board another."""
         self.bodies: list[int] = []
         shapes: dict[str, int] = {}
         for r, prof in zip(robots, self.profiles, strict=True):
@@ -148,94 +139,49 @@ class World:
                 baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=self.cid,
             )
             izz = 0.5 * prof.mass_kg * prof.radius_m**2
-            # The wheels are kinematic (the twist is imposed every step), so the body itself must not
-            # rub on the floor; huge roll/pitch inertia keeps it upright when it hits something.
+            # A drive imposes the body's twist every step, so the body itself must not rub on the floor; huge
+            # roll/pitch inertia keeps it upright when it hits something.
             pb.changeDynamics(body, -1, localInertiaDiagonal=[1e3, 1e3, izz], lateralFriction=0.0,
                               linearDamping=0.0, angularDamping=0.0, physicsClientId=self.cid)
             self.bodies.append(body)
         # bodies whose motion the config states (a real board's or vehicle's robot, a gateway): (t, x, y, yaw) rows
         self.paths = {r.id: _path(r) for r in robots if r.scripted}
-        # robots riding on a carrier's conveyor: robot -> (carrier, slot); they drop off as its belt advances
+        # robots riding on board another (a carrier's conveyor): robot -> (carrier, slot); a part of the carrier's
+        # decides when each goes down (``drop_off``)
         self.carried: dict[int, tuple[int, int]] = {r.id: (r.carrier, r.slot) for r in robots if r.carrier is not None}
-        self.belt_m = np.zeros(n)  # each carrier's belt travel since power-up
-        self.released: list[dict] = []  # releases since the hub last took them (t_ns, robot, carrier, pose)
+        self.released: list[dict] = []  # drop-offs since the hub last took them (t_ns, robot, carrier, slot, pose)
         for i in self.carried:  # on board nothing touches them and they touch nothing
             pb.setCollisionFilterGroupMask(self.bodies[i], -1, 0, 0, physicsClientId=self.cid)
 
-    def _drivetrains(self, robots: list[RobotPlan]) -> None:
-        """Every robot's motors, wheels, battery and sensors as numpy arrays (one vectorised model for all), with
-        each robot's own spread of wheel radius and motor gain from its seeded stream."""
-        n, p = self.n, self.profiles
-        self.wheel_r = np.empty((n, 2))
-        self.gain = np.empty((n, 2))
-        for i, prof in enumerate(p):
-            g = stream(self.seed, "robot", i, "drivetrain")
-            self.wheel_r[i] = prof.wheel_radius_m * (1 + prof.wheel_radius_spread * g.standard_normal(2))
-            self.gain[i] = 1 + prof.motor_gain_spread * g.standard_normal(2)
-        self.half_track = np.array([q.half_track_m for q in p])
-        self.cpr = np.array([q.encoder_cpr for q in p], dtype=float)
-        self.w_max = np.array([q.motor_max_wheel_rad_s for q in p])
-        self.tau = np.array([q.motor_time_constant_s for q in p])
-        self.deadband = np.array([q.motor_deadband_pwm for q in p], dtype=float)
-        self.pwm = np.zeros((n, 2))
-        self.omega = np.zeros((n, 2))
-        self._w_ss = np.zeros((n, 2))
-        self._decay = np.exp(-self.dt / self.tau)[:, None]
-        self._tau_1ma = self.tau[:, None] * (1 - self._decay)
-        self.angle = np.zeros((n, 2))
-        self.alive = np.ones(n, dtype=bool)
-        self.led = np.zeros((n, 3), dtype=np.uint8)
-        self.soc = np.ones(n)
+    def _batteries(self) -> None:
+        p = self.profiles
+        self.soc = np.ones(self.n)
         self.cells = np.array([q.battery_cells for q in p], dtype=float)
         self.capacity_as = np.array([q.battery_capacity_mah * 3.6 for q in p])
         self.r_int = np.array([q.battery_internal_ohm for q in p])
         self.i_idle = np.array([q.current_idle_ma for q in p]) / 1000.0
-        self.i_motor = np.array([q.current_motor_max_ma for q in p]) / 1000.0
-        self.battery_v = self._battery_voltage(np.zeros(n))
-        self.pos = np.array([[r.pose[0], r.pose[1]] for r in robots], dtype=float).reshape(n, 2)
-        self.yaw = np.array([r.pose[2] for r in robots], dtype=float)
-        self.odometer = np.zeros(n)
-        self.sonar_m = np.array([q.sonar_max_range_m for q in p])  # each robot's front sonar
-        self.sonars = [np.full(len(q.sonar_angles_deg), q.sonar_max_range_m) for q in p]  # all of its sonars
-        self._sonar_rng = [stream(self.seed, "robot", i, "sonar") for i in range(n)]
-        self._light_rng = [stream(self.seed, "robot", i, "light") for i in range(n)]
-        self._light_noise = [q.light_noise_rel for q in p]
-        self._sampled: tuple | None = None
-        self._walls_rows: dict[int, np.ndarray] = {}
+        self.battery_v = self._battery_voltage(np.zeros(self.n))
 
-    def _sonar_rays(self) -> None:
-        """The sonar ray batch: a cone of rays per sonar, every robot's sonars numbered consecutively."""
-        n, p = self.n, self.profiles
-        self._sonar_period_ns = round(1e9 / max(q.sonar_rate_hz for q in p)) if n else 0
-        self._next_sonar_ns = 0
-        # rays: a cone per sonar; ``_ray_sonar`` numbers every robot's sonars consecutively (robot i's first is
-        # ``_sonar_base[i]``), ``_ray_owner`` is the robot
-        cones = [np.linspace(-1, 1, q.sonar_rays) * math.radians(q.sonar_half_beam_deg) if q.sonar_rays > 1
-                 else np.zeros(1) for q in p]
-        offsets = [np.concatenate([c + math.radians(a) for a in q.sonar_angles_deg]) for c, q in zip(cones, p,
-                                                                                                      strict=True)]
-        counts = [len(q.sonar_angles_deg) for q in p]
-        self._sonar_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int) if n else np.zeros(0, int)
-        self._ray_owner = np.concatenate([np.full(len(o), i) for i, o in enumerate(offsets)]) if n else np.zeros(0, int)
-        self._ray_sonar = (np.concatenate([self._sonar_base[i] + np.repeat(np.arange(k), len(c))
-                                           for i, (k, c) in enumerate(zip(counts, cones, strict=True))])
-                           if n else np.zeros(0, int))
-        self._sonar_count = int(sum(counts))
-        self._ray_angle = np.concatenate(offsets) if n else np.zeros(0)
-        self._ray_r0 = np.array([q.radius_m + 0.005 for q in p])
-        self._ray_len = np.array([q.sonar_max_range_m for q in p])
-        self._ray_z = np.array([q.height_m * 0.6 for q in p])
+    def _models(self) -> None:
+        """One world model per kind of part, for every robot with one, in order of first appearance."""
+        members: dict[type[WorldModel], tuple[list[int], list[Any]]] = {}
+        for r, prof in enumerate(self.profiles):
+            for part in prof.parts:
+                ids, parts = members.setdefault(type(part).world_model, ([], []))
+                ids.append(r)
+                parts.append(part)
+        self.models: dict[str, WorldModel] = {}
+        for cls, (ids, parts) in members.items():
+            self.models[cls.name] = cls(self, ids, parts)
+        self._robot_models = [[self.models[type(part).world_model.name] for part in prof.parts]
+                              for prof in self.profiles]
 
-    # -- actuators --------------------------------------------------------------------------------
-    def set_pwm(self, robot: int, left: int, right: int) -> None:
-        if self.alive[robot]:
-            self.pwm[robot] = (left, right)
+    def model(self, name: str) -> Any:
+        """The world model of one kind of part (``"differential_drive"``, ``"conveyor"``...), None if no robot of
+        the session has that part."""
+        return self.models.get(name)
 
-    def set_belt(self, robot: int, steps: int) -> None:
-        """The carrier's conveyor stepper has turned ``steps`` steps since power-up."""
-        if self.alive[robot]:
-            self.belt_m[robot] = steps * self.profiles[robot].conveyor_m_per_step
-
+    # -- what every robot has ---------------------------------------------------------------------------
     def set_led(self, robot: int, rgb: tuple[int, int, int]) -> None:
         self.led[robot] = rgb
 
@@ -245,73 +191,65 @@ class World:
         self.battery_v[robot] = float(self._battery_voltage(np.zeros(self.n))[robot])
 
     def kill(self, robot: int) -> None:
-        """A dead robot: motors off, it stays in the arena as an obstacle."""
+        """A dead robot: its parts stop, it stays in the arena as an obstacle."""
         self.alive[robot] = False
-        self.pwm[robot] = 0
+        for m in self._robot_models[robot]:
+            m.kill(robot)
         self.led[robot] = 0
+
+    def drop_off(self, robot: int, x: float, y: float, yaw: float, t_ns: int) -> None:
+        """A carried robot goes down onto the floor at (x, y, yaw), solid again."""
+        carrier, slot = self.carried.pop(robot)
+        c = self.cid
+        pb.resetBasePositionAndOrientation(self.bodies[robot], [x, y, self.profiles[robot].height_m / 2 + 1e-3],
+                                           pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
+        pb.resetBaseVelocity(self.bodies[robot], [0, 0, 0], [0, 0, 0], physicsClientId=c)
+        pb.setCollisionFilterGroupMask(self.bodies[robot], -1, 1, -1, physicsClientId=c)
+        self.pos[robot] = (x, y)
+        self.yaw[robot] = yaw
+        self.released.append({"t_ns": t_ns, "robot": robot, "carrier": carrier, "slot": slot,
+                              "pose": [round(x, 4), round(y, 4), round(yaw, 4)]})
 
     # -- stepping -----------------------------------------------------------------------------------
     def _battery_voltage(self, current: np.ndarray) -> np.ndarray:
         ocv = np.interp(self.soc, _OCV_SOC, _OCV_V) * self.cells
         return ocv - current * self.r_int
 
-    def _motor_targets(self) -> None:
-        """Steady-state wheel speeds for the current PWM and battery voltage (constant over a quantum)."""
-        duty = np.abs(self.pwm)
-        frac = np.clip((duty - self.deadband[:, None]) / (255.0 - self.deadband[:, None]), 0.0, 1.0)
-        vscale = (self.battery_v / (_V_NOMINAL_PER_CELL * self.cells))[:, None]
-        self._w_ss = np.sign(self.pwm) * frac * self.w_max[:, None] * self.gain * vscale
-
-    def _motor_step(self) -> None:
-        """Exact first-order response over one physics step; the wheel angle is its exact integral."""
-        w_ss = self._w_ss
-        dev = self.omega - w_ss
-        self.angle += w_ss * self.dt + dev * self._tau_1ma
-        self.omega = w_ss + dev * self._decay
-
     def step_quantum(self, t_ns: int, q_ns: int) -> None:
         """Advance physics from ``t_ns`` to ``t_ns + q_ns`` (whole 1/physics_hz steps, exact on average)."""
         target_steps = int((t_ns + q_ns) * self.hz // 1_000_000_000)
-        c = self.cid
-        self._motor_targets()
-        reset = pb.resetBaseVelocity
-        yaw = self.yaw.copy()
+        models = list(self.models.values())
+        for m in models:
+            m.start_quantum(t_ns, q_ns)
         stepped = False
         while self.steps_done < target_steps:
-            self._motor_step()
-            rim = self.omega * self.wheel_r
-            v = 0.5 * (rim[:, 0] + rim[:, 1])
-            w = (rim[:, 1] - rim[:, 0]) / (2 * self.half_track)
-            # heading at mid-step (imposed turn rate); the true pose is read back once per quantum, so
-            # a collision's effect on the heading is picked up within one quantum
-            mid = yaw + 0.5 * w * self.dt
-            vx = (v * np.cos(mid)).tolist()
-            vy = (v * np.sin(mid)).tolist()
-            wl = w.tolist()
-            for i, body in enumerate(self.bodies):
-                reset(body, (vx[i], vy[i], 0.0), (0.0, 0.0, wl[i]), physicsClientId=c)
-            pb.stepSimulation(physicsClientId=c)
-            yaw += w * self.dt
+            for m in models:
+                m.before_step()
+            pb.stepSimulation(physicsClientId=self.cid)
+            for m in models:
+                m.after_step()
             self.steps_done += 1
             if self.paths:
                 self._follow_paths(self.steps_done / self.hz)
             if self.carried:
                 self._ride()
             stepped = True
+        t_end = t_ns + q_ns
         if stepped:
             self._read_poses()
-        if self.carried:
-            self._release(t_ns + q_ns)
-        current = self.i_idle + self.i_motor * np.abs(self.pwm).sum(axis=1) / 510.0
+        for m in models:
+            m.settle(t_end)
+        load = np.zeros(self.n)
+        for m in models:
+            m.load_a(load)
+        current = self.i_idle + load
         self.soc = np.clip(self.soc - current * (q_ns * 1e-9) / self.capacity_as, 0.0, 1.0)
         self.battery_v = self._battery_voltage(current)
-        self._sampled = None
         self._walls_rows.clear()
-        t_end = t_ns + q_ns
-        if self.n and t_end >= self._next_sonar_ns:
-            self._update_sonar()
-            while self._next_sonar_ns <= t_end:
-                self._next_sonar_ns += self._sonar_period_ns
+        for m in models:
+            m.drive_speed(self.drive_speed)
+        for m in models:
+            m.sample(t_end)
 
     def _follow_paths(self, t_s: float) -> None:
         """Put every body with a stated motion where its path says at ``t_s``, moving as the path moves (so what
@@ -327,7 +265,7 @@ class World:
                                  [0.0, 0.0, wrap(yaw1 - yaw) * self.hz], physicsClientId=c)
 
     def _ride(self) -> None:
-        """Robots on a conveyor sit on their carrier's deck and move with it (their wheels turn in the air)."""
+        """Robots on board sit on their carrier's deck and move with it (their wheels turn in the air)."""
         c = self.cid
         get = pb.getBasePositionAndOrientation
         for i, (carrier, _slot) in self.carried.items():
@@ -336,27 +274,6 @@ class World:
             pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, top], orn, physicsClientId=c)
             v, w = pb.getBaseVelocity(self.bodies[carrier], physicsClientId=c)
             pb.resetBaseVelocity(self.bodies[i], v, w, physicsClientId=c)
-
-    def _release(self, t_ns: int) -> None:
-        """A robot whose slot the belt has passed drops off behind its carrier, on the floor, facing its way."""
-        for i, (carrier, slot) in list(self.carried.items()):
-            prof = self.profiles[carrier]
-            if self.belt_m[carrier] + 1e-9 < slot * prof.conveyor_pitch_m:
-                continue
-            del self.carried[i]
-            yaw = float(self.yaw[carrier])
-            back = prof.radius_m + self.profiles[i].radius_m + 0.02
-            x = float(self.pos[carrier, 0]) - back * math.cos(yaw)
-            y = float(self.pos[carrier, 1]) - back * math.sin(yaw)
-            c = self.cid
-            pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, self.profiles[i].height_m / 2 + 1e-3],
-                                               pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
-            pb.resetBaseVelocity(self.bodies[i], [0, 0, 0], [0, 0, 0], physicsClientId=c)
-            pb.setCollisionFilterGroupMask(self.bodies[i], -1, 1, -1, physicsClientId=c)
-            self.pos[i] = (x, y)
-            self.yaw[i] = yaw
-            self.released.append({"t_ns": t_ns, "robot": i, "carrier": carrier, "slot": slot,
-                                  "pose": [round(x, 4), round(y, 4), round(yaw, 4)]})
 
     def _read_poses(self) -> None:
         c = self.cid
@@ -374,44 +291,6 @@ class World:
         self.odometer += moved
         self.pos = new
         self.yaw = np.array(yaws)
-
-    def _update_sonar(self) -> None:
-        """One ray batch for every live robot's sonar cone; the nearest echo in the cone is the range."""
-        live = np.flatnonzero(self.alive)
-        if not len(live):
-            return
-        rays = self.alive[self._ray_owner]
-        owner = self._ray_owner[rays]
-        ang = self.yaw[owner] + self._ray_angle[rays]
-        ca, sa = np.cos(ang), np.sin(ang)
-        x, y = self.pos[owner, 0], self.pos[owner, 1]
-        r0, r1, z = self._ray_r0[owner], self._ray_r0[owner] + self._ray_len[owner], self._ray_z[owner]
-        froms = np.column_stack([x + r0 * ca, y + r0 * sa, z])
-        tos = np.column_stack([x + r1 * ca, y + r1 * sa, z])
-        hits = pb.rayTestBatch(froms.tolist(), tos.tolist(), numThreads=1, physicsClientId=self.cid)
-        frac = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits])
-        nearest = np.ones(self._sonar_count)
-        np.minimum.at(nearest, self._ray_sonar[rays], frac)
-        for i in live.tolist():
-            prof = self.profiles[i]
-            rng = self._sonar_rng[i]
-            moving = abs(self.omega[i]).max() * prof.wheel_radius_m > 0.01
-            out = self.sonars[i]
-            for k in range(len(out)):
-                frac = float(nearest[self._sonar_base[i] + k])
-                true_r = frac * prof.sonar_max_range_m + 0.005
-                noise = rng.standard_normal()
-                outlier = rng.random() < prof.sonar_outlier_p
-                spurious = rng.uniform(prof.sonar_min_range_m, prof.sonar_max_range_m)
-                if frac >= 1.0:
-                    r = prof.sonar_max_range_m
-                else:
-                    r = true_r + noise * (prof.sonar_noise_m + prof.sonar_noise_rel * true_r)
-                if moving and outlier:
-                    r = spurious
-                # inside its blind zone the ranger reports its minimum range (as MaxBotix sensors do)
-                out[k] = float(min(max(r, prof.sonar_min_range_m), prof.sonar_max_range_m))
-            self.sonar_m[i] = out[0]
 
     # -- radio geometry (the Geometry the radio and UWB media ask) ---------------------------------------
     STATIC_RAY_MASK = 2  # Bullet puts static bodies (walls, obstacles) in its StaticFilter group: robots are skipped
@@ -453,24 +332,17 @@ class World:
         return counts
 
     # -- sensing ------------------------------------------------------------------------------------
-    def _sample_all(self) -> None:
-        """Noise-free encoder counts and illuminance of every robot, once per physics state."""
-        counts = np.floor(self.angle * (self.cpr / (2 * math.pi))[:, None]).astype(np.int64)
-        if self.lux_field is not None:
-            lux = self.lux_field.lux(self.pos[:, 0], self.pos[:, 1])
-        else:
-            lux = self.cfg.light.illuminance(self.pos[:, 0], self.pos[:, 1])
-        self._sampled = (counts.tolist(), lux.tolist(), self.sonar_m.tolist(), self.battery_v.tolist())
-
-    def sensors(self, robot: int) -> Sensors:
-        if self._sampled is None:  # invalidated by every step_quantum
-            self._sample_all()
-        counts, lux, sonar, batt = self._sampled
-        noisy = lux[robot] * (1 + self._light_noise[robot] * self._light_rng[robot].standard_normal())
-        sides = tuple(self.sonars[robot][1:].tolist()) if len(self.sonars[robot]) > 1 else ()
-        return Sensors((counts[robot][0], counts[robot][1]), sonar[robot], max(noisy, 0.0), batt[robot], sides)
+    def sensors(self, robot: int) -> dict[str, Any]:
+        """What robot ``robot``'s board reads now: each of its parts' readings by name, and its battery voltage."""
+        out: dict[str, Any] = {}
+        for m in self._robot_models[robot]:
+            out.update(m.sense(robot))
+        out["battery_v"] = float(self.battery_v[robot])
+        return out
 
     def close(self) -> None:
+        for m in self.models.values():
+            m.close()
         if pb.isConnected(self.cid):
             pb.disconnect(self.cid)
 

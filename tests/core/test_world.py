@@ -27,7 +27,7 @@ def run(w: World, seconds: float, pwm: tuple[int, int]) -> None:
     q = 10_000_000
     t = 0
     for _ in range(round(seconds * 100)):
-        w.set_pwm(0, *pwm)
+        w.model("differential_drive").set_pwm(0, *pwm)
         w.step_quantum(t, q)
         t += q
 
@@ -37,19 +37,20 @@ def test_wall_stops_a_robot_and_wheels_keep_counting() -> None:
     run(w, 8.0, (200, 200))
     x = w.pos[0, 0]
     assert 0.063 - 0.01 < x < 0.2  # pressed against the wall at x = 0, not through it
-    assert w.sensors(0).encoders[0] > 1.5 * 362  # counted far more than the 0.94 m it could travel
+    assert w.sensors(0)["encoders"][0] > 1.5 * 362  # counted far more than the 0.94 m it could travel
 
 
 def test_robots_collide_with_each_other() -> None:
     c = Config.model_validate({"robots": [{"count": 2, "placement": {
         "kind": "explicit", "poses": [[2.0, 2.0, 0.0], [3.0, 2.0, 180.0]]}}]})
     w = World(c, make_plan(c).robots)
-    w.gain[:] = 1.0  # ideal drive trains: exactly head-on along one line
-    w.wheel_r[:] = w.profiles[0].wheel_radius_m
+    drive = w.model("differential_drive")
+    drive.gain[:] = 1.0  # ideal drive trains: exactly head-on along one line
+    drive.wheel_r[:] = drive.parts[0].wheel_radius_m
     closest = math.inf
     for k in range(400):  # without contacts they would pass through each other
-        w.set_pwm(0, 180, 180)
-        w.set_pwm(1, 180, 180)
+        drive.set_pwm(0, 180, 180)
+        drive.set_pwm(1, 180, 180)
         w.step_quantum(k * 10_000_000, 10_000_000)
         closest = min(closest, math.dist(w.pos[0], w.pos[1]))
     assert 2 * 0.063 - 0.01 < closest < 2 * 0.063 + 0.02  # they met and did not interpenetrate
@@ -75,8 +76,8 @@ def test_light_field_and_sensor_noise_are_seeded() -> None:
     b = world(**one_robot(2.0, 2.0, 0, **extra))
     assert a.cfg.light.illuminance(2, 2) == pytest.approx(110)
     assert a.cfg.light.illuminance(3, 2) == pytest.approx(10 + 100 * math.exp(-0.5))
-    readings = [a.sensors(0).lux for _ in range(200)]
-    assert readings[:5] == [b.sensors(0).lux for _ in range(5)]  # seeded: same stream in the same order
+    readings = [a.sensors(0)["lux"] for _ in range(200)]
+    assert readings[:5] == [b.sensors(0)["lux"] for _ in range(5)]  # seeded: same stream in the same order
     assert np.std(readings) == pytest.approx(110 * 0.01, rel=0.25)  # 1 % noise is there
     assert np.mean(readings) == pytest.approx(110, rel=0.005)
 

@@ -32,6 +32,11 @@ MOVE = DB.get_message_by_name("MOVE_CMD")
 IDLE, ROTATING, FORWARD, DONE, ABORTED = range(5)
 
 
+def _pwm(p) -> object:
+    """The PWM the LLC's motors get now."""
+    return p.world.model("differential_drive").pwm[0]
+
+
 def plant(x: float = 2.0, y: float = 2.0, yaw: float = 0.0, seed: int = 3, **arena) -> Plant:
     cfg = Config.model_validate({
         "session": {"seed": seed}, "arena": arena or {"width_m": 10, "length_m": 10},
@@ -59,7 +64,7 @@ def test_pid_tracks_commanded_speed_on_quantised_encoders() -> None:
     drive(p, 0.15, 0.0, 5.0)
     speed = math.dist(p.world.pos[0], x0) / 5.0
     assert speed == pytest.approx(0.15, rel=0.03)
-    left, right = p.world.sensors(0).encoders
+    left, right = p.world.sensors(0)["encoders"]
     assert abs(left - right) <= 2  # both wheels held to the same pulse rate despite gain spread
 
 
@@ -85,11 +90,11 @@ def test_odometry_matches_ground_truth_over_a_short_run() -> None:
 def test_watchdog_stops_motors_half_a_second_after_last_command() -> None:
     p = plant()
     drive(p, 0.15, 0.0, 1.0)
-    assert abs(p.world.pwm[0]).sum() > 0
+    assert abs(_pwm(p)).sum() > 0
     p.run_for(0.35)
-    assert abs(p.world.pwm[0]).sum() > 0  # still within 0.5 s of the last command (sent at 0.9 s)
+    assert abs(_pwm(p)).sum() > 0  # still within 0.5 s of the last command (sent at 0.9 s)
     p.run_for(0.2)
-    assert abs(p.world.pwm[0]).sum() == 0
+    assert abs(_pwm(p)).sum() == 0
     status = decoded(p, "STATUS")[-1]
     assert status["fault_watchdog"] == 1
 
@@ -206,8 +211,9 @@ def test_heading_drift_follows_the_wheel_radius_mismatch() -> None:
     drive(p, 0.15, 0.0, 1.0)
     yaw0 = float(p.world.yaw[0])
     drive(p, 0.15, 0.0, 8.0)
-    r_left, r_right = p.world.wheel_r[0]
-    expected = 0.15 * 2 * (r_right - r_left) / ((r_left + r_right) * 2 * p.world.half_track[0]) * 8.0
+    wheels = p.world.model("differential_drive")
+    r_left, r_right = wheels.wheel_r[0]
+    expected = 0.15 * 2 * (r_right - r_left) / ((r_left + r_right) * 2 * wheels.half_track[0]) * 8.0
     assert abs(expected) > 0.02  # the seed gives a measurable mismatch
     assert float(p.world.yaw[0]) - yaw0 == pytest.approx(expected, rel=0.2)
 
@@ -233,11 +239,11 @@ def move(p: Plant, rot_rad: float, dist_m: float, speed: float, seq: int) -> Non
 def test_move_rotates_then_drives_by_the_pulse_counts() -> None:
     p = plant()
     p.run_for(0.2)
-    e0 = p.world.sensors(0).encoders
+    e0 = p.world.sensors(0)["encoders"]
     yaw0, pos0 = float(p.world.yaw[0]), p.world.pos[0].copy()
     move(p, math.pi / 2, 0.1, 0.1, seq=7)
     p.run_for(3.5)  # about 2 s of moving, no DRIVE_CMD: the watchdog does not stop a move
-    left, right = (e - s for e, s in zip(p.world.sensors(0).encoders, e0, strict=True))
+    left, right = (e - s for e, s in zip(p.world.sensors(0)["encoders"], e0, strict=True))
     assert left == pytest.approx(-25 + 36, abs=2) and right == pytest.approx(25 + 36, abs=2)
     status = decoded(p, "MOVE_STATUS")
     states = [s["state"] for s in status]
@@ -249,7 +255,7 @@ def test_move_rotates_then_drives_by_the_pulse_counts() -> None:
     turned = float(p.world.yaw[0]) - yaw0
     assert math.degrees(turned) == pytest.approx(90, abs=5)
     assert math.dist(p.world.pos[0], pos0) == pytest.approx(0.1, abs=0.01)
-    assert abs(p.world.pwm[0]).sum() == 0 and decoded(p, "STATUS")[-1]["fault_watchdog"] == 0
+    assert abs(_pwm(p)).sum() == 0 and decoded(p, "STATUS")[-1]["fault_watchdog"] == 0
 
 
 def test_a_new_move_aborts_the_running_one() -> None:
@@ -277,7 +283,7 @@ def test_drive_cmd_aborts_a_move_and_takes_over() -> None:
     n = len(status)
     p.run_for(1.0)
     assert len(decoded(p, "MOVE_STATUS")) == n  # no more reports once it is over
-    assert abs(p.world.pwm[0]).sum() == 0
+    assert abs(_pwm(p)).sum() == 0
 
 
 def _move_frames(llc: LowLevelController) -> list[dict]:

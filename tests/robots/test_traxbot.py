@@ -53,7 +53,7 @@ def test_scouts_are_loaded_ranger_by_ranger(tmp_path: Path) -> None:
     (lambda t: t.replace("count = 5\n", "count = 6\n"), r"robots\[1\].count: robots\[0\] carries at most 1 x 5"),
     (lambda t: t.replace("carried_by = 0", "carried_by = 1"), r"robots\[1\].carried_by = 1: not another robot group"),
     (lambda t: t.replace('profile = "traxbot"', 'profile = "eswarbot"'), r"robots\[0\] \(eswarbot\) has no conveyor"),
-    (lambda t: t + 'placement = { kind = "random" }\n', "robots carried by a ranger start on board"),
+    (lambda t: t + 'placement = { kind = "random" }\n', "carried robots start on board"),
 ])
 def test_carrying_is_checked(tmp_path: Path, edit, match: str) -> None:
     p = ranger_config(tmp_path)

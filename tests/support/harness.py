@@ -30,14 +30,15 @@ class Plant:
 
     def step(self) -> None:
         for r, pins in self.pending_pins:
-            self.world.set_pwm(r, *pins["pwm"])
+            self.world.model("differential_drive").set_pwm(r, *pins["pwm"])
         self.pending_pins = []
         for r in sorted(self.wake):
             if self.wake[r] <= self.t:
                 s = self.world.sensors(r)
                 res = self.fw.run(entity(r, "llc"), self.t, {
                     "in": self.inbox[r],
-                    "sens": {"enc": list(s.encoders), "sonar_m": s.sonar_m, "lux": s.lux, "battery_v": s.battery_v}})
+                    "sens": {"enc": list(s["encoders"]), "sonar_m": s["sonar_m"], "lux": s["lux"],
+                             "battery_v": s["battery_v"]}})
                 self.inbox[r] = []
                 self.tx[r].extend(res["out"])
                 self.wake[r] = res["wake"]

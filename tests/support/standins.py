@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 
 from bridge.core.registry import robot_profile
+from bridge.models.differential_drive import DriveParams
+from bridge.models.sonar import SonarParams
 from bridge.robots.eswarbot.board import llc_params
 from firmware_sim.board import sensors
 from firmware_sim.board.arduino import Board
@@ -157,7 +159,7 @@ class LlcStand(_Stand):
             self.frames_in += 1
         dt = (t_ns - self.last_ns) / 1e9
         self.last_ns = t_ns
-        p = self.prof
+        p = self.prof.part(DriveParams)
         for i in (0, 1):  # the motors spin the free wheels
             pwm = b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1)
             w_ss = np.sign(pwm) * max(0.0, (abs(pwm) - p.motor_deadband_pwm) / (255 - p.motor_deadband_pwm)) \
@@ -168,7 +170,7 @@ class LlcStand(_Stand):
         if t_ns >= self.next_loop_ns:
             b.time_us = t_ns // 1000
             b.encoder_counts = [math.floor(a * p.encoder_cpr / (2 * math.pi)) for a in self.angle]
-            b.analog_volts[PIN_SONAR] = sensors.sonar_volts(p.sonar_max_range_m)
+            b.analog_volts[PIN_SONAR] = sensors.sonar_volts(self.prof.part(SonarParams).max_range_m)
             b.analog_volts[PIN_LDR] = sensors.ldr_volts(50.0)
             b.analog_volts[PIN_BATTERY] = sensors.battery_volts_at_pin(8.2)
             if not self.booted:

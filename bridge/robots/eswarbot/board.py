@@ -1,6 +1,6 @@
 """The eSwarBot's Arduino board with its LLC sketch, wired as the real robot is: which physical value reaches which
 pin (encoders, the sonars' analog outputs, the light-dependent resistor, the battery divider, the XBee's RSSI PWM
-output, a motion-capture receiver), which pins drive the motors, the LED strip and a TraxBot's conveyor stepper.
+output, a motion-capture receiver), which pins drive the motors, the LED strip and a conveyor's stepper (the TraxBot's).
 
 The firmware host runs one per robot whose LLC the session simulates (``RobotSpec.make_board``); the sketch itself
 is ``firmware_sim.robots.eswarbot.llc``.
@@ -12,6 +12,9 @@ from typing import Any
 
 from bridge.core.plan import RobotPlan
 from bridge.core.profile import RobotProfile
+from bridge.core.registry import PluginError
+from bridge.models.differential_drive import DriveParams
+from bridge.models.sonar import SonarParams
 from firmware_sim.board import sensors
 from firmware_sim.board.arduino import Board
 from firmware_sim.board.can_controller import Frame
@@ -31,27 +34,31 @@ from firmware_sim.robots.eswarbot.llc import (
 
 
 def llc_params(p: RobotProfile, xbee: dict | None = None) -> LlcParams:
+    """The sketch's build for a robot of profile ``p``: its drive's figures, its sonars, a conveyor if it has one."""
+    d, s = p.part(DriveParams), p.part(SonarParams)
+    if d is None or s is None:
+        raise PluginError(f"robot {p.name!r}: the eSwarBot's LLC sketch drives a differential drive and reads sonars")
+    belt = p.part_named("conveyor")
     # the wheel PI was tuned on the eSwarBot's 48-pulse encoders: the same gains per radian of wheel angle
-    per_pulse = 48 / p.encoder_cpr
+    per_pulse = 48 / d.encoder_cpr
     return LlcParams(
         kp=LlcParams.kp * per_pulse,
         ki=LlcParams.ki * per_pulse,
         max_err_pulses=LlcParams.max_err_pulses / per_pulse,
-        wheel_radius_m=p.wheel_radius_m,
-        half_track_m=p.half_track_m,
-        encoder_cpr=p.encoder_cpr,
+        wheel_radius_m=d.wheel_radius_m,
+        half_track_m=d.half_track_m,
+        encoder_cpr=d.encoder_cpr,
         loop_hz=p.llc_loop_hz,
-        max_wheel_rad_s=p.motor_max_wheel_rad_s,
-        deadband_pwm=p.motor_deadband_pwm,
-        motor_time_constant_s=p.motor_time_constant_s,
+        max_wheel_rad_s=d.motor_max_wheel_rad_s,
+        deadband_pwm=d.motor_deadband_pwm,
+        motor_time_constant_s=d.motor_time_constant_s,
         battery_cells=p.battery_cells,
-        sonar_min_mm=round(p.sonar_min_range_m * 1000),
-        sonar_max_mm=round(p.sonar_max_range_m * 1000),
-        side_sonars=len(p.sonar_angles_deg) == 3,
-        conveyor_slots=p.conveyor_slots,
-        conveyor_pitch_mm=p.conveyor_pitch_m * 1000,
-        conveyor_speed_mm_s=p.conveyor_speed_m_s * 1000,
-        belt_mm_per_step=p.conveyor_m_per_step * 1000,
+        sonar_min_mm=round(s.min_range_m * 1000),
+        sonar_max_mm=round(s.max_range_m * 1000),
+        side_sonars=len(s.angles_deg) == 3,
+        **({} if belt is None else {"conveyor_slots": belt.slots, "conveyor_pitch_mm": belt.pitch_m * 1000,
+                                    "conveyor_speed_mm_s": belt.speed_m_s * 1000,
+                                    "belt_mm_per_step": belt.m_per_step * 1000}),
         rssi_pwm_input=xbee is not None,
         # the firmware inverts eq. 3.9 with the sensitivity of the module it is built for
         xbee_sensitivity_dbm=-92.0 if xbee is not None and xbee["series"] == 1 else -94.0,

@@ -8,14 +8,38 @@ from __future__ import annotations
 
 from typing import Any
 
+from bridge.core.recorder import register_schema
+
+SCHEMA = "swarm_sitl.LlcPins"
+register_schema(SCHEMA, {
+    "type": "object",
+    "description": "One loop() of the LLC board: physical values at its input pins, and its pin writes "
+                   "(signed motor PWM, LED colour; only when they changed), which act from the next quantum",
+    "properties": {
+        "enc": {"type": "array", "items": {"type": "integer"}},
+        "sonar_m": {"type": "number"},
+        "lux": {"type": "number"},
+        "battery_v": {"type": "number"},
+        "rssi_pwm": {"type": "number", "description": "XBee RSSI PWM duty (0..1) at the board's pin"},
+        "pwm": {"type": "array", "items": {"type": "integer"}},
+        "led": {"type": "array", "items": {"type": "integer"}},
+        "sides": {"type": "array", "items": {"type": "number"},
+                  "description": "a robot with three sonars: the left and right ranges (m)"},
+        "belt_steps": {"type": "integer", "description": "a carrier's conveyor stepper, steps since power-up"},
+    },
+})
+
 
 class LlcPins:
+    schema = SCHEMA  # what the hub records each loop() under
+
     def sense(self, world: Any, r: int, media: dict[str, Any], ideal_pose: bool) -> tuple[dict, dict]:
         """(what the board is sent, what is recorded as its pins' values: the pose is in /world/poses)."""
         s = world.sensors(r)
-        sens: dict[str, Any] = {"enc": list(s.encoders), "sonar_m": s.sonar_m, "lux": s.lux, "battery_v": s.battery_v}
-        if s.side_sonars_m:
-            sens["sides"] = list(s.side_sonars_m)
+        sens: dict[str, Any] = {"enc": list(s["encoders"]), "sonar_m": s["sonar_m"], "lux": s["lux"],
+                                "battery_v": s["battery_v"]}
+        if s.get("side_sonars_m"):
+            sens["sides"] = list(s["side_sonars_m"])
         if media:  # what media put on its pins (an XBee's RSSI PWM output)
             sens.update(media)
         recorded = sens
@@ -34,10 +58,10 @@ class LlcPins:
 
     def actuate(self, world: Any, r: int, pins: dict[str, Any]) -> None:
         """The pin writes of the LLC's previous loop take effect: motors, LEDs, a conveyor's stepper."""
-        world.set_pwm(r, *pins["pwm"])
+        world.model("differential_drive").set_pwm(r, *pins["pwm"])
         world.set_led(r, tuple(pins["led"]))
         if "belt_steps" in pins:
-            world.set_belt(r, pins["belt_steps"])
+            world.model("conveyor").set_belt(r, pins["belt_steps"])
 
 
 LLC_PINS = LlcPins()

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bridge.core.loop_functions import LoopFunctions
+from bridge.core.recorder import register_schema
 from bridge.media.radio import splits
 from bridge.studies.rdpso.comm_stats import comm_report
 from bridge.studies.rdpso.deployment import covered_share, dispersion, link_stats, mean_sd
@@ -27,13 +28,25 @@ if TYPE_CHECKING:
     from bridge.core.config import Config
     from bridge.core.hub import Hub
 
+register_schema("swarm_sitl.Mapping", {
+    "type": "object",
+    "description": "The chapter 8 mapping objective after a scan of all live robots (objective kind mapping)",
+    "properties": {
+        "eta_exp": {"type": "number", "description": "exploration ratio: explored free cells / free cells"},
+        "scans": {"type": "integer", "description": "scans so far, this one included"},
+        "explored_free_cells": {"type": "integer"},
+        "free_cells": {"type": "integer"},
+        "entropy_bits": {"type": "number", "description": "the map's total entropy, eq. 8.2 summed over cells"},
+    },
+})
+
 BEHAVIOURS = ("rdpso", "est_ranger")  # the study's controllers: their logs are read here
 
 
 class RdpsoLoopFunctions(LoopFunctions):
     @classmethod
     def wanted(cls, cfg: Config) -> bool:
-        return (cfg.objective.kind == "mapping" or any(g.carried_by is not None for g in cfg.robots)
+        return (cfg.section("objective").kind == "mapping" or any(g.carried_by is not None for g in cfg.robots)
                 or any(g.behaviour in BEHAVIOURS for g in cfg.robots))
 
     def __init__(self, hub: Hub) -> None:
@@ -49,7 +62,7 @@ class RdpsoLoopFunctions(LoopFunctions):
         self.deployed: dict[int, dict[str, Any]] = {}  # ranger -> its deployment as it ended (deployment_report)
         self.comm: dict[int, dict[str, Any]] = {}  # robot -> its routing layer's latest counters (comm_report)
         self.mapping = None
-        if hub.cfg.objective.kind == "mapping":
+        if hub.cfg.section("objective").kind == "mapping":
             from bridge.studies.rdpso.mapping import SessionMap
 
             self.mapping = hub.world.lux_field = SessionMap(hub.cfg)

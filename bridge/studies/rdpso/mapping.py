@@ -369,7 +369,7 @@ class SessionMap:
     robots scan from their true poses; the light sensor reads eq. 8.1 as lux; eta_exp is kept per scan."""
 
     def __init__(self, cfg: Any) -> None:
-        o = cfg.objective
+        o = cfg.section("objective")
         self.lux_min, self.lux_max = float(o.lux_min), float(o.lux_max)
         bounds = (0.0, 0.0, float(cfg.arena.width_m), float(cfg.arena.length_m))
         self.map = EntropyMap(bounds, config_occupancy(cfg, o.cell_m), o.cell_m, o.r_w_m, sigma_m=o.sigma_m)

@@ -109,7 +109,7 @@ def test_a_resized_conveyor_carries_more_scouts(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("profile", "slots", "scouts", "match"), [
     ("traxbot", "conveyor_slots = 20", 61, r"robots\[1\].count: robots\[0\] carries at most 3 x 20 = 60"),
     ("traxbot", "", 16, r"carries at most 3 x 5 = 15"),
-    ("eswarbot", "conveyor_slots = 5", 3, r"robots\[0\]: conveyor_slots: a eswarbot has no conveyor"),
+    ("eswarbot", "conveyor_slots = 5", 3, r"robots\[0\].conveyor_slots: Extra inputs are not permitted"),
     ("traxbot", "conveyor_slots = 0", 3, r"robots\[0\].conveyor_slots: Input should be greater than or equal to 1"),
 ])
 def test_conveyor_slots_are_checked(tmp_path: Path, profile: str, slots: str, scouts: int, match: str) -> None:

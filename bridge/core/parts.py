@@ -1,0 +1,81 @@
+"""A robot's parts as the world simulates them: a drive, a sensor, a conveyor, soon legs.
+
+A robot plugin lists its parts in its profile (``RobotProfile.parts``), each a frozen set of figures (a ``Part``)
+that names the world model simulating it. The world builds one model per kind of part, for every robot that has
+one, vectorised across them (as ARGoS's sensors and actuators are plugins the core only calls), and calls it at
+fixed points of a quantum; the core knows no part by name.
+
+A quantum, as the world runs it::
+
+    start_quantum            (commands of the last tick are in: set the targets)
+    repeat per physics step:  before_step -> pybullet step -> scripted bodies -> after_step
+    the true poses are read back
+    settle(t_end)            (what the quantum's motion changes: a carried robot goes down)
+    the batteries drain by load_a (what the parts draw beyond the board's idle current)
+    drive_speed               (how fast each robot's drive is driving it, for the sensors)
+    sample(t_end)            (sensors whose readings are updated at their own rate)
+
+and between quanta ``sense(r)`` gives what robot ``r``'s board reads from the part.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+if TYPE_CHECKING:
+    from bridge.core.world import World
+
+
+class Part(BaseModel):
+    """A part's figures in a robot's profile; ``world_model`` is the class that simulates every part of its kind."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    world_model: ClassVar[type[WorldModel]]
+
+    @property
+    def capacity(self) -> int:
+        """Robots this part carries on board (a conveyor's slots; most parts carry none)."""
+        return 0
+
+
+class WorldModel:
+    """One kind of part for every robot that has it. ``robots`` are their ids in robot order, ``parts`` their
+    figures; ``local[r]`` is robot ``r``'s row in the model's arrays. Hooks do nothing unless overridden."""
+
+    name: ClassVar[str]
+
+    def __init__(self, world: World, robots: list[int], parts: list[Any]) -> None:
+        self.world = world
+        self.robots = robots
+        self.ids = np.array(robots, dtype=int)
+        self.parts = parts
+        self.local = {r: k for k, r in enumerate(robots)}
+
+    def start_quantum(self, t_ns: int, q_ns: int) -> None: ...
+
+    def before_step(self) -> None: ...
+
+    def after_step(self) -> None: ...
+
+    def settle(self, t_end_ns: int) -> None: ...
+
+    def load_a(self, load: np.ndarray) -> None:
+        """Add the current the part draws (A) to ``load``, a per-robot array."""
+
+    def drive_speed(self, speed: np.ndarray) -> None:
+        """A drive writes how fast it is driving each of its robots (m/s) into ``speed`` (what shakes a sensor)."""
+
+    def sample(self, t_end_ns: int) -> None: ...
+
+    def sense(self, r: int) -> dict[str, Any]:
+        """What robot ``r``'s board reads from this part now, by name."""
+        return {}
+
+    def kill(self, r: int) -> None:
+        """Robot ``r`` is dead: the part stops."""
+
+    def close(self) -> None: ...

@@ -1,0 +1,111 @@
+"""Ultrasonic range finders (MaxBotix-class): one batched ray test for every robot's sonars, a cone of rays
+per sonar, at the sensors' rate; the nearest echo in the cone is the range, with range-proportional noise, spurious
+echoes while the robot drives, and the minimum range inside the blind zone."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pybullet as pb
+
+from bridge.core.parts import Part, WorldModel
+from bridge.core.rng import stream
+
+
+class SonarParams(Part):
+    max_range_m: float
+    min_range_m: float
+    half_beam_deg: float
+    rays: int  # rays per cone
+    rate_hz: float
+    noise_m: float
+    noise_rel: float
+    outlier_p: float  # probability of a spurious echo per reading while the robot moves
+    angles_deg: tuple[float, ...] = (0.0,)  # one sonar per angle from the heading; the first is the front
+
+
+class Sonars(WorldModel):
+    name = "sonar"
+
+    def __init__(self, world: Any, robots: list[int], parts: list[SonarParams]) -> None:
+        super().__init__(world, robots, parts)
+        n, p = len(robots), parts
+        self.ranges = [np.full(len(q.angles_deg), q.max_range_m) for q in p]  # each robot's sonars, front first
+        self._rng = [stream(world.seed, "robot", r, "sonar") for r in robots]
+        self._period_ns = round(1e9 / max(q.rate_hz for q in p)) if n else 0
+        self._next_ns = 0
+        # a cone per sonar; ``_ray_sonar`` numbers every robot's sonars consecutively (robot k's first is
+        # ``_base[k]``), ``_ray_owner`` is the robot's row
+        cones = [np.linspace(-1, 1, q.rays) * math.radians(q.half_beam_deg) if q.rays > 1 else np.zeros(1) for q in p]
+        offsets = [np.concatenate([c + math.radians(a) for a in q.angles_deg]) for c, q in zip(cones, p, strict=True)]
+        counts = [len(q.angles_deg) for q in p]
+        self._base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int) if n else np.zeros(0, int)
+        self._ray_owner = np.concatenate([np.full(len(o), k) for k, o in enumerate(offsets)]) if n else np.zeros(0, int)
+        self._ray_sonar = (np.concatenate([self._base[k] + np.repeat(np.arange(m), len(c))
+                                           for k, (m, c) in enumerate(zip(counts, cones, strict=True))])
+                           if n else np.zeros(0, int))
+        self._count = int(sum(counts))
+        self._ray_angle = np.concatenate(offsets) if n else np.zeros(0)
+        prof = [world.profiles[r] for r in robots]
+        self._ray_r0 = np.array([q.radius_m + 0.005 for q in prof])
+        self._ray_len = np.array([q.max_range_m for q in p])
+        self._ray_z = np.array([q.height_m * 0.6 for q in prof])
+
+    def sample(self, t_end_ns: int) -> None:
+        if len(self.robots) and t_end_ns >= self._next_ns:
+            self._update()
+            while self._next_ns <= t_end_ns:
+                self._next_ns += self._period_ns
+
+    def _update(self) -> None:
+        """One ray batch for every live robot's sonar cones."""
+        w = self.world
+        alive = w.alive[self.ids]
+        live = np.flatnonzero(alive)
+        if not len(live):
+            return
+        rays = alive[self._ray_owner]
+        owner = self._ray_owner[rays]
+        robot = self.ids[owner]
+        ang = w.yaw[robot] + self._ray_angle[rays]
+        ca, sa = np.cos(ang), np.sin(ang)
+        x, y = w.pos[robot, 0], w.pos[robot, 1]
+        r0, r1, z = self._ray_r0[owner], self._ray_r0[owner] + self._ray_len[owner], self._ray_z[owner]
+        froms = np.column_stack([x + r0 * ca, y + r0 * sa, z])
+        tos = np.column_stack([x + r1 * ca, y + r1 * sa, z])
+        hits = pb.rayTestBatch(froms.tolist(), tos.tolist(), numThreads=1, physicsClientId=w.cid)
+        frac = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits])
+        nearest = np.ones(self._count)
+        np.minimum.at(nearest, self._ray_sonar[rays], frac)
+        for k in live.tolist():
+            q = self.parts[k]
+            rng = self._rng[k]
+            moving = w.drive_speed[self.robots[k]] > 0.01
+            out = self.ranges[k]
+            for j in range(len(out)):
+                frac = float(nearest[self._base[k] + j])
+                true_r = frac * q.max_range_m + 0.005
+                noise = rng.standard_normal()
+                outlier = rng.random() < q.outlier_p
+                spurious = rng.uniform(q.min_range_m, q.max_range_m)
+                if frac >= 1.0:
+                    r = q.max_range_m
+                else:
+                    r = true_r + noise * (q.noise_m + q.noise_rel * true_r)
+                if moving and outlier:
+                    r = spurious
+                # inside its blind zone the sensor reports its minimum range (as MaxBotix sensors do)
+                out[j] = float(min(max(r, q.min_range_m), q.max_range_m))
+
+    def sense(self, r: int) -> dict[str, Any]:
+        """The front sonar's range (m), and a robot with more sonars the others', left then right."""
+        out = self.ranges[self.local[r]]
+        reading: dict[str, Any] = {"sonar_m": float(out[0])}
+        if len(out) > 1:
+            reading["side_sonars_m"] = tuple(out[1:].tolist())
+        return reading
+
+
+SonarParams.world_model = Sonars
