@@ -28,8 +28,8 @@ import can
 import numpy as np
 import serial
 
+from swarm_logic import devices
 from swarm_logic.clock import Clock
-from swarm_logic.drivers.llc_client import LlcClient
 from swarm_logic.log import JsonlLog, Sink
 
 if TYPE_CHECKING:
@@ -63,20 +63,8 @@ class Robot:
     @classmethod
     def open(cls, robot_id: int, hal: dict[str, Any], clock: Clock, seed: int,
              params: dict[str, Any] | None = None, log_sink: Sink | None = None) -> Robot:
-        if hal.get("llc_mavlink") is not None:
-            if hal.get("llc_can"):
-                raise ValueError("HAL config llc_mavlink: the robot has one low-level controller; give llc_can or "
-                                 "llc_mavlink, not both")
-            from swarm_logic.mavlink.low_level import open_low_level
-
-            llc: LowLevel = open_low_level(hal["llc_mavlink"], clock)
-            buses: list[can.BusABC] = []
-        else:
-            llc_cfg = dict(hal.get("llc_can") or {})
-            if "interface" not in llc_cfg:
-                raise ValueError("HAL config needs llc_can.interface (a python-can interface name) or llc_mavlink")
-            bus = can.Bus(**llc_cfg)
-            llc, buses = LlcClient(bus), [bus]
+        """The robot a HAL config describes, its devices open (``swarm_logic.devices`` builds them)."""
+        llc, buses = devices.open_low_level(hal, clock)
         rng = np.random.Generator(np.random.PCG64(seed))
         robot = cls(robot_id, clock, llc, rng, dict(params or {}), buses)
         if hal.get("start_pose") is not None:
@@ -88,24 +76,11 @@ class Robot:
             robot.payload = tuple(int(v) for v in hal["payload"])
         try:
             if hal.get("xbee"):
-                from swarm_logic.drivers.xbee import XBee
-
-                x = dict(hal["xbee"])
-                port = _open_port(x, "xbee", 9600)
-                robot.ports.append(port)
-                robot.xbee = XBee(port, clock, api_mode=int(x.get("api_mode", 1)),
-                                  rssi_from_db=bool(x.get("rssi_from_db", False)))
+                robot.xbee = devices.open_xbee(hal["xbee"], clock, robot.ports)
             if hal.get("uwb"):
-                from swarm_logic.drivers.uwb import Uwb
-
-                u = dict(hal["uwb"])
-                port = _open_port(u, "uwb", 115200)
-                robot.ports.append(port)
-                robot.uwb = Uwb(port, clock)
+                robot.uwb = devices.open_uwb(hal["uwb"], clock, robot.ports)
             if hal.get("mavlink") is not None:
-                from swarm_logic.mavlink.face import open_face
-
-                robot.mavlink = open_face(hal["mavlink"], robot_id, clock)
+                robot.mavlink = devices.open_mavlink(hal["mavlink"], robot_id, clock)
             if log_sink is None and (hal.get("log") or {}).get("path"):
                 log_sink = JsonlLog(hal["log"]["path"], clock)
             robot.log_sink = log_sink
@@ -138,9 +113,3 @@ class Robot:
         if isinstance(self.log_sink, JsonlLog):
             self.log_sink.close()
 
-
-def _open_port(cfg: dict[str, Any], what: str, default_baud: int) -> serial.SerialBase:
-    url = cfg.get("port")
-    if not url:
-        raise ValueError(f"HAL config {what}.port: a serial device or URL is needed (e.g. /dev/ttyUSB0, sitl://{what})")
-    return serial.serial_for_url(str(url), baudrate=int(cfg.get("baudrate", default_baud)), timeout=0)

@@ -214,29 +214,30 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     return res
 
 
+@dataclass
+class _Watch:
+    """What the launcher knows of a running session: its processes, when it started, how it ended."""
+
+    t_launch: float
+    children: list[Child] = field(default_factory=list)  # the world first
+    t_started: float | None = None  # when the world said every process had joined
+    last_sim: float = 0.0  # the simulated time of the last progress report
+    world_code: int | None = None
+    interrupted: bool = False
+    startup_error: str | None = None
+
+
 def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, endpoint: str, namespace: str,
                session_dir: str, prog: _Progress, ports: list[str], remote: int, plot: bool) -> SessionResult:
     """Start the session's processes, supervise them until the world ends, tear down, write the summary."""
-    children: list[Child] = []
-    t_launch = time.monotonic()
+    w = _Watch(time.monotonic())
     session = None
     status_q: queue.SimpleQueue = queue.SimpleQueue()
-    world_code: int | None = None
-    interrupted = False
-    t_started = None
-    startup_error: str | None = None
     try:
         world = Child("world", "world", spawn("world", "world"))
-        children.append(world)
-        sock = Path(session_dir) / "zenoh.sock"
-        while not sock.exists():
-            if world.popen.poll() is not None or time.monotonic() - t_launch > cfg.session.startup_timeout_s:
-                startup_error = f"the world process did not open its endpoint; see {logs / 'world.log'}"
-                break
-            if stops.count:
-                break
-            time.sleep(0.01)
-        if startup_error or stops.count:
+        w.children.append(world)
+        w.startup_error = _await_endpoint(cfg, world, Path(session_dir) / "zenoh.sock", w.t_launch, logs, stops)
+        if w.startup_error or stops.count:
             raise _Abort
         session = transport.open_session(endpoint, namespace, listen=False)
         _sub = transport.queue_subscriber(session, "status", status_q)
@@ -245,73 +246,102 @@ def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, end
             prog.note(f"[{cfg.session.name}] {line}")
         for p in plan.procs:
             if not p.remote:  # a remote logic is started on its own computer; the world's timeouts watch it
-                children.append(Child(p.name, p.kind, spawn(p.kind, p.name), p.robots))
-        sent_stop = False
-        last_sim = 0.0
-        while True:
-            # status from the world
-            while True:
-                try:
-                    _, data = status_q.get_nowait()
-                except queue.Empty:
-                    break
-                msg = transport.unpack(data)
-                op = msg.get("op")
-                if op == "started":
-                    t_started = time.monotonic()
-                    prog.note(f"[{cfg.session.name}] started: {len(children) + remote} processes joined in "
-                              f"{t_started - t_launch:.1f} s")
-                    for line in ports:
-                        prog.note(f"[{cfg.session.name}] port: {line}")
-                    if msg.get("mavlink"):
-                        prog.note(f"[{cfg.session.name}] MAVLink: " + ", ".join(
-                            f"{who} {ep}" for who, ep in msg["mavlink"].items()))
-                elif op == "progress" and t_started is not None and msg["t"] >= 1.0:
-                    last_sim = msg["t"]
-                    prog.update(msg["t"], msg["t"] / max(time.monotonic() - t_started, 1e-9), msg["alive"],
-                                msg.get("lag_s"))
-                elif op == "notice":  # something the user should know that is not a failure (a CAN bus-off)
-                    prog.note(f"[{cfg.session.name}] {msg.get('text', '')}")
-                elif op == "event":
-                    prog.note(f"robot {msg['robot']} failed at sim t={msg['t_s']:.2f} s: {msg['kind']} "
-                              f"({msg['detail'].strip().splitlines()[-1] if msg['detail'].strip() else ''})")
-            # children
-            for c in children:
-                if c.exit_code is None:
-                    _reap(c)
-                    unexpected = c.kind != "world" and not c.expected_exit and world.exit_code is None
-                    if c.exit_code is not None and unexpected:
-                        control.put(transport.pack({"op": "dead", "proc": c.name,
-                                                    "detail": f"exit code {c.exit_code}; see {logs / c.name}.log"}))
-            if world.exit_code is not None:
-                world_code = world.exit_code
-                break
-            if stops.count and not sent_stop:
-                sent_stop = interrupted = True
-                stops.used = 1
-                prog.note(f"stopping at sim t={last_sim:.1f} s (Ctrl-C again to kill at once)")
-                control.put(transport.pack({"op": "stop", "reason": "interrupted"}))
-            if stops.hurry():
-                break
-            time.sleep(0.02)
+                w.children.append(Child(p.name, p.kind, spawn(p.kind, p.name), p.robots))
+        _watch(cfg, w, status_q, control, logs, stops, prog, ports, remote)
     except _Abort:
-        interrupted = bool(stops.count)
+        w.interrupted = bool(stops.count)
         stops.used = min(stops.count, 1)
     finally:
-        for c in children:
-            c.expected_exit = True
-        # Once started, every process was told to stop and leaves by itself: the grace only bounds a stuck one, and
-        # is generous so that a loaded machine does not turn a clean exit into a kill. A process that never joined
-        # (start-up failed) waits for nothing: it gets the short grace; a second Ctrl-C hurries them all.
-        _terminate(children, grace_s=10.0 if t_started is not None else 2.0, hurry=stops.hurry)
-        if session is not None:
-            session.close()
-        shutil.rmtree(session_dir, ignore_errors=True)
-    wall = time.monotonic() - t_launch
-    if world_code is None and children:
-        world_code = children[0].exit_code  # the world, reaped during teardown
-    return _finish(cfg, plan, out, children, world_code, interrupted, wall, t_started, t_launch, prog,
-                   plot, startup_error, stops)
+        _teardown(w, stops, session, session_dir)
+    wall = time.monotonic() - w.t_launch
+    if w.world_code is None and w.children:
+        w.world_code = w.children[0].exit_code  # the world, reaped during teardown
+    return _finish(cfg, plan, out, w.children, w.world_code, w.interrupted, wall, w.t_started, w.t_launch, prog,
+                   plot, w.startup_error, stops)
+
+
+def _await_endpoint(cfg, world: Child, sock: Path, t_launch: float, logs: Path, stops: _Stops) -> str | None:
+    """Wait for the world to open its endpoint (or a Ctrl-C); why it did not, if it failed or timed out."""
+    while not sock.exists():
+        if world.popen.poll() is not None or time.monotonic() - t_launch > cfg.session.startup_timeout_s:
+            return f"the world process did not open its endpoint; see {logs / 'world.log'}"
+        if stops.count:
+            break
+        time.sleep(0.01)
+    return None
+
+
+def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, stops: _Stops, prog: _Progress,
+           ports: list[str], remote: int) -> None:
+    """Until the world ends (or Ctrl-C again): show its status, report dead processes to it, pass a Ctrl-C on."""
+    world = w.children[0]
+    sent_stop = False
+    while True:
+        while True:  # status from the world
+            try:
+                _, data = status_q.get_nowait()
+            except queue.Empty:
+                break
+            _on_status(cfg, w, transport.unpack(data), prog, ports, remote)
+        _reap_running(w.children, world, control, logs)
+        if world.exit_code is not None:
+            w.world_code = world.exit_code
+            return
+        if stops.count and not sent_stop:
+            sent_stop = w.interrupted = True
+            stops.used = 1
+            prog.note(f"stopping at sim t={w.last_sim:.1f} s (Ctrl-C again to kill at once)")
+            control.put(transport.pack({"op": "stop", "reason": "interrupted"}))
+        if stops.hurry():
+            return
+        time.sleep(0.02)
+
+
+def _on_status(cfg, w: _Watch, msg: dict[str, Any], prog: _Progress, ports: list[str], remote: int) -> None:
+    """Show one status message of the world: the session started, its progress, a notice, a robot's failure."""
+    op = msg.get("op")
+    if op == "started":
+        w.t_started = time.monotonic()
+        prog.note(f"[{cfg.session.name}] started: {len(w.children) + remote} processes joined in "
+                  f"{w.t_started - w.t_launch:.1f} s")
+        for line in ports:
+            prog.note(f"[{cfg.session.name}] port: {line}")
+        if msg.get("mavlink"):
+            prog.note(f"[{cfg.session.name}] MAVLink: " + ", ".join(
+                f"{who} {ep}" for who, ep in msg["mavlink"].items()))
+    elif op == "progress" and w.t_started is not None and msg["t"] >= 1.0:
+        w.last_sim = msg["t"]
+        prog.update(msg["t"], msg["t"] / max(time.monotonic() - w.t_started, 1e-9), msg["alive"],
+                    msg.get("lag_s"))
+    elif op == "notice":  # something the user should know that is not a failure (a CAN bus-off)
+        prog.note(f"[{cfg.session.name}] {msg.get('text', '')}")
+    elif op == "event":
+        prog.note(f"robot {msg['robot']} failed at sim t={msg['t_s']:.2f} s: {msg['kind']} "
+                  f"({msg['detail'].strip().splitlines()[-1] if msg['detail'].strip() else ''})")
+
+
+def _reap_running(children: list[Child], world: Child, control, logs: Path) -> None:
+    """Reap the children that ended; tell the world of a participant that died while it runs (its failure policy)."""
+    for c in children:
+        if c.exit_code is None:
+            _reap(c)
+            unexpected = c.kind != "world" and not c.expected_exit and world.exit_code is None
+            if c.exit_code is not None and unexpected:
+                control.put(transport.pack({"op": "dead", "proc": c.name,
+                                            "detail": f"exit code {c.exit_code}; see {logs / c.name}.log"}))
+
+
+def _teardown(w: _Watch, stops: _Stops, session, session_dir: str) -> None:
+    """End every process of the session, close the launcher's zenoh session, remove the session directory."""
+    for c in w.children:
+        c.expected_exit = True
+    # Once started, every process was told to stop and leaves by itself: the grace only bounds a stuck one, and
+    # is generous so that a loaded machine does not turn a clean exit into a kill. A process that never joined
+    # (start-up failed) waits for nothing: it gets the short grace; a second Ctrl-C hurries them all.
+    _terminate(w.children, grace_s=10.0 if w.t_started is not None else 2.0, hurry=stops.hurry)
+    if session is not None:
+        session.close()
+    shutil.rmtree(session_dir, ignore_errors=True)
 
 
 def _pass_on(signum: int | None, handlers: dict[int, Any]) -> None:
@@ -445,8 +475,20 @@ def _study_sections(world_res: dict[str, Any]) -> dict[str, Any]:
 def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None, interrupted: bool, wall: float,
             t_started: float | None, t_launch: float, prog: _Progress, plot: bool,
             startup_error: str | None, stops: _Stops) -> SessionResult:
+    """Write the summary (and the plot) from the world's result, say how the session ended; its result."""
     res_path = out / "world_result.json"
     world_res: dict[str, Any] = json.loads(res_path.read_text()) if res_path.exists() else {}
+    summary = _summary(cfg, plan, children, world_res, interrupted, wall, t_started, t_launch)
+    _merge_radio(summary, world_res)
+    code = _judge(summary, world_res, world_code, interrupted, t_started, startup_error, out)
+    _write_outputs(summary, out, plan, prog, stops, plot)
+    _report(cfg, summary, out, code, interrupted, wall, prog)
+    return SessionResult(code, summary, out, children)
+
+
+def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interrupted: bool, wall: float,
+             t_started: float | None, t_launch: float) -> dict[str, Any]:
+    """summary.json's content from the plan, the world's result and the processes' exits (no files, no exit code)."""
     n = len(plan.robots)
     cpu_total = sum(c.cpu_s for c in children)
     sim_t = world_res.get("sim_time_s", 0.0)
@@ -491,11 +533,21 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         "per_robot": world_res.get("robots", []),
         "files": {},  # the outputs there are (below)
     }
+    return summary
+
+
+def _merge_radio(summary: dict[str, Any], world_res: dict[str, Any]) -> None:
+    """Add the radio medium's statistics, per robot and for the session, when it has any."""
     radio = world_res.get("radio") or {}
     if radio.get("per_robot") or len(radio) > 1:
         for rr in summary["per_robot"]:
             rr.update(radio.get("per_robot", {}).get(str(rr["id"]), {}))
         summary["radio"] = {k: v for k, v in radio.items() if k != "per_robot"}
+
+
+def _judge(summary: dict[str, Any], world_res: dict[str, Any], world_code: int | None, interrupted: bool,
+           t_started: float | None, startup_error: str | None, out: Path) -> int:
+    """The session's exit code (130: interrupted; non-zero: an error, or every robot failed), with its error."""
     if not world_res:
         summary["error"] = (
             "interrupted during start-up" if interrupted and t_started is None else
@@ -512,6 +564,11 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         code = code or 1
         summary["error"] = summary["error"] or "every robot failed"
     summary["exit_code"] = code
+    return code
+
+
+def _write_outputs(summary: dict[str, Any], out: Path, plan, prog: _Progress, stops: _Stops, plot: bool) -> None:
+    """Write summary.json, then draw the plot and write it again listing the plot (a Ctrl-C skips the plot)."""
     outputs = {"recording": out / "session.mcap", "summary": out / "summary.json", "plot": out / "trajectories.png",
                "logs": out / "logs"}
 
@@ -524,6 +581,12 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
     write_summary()
     if plot and (out / "session.mcap").exists() and _draw(out, plan, prog, stops):
         write_summary()  # now with the plot
+
+
+def _report(cfg, summary: dict[str, Any], out: Path, code: int, interrupted: bool, wall: float,
+            prog: _Progress) -> None:
+    """Say how the session ended, how fast it ran and where its outputs are (and how late a paced one was)."""
+    sim_t = summary["sim_time_s"]
     how = "interrupted" if interrupted else "stopped" if code else "done"
     why = f" ({summary['stop_reason'] or summary['error'].strip().splitlines()[-1]})" if code and not interrupted and (
         summary["stop_reason"] or summary["error"]) else ""
@@ -540,4 +603,3 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
         f"{wall:.1f} s wall (rtf {summary['rtf']}x), {summary['messages']} messages, digest "
         f"{str(summary['digest'])[:16]}{files}"
     )
-    return SessionResult(code, summary, out, children)

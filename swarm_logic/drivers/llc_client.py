@@ -1,7 +1,8 @@
 """Driver for the eSwarBot low-level controller over any python-can bus (SITL or a real adapter).
 
-``poll()`` drains received frames without blocking and decodes them with the robot's DBC; commands are
-encoded with the same database. Frames with an unknown ID or a wrong length are counted and dropped.
+``poll()`` drains received frames without blocking and decodes them with the robot's DBC (the eSwarBot's unless
+the client is given another); commands are encoded with the same database. Frames with an unknown ID or a wrong
+length are counted and dropped.
 
 Two ways to move: ``drive(v, w)`` sets wheel speeds (repeat it, the LLC stops 0.5 s after the last), and
 ``move(rot, dist, speed)`` hands the LLC a rotate-then-go displacement, which it executes on its own and
@@ -12,10 +13,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import can
 
 from swarm_logic.robots.eswarbot import eswarbot_llc_db
+
+if TYPE_CHECKING:
+    from cantools.database.can import Database
 
 MOVE_STATES = ("idle", "rotating", "forward", "done", "aborted")  # MOVE_STATUS.state, by value
 
@@ -57,9 +62,11 @@ class LlcState:
 
 
 class LlcClient:
-    def __init__(self, bus: can.BusABC) -> None:
+    """The LLC's client on ``bus``, speaking the robot's CAN database ``db`` (default: the eSwarBot's)."""
+
+    def __init__(self, bus: can.BusABC, db: Database | None = None) -> None:
         self.bus = bus
-        self.db = eswarbot_llc_db()
+        self.db = db if db is not None else eswarbot_llc_db()
         self.state = LlcState()
         self.rx_frames = 0
         self.rx_unknown = 0

@@ -74,7 +74,7 @@ import os
 import zlib
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 import serial
@@ -84,8 +84,7 @@ from swarm_logic.clock import Clock
 from swarm_logic.geometry import wrap
 
 if TYPE_CHECKING:
-    from swarm_logic.controller import Controller
-    from swarm_logic.robot import Robot
+    from swarm_logic.hal import LowLevel
 
 os.environ.setdefault("MAVLINK20", "1")  # pymavlink's mavutil frames MAVLink 2 as the face does (MavutilLink)
 
@@ -291,6 +290,33 @@ def param_ids(names: Iterable[str]) -> dict[str, str]:
     return ids
 
 
+# -- what the face serves ------------------------------------------------------------------------------------
+class FaceRobot(Protocol):
+    """The robot as its face sees it (a ``swarm_logic.robot.Robot``; the face does not import it): its low level
+    and radio for telemetry, its configured parameters and its log."""
+
+    llc: LowLevel
+    xbee: Any  # None, or a radio with ``counters`` and ``last_rssi_dbm``
+    params: dict[str, Any]
+
+    def log(self, topic: str, **values: Any) -> None: ...
+
+
+class FaceController(Protocol):
+    """The controller as its face sees it (a ``swarm_logic.controller.Controller``): its class's parameters, how
+    they are checked and set, its telemetry."""
+
+    defaults: ClassVar[dict[str, Any]]
+    static_params: ClassVar[frozenset[str]]
+
+    @classmethod
+    def param_error(cls, name: str, value: Any) -> str | None: ...
+
+    def set_param(self, name: str, value: Any) -> None: ...
+
+    def telemetry(self) -> dict[str, float | int]: ...
+
+
 # -- the face ------------------------------------------------------------------------------------------------
 class MavlinkFace:
     """The robot's MAVLink 2 endpoint: vehicle state (``armed``, ``mode``, ``target``), telemetry, commands and
@@ -323,8 +349,8 @@ class MavlinkFace:
         self._statustext_id = 0
         self._pose_prev: tuple[float, float] | None = None  # (theta, odom_t) at the last ATTITUDE
         self._yaw_rate = 0.0
-        self.robot: Robot | None = None
-        self.controller: Controller | None = None
+        self.robot: FaceRobot | None = None
+        self.controller: FaceController | None = None
         self.params: list[Param] = []
         self._param_index: dict[str, int] = {}
         self._senders: dict[str, Callable[[], None]] = {
@@ -346,7 +372,7 @@ class MavlinkFace:
         self.speed_mps = GUIDED_SPEED_MPS
         self.reboot_requested = False
 
-    def bind(self, robot: Robot, controller: Controller) -> None:
+    def bind(self, robot: FaceRobot, controller: FaceController) -> None:
         """Serve ``robot`` and ``controller`` (again after a reboot): telemetry sources and the parameter table."""
         self.robot = robot
         self.controller = controller

@@ -11,23 +11,24 @@ fresh instance of its class, in the boot state. At start the supervisor sets the
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Protocol
 
 from pymavlink.dialects.v20.common import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING
 
-from swarm_logic.controller import Controller
+from swarm_logic.clock import Clock
 from swarm_logic.geometry import wrap
 from swarm_logic.mavlink.face import (
     AUTO,
     EPS,
     GUIDED,
     TARGET_TIMEOUT_S,
+    FaceController,
+    FaceRobot,
     HeadingTarget,
     MavlinkFace,
     PositionTarget,
     Target,
 )
-from swarm_logic.robot import Robot
 
 GOTO_PERIOD_S = 0.1
 REACHED_M = 0.05  # a go-to stops this close to its point; it sets off again only when twice as far
@@ -40,7 +41,32 @@ K_APPROACH = 0.8  # 1/s: the approach speed per metre left, so the robot slows d
 V_MIN = 0.03  # m/s: the slowest approach
 
 
-def supervise(controller: Controller, robot: Robot, duration_s: float | None) -> None:
+class SupervisedRobot(FaceRobot, Protocol):
+    """The robot as the supervisor runs it (a ``swarm_logic.robot.Robot``; this package does not import it)."""
+
+    clock: Clock
+    mavlink: MavlinkFace | None
+    start_pose: tuple[float, float, float] | None
+
+    def poll(self) -> None: ...
+
+
+class SupervisedController(FaceController, Protocol):
+    """The controller as the supervisor runs it (a ``swarm_logic.controller.Controller``); a reboot makes a fresh
+    one of its class."""
+
+    period_s: float
+
+    def init(self, robot: Any) -> None: ...
+
+    def step(self) -> None: ...
+
+    def destroy(self) -> None: ...
+
+
+def supervise(controller: SupervisedController, robot: SupervisedRobot, duration_s: float | None) -> None:
+    """``Supervisor.start``, then its ticks until ``duration_s`` of the robot's clock; the controller is destroyed
+    at the end."""
     sup = Supervisor(controller, robot)
     sup.start()
     clock = robot.clock
@@ -55,7 +81,7 @@ def supervise(controller: Controller, robot: Robot, duration_s: float | None) ->
 class Supervisor:
     """Arming and modes of a robot with a MAVLink face: ``start()``, then ``tick()`` whenever the last one said."""
 
-    def __init__(self, controller: Controller, robot: Robot) -> None:
+    def __init__(self, controller: SupervisedController, robot: SupervisedRobot) -> None:
         if robot.mavlink is None:
             raise ValueError("a supervisor needs a robot with a MAVLink face (robot.mavlink)")
         self.robot = robot
@@ -132,7 +158,7 @@ class GoTo:
     closer than ``OBSTACLE_M``; turning stays allowed, so a point behind the robot is still reached.
     """
 
-    def __init__(self, robot: Robot, face: MavlinkFace) -> None:
+    def __init__(self, robot: SupervisedRobot, face: MavlinkFace) -> None:
         self.robot = robot
         self.face = face
         self.reset()

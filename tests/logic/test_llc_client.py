@@ -142,3 +142,20 @@ def test_client_sees_the_ideal_pose_flag() -> None:
     finally:
         bus.shutdown()
         llc.bus.shutdown()
+
+
+def test_client_speaks_the_can_database_it_is_given() -> None:
+    """A robot with another CAN interface hands the client its database; the eSwarBot's is the default."""
+    import cantools
+
+    from swarm_logic.robots.eswarbot import ESWARBOT_LLC_DBC, eswarbot_llc_db
+
+    dbc = ESWARBOT_LLC_DBC.read_text().replace("BO_ 256 DRIVE_CMD:", "BO_ 300 DRIVE_CMD:")
+    other = cantools.database.load_string(dbc, database_format="dbc")
+    ch = f"t-{uuid.uuid4().hex}"
+    with can.Bus(interface="virtual", channel=ch) as tx, can.Bus(interface="virtual", channel=ch) as rx:
+        assert LlcClient(tx).db is eswarbot_llc_db()
+        LlcClient(tx, other).drive(0.1, 0.0)
+        m = rx.recv(timeout=0)
+        assert m is not None and m.arbitration_id == 300
+        assert other.decode_message(300, m.data)["v_mm_s"] == 100

@@ -202,29 +202,64 @@ class LowLevelController:
         self._sample_battery()
 
     def loop(self) -> None:
-        b = self.board
-        now = b.millis()
-        now_us = b.micros()
+        """One fixed-rate pass: commands in, dead reckoning, the motors, then the telemetry that is due."""
+        now = self.board.millis()
+        now_us = self.board.micros()
+        dt = self._loop_dt(now_us)
+        self._read_can(now)
+        self._bus_off_stop(now)
+        counts, prev = self._dead_reckon(dt)
+        self._watchdog(now)
+        self._drive_wheels(counts, prev, now, now_us, dt)
+        self._report_sonar(now)
+        if self.p.conveyor_slots:
+            self._conveyor(now, dt)
+        self._report_odometry(now, counts)
+        if self.move_state in (MOVE_ROTATING, MOVE_FORWARD) and now >= self.next_ms["move"]:
+            self._move_status(now)
+        self._report_light(now)
+        self._report_rssi(now)
+        self._report_battery(now)
+        self._report_status(now)
+        self.board.led_strip(*self.led)
+
+    # -- the loop's steps, in its order ---------------------------------------------------------------
+    def _loop_dt(self, now_us: int) -> float:
+        """Seconds since the last loop (the nominal period on the first one, or if the clock did not advance)."""
         dt = (now_us - self.last_loop_us) * 1e-6 if self.last_loop_us is not None else self.loop_period_us * 1e-6
         self.last_loop_us = now_us
         if dt <= 0:
             dt = self.loop_period_us * 1e-6
-        self._read_can(now)
-        if b.can.bus_off:  # cut off from the host: nothing it sends can arrive, so stop now rather than at the watchdog
+        return dt
+
+    def _bus_off_stop(self, now: int) -> None:
+        """Stop at once while bus-off: nothing the host sends can arrive, so no waiting for the watchdog."""
+        if self.board.can.bus_off:
             self.fault_bus_off = True
             self._abort_move(now)
             self.v_cmd = self.w_cmd = 0.0
+
+    def _dead_reckon(self, dt: float) -> tuple[tuple[int, int], tuple[int, int]]:
+        """Read the encoders and update the odometry; returns this loop's and the last loop's counts."""
+        b = self.board
         counts = (b.encoder(0), b.encoder(1))
         prev = self.last_counts
         dl = (counts[0] - prev[0]) * self.m_per_pulse
         dr = (counts[1] - prev[1]) * self.m_per_pulse
         self.last_counts = counts
         self._odometry(dl, dr, dt)
+        return counts, prev
 
+    def _watchdog(self, now: int) -> None:
+        """Zero the wheel-speed command WATCHDOG_MS after the last DRIVE_CMD (a fault if it was moving)."""
         if self.last_cmd_ms is None or now - self.last_cmd_ms > WATCHDOG_MS:
             if self.last_cmd_ms is not None and (self.v_cmd or self.w_cmd):
                 self.fault_watchdog = True
             self.v_cmd = self.w_cmd = 0.0
+
+    def _drive_wheels(self, counts: tuple[int, int], prev: tuple[int, int], now: int, now_us: int,
+                      dt: float) -> None:
+        """One PID step per wheel (the running move's, else the wheel-speed command's), then the stall check."""
         pps_per_mps = 1.0 / self.m_per_pulse
         if self.move_state in (MOVE_ROTATING, MOVE_FORWARD):
             pwms = self._move_step(counts, now, now_us, dt)
@@ -239,84 +274,105 @@ class LowLevelController:
             self._set_motor(i, pwm)
             self._stall_check(i, pwm, counts[i] != prev[i], now)
 
-        if now >= self.next_ms["sonar"]:
-            self.next_ms["sonar"] += PERIOD_SONAR_MS
-            mm = sensors.sonar_mm_from_adc(b.analog_read(PIN_SONAR))
-            # a reading at the top of the scale means no echo (the ranger outputs its maximum); anything
-            # nearer than its minimum range reads as the minimum, which is a valid "very close"
-            self.sonar_valid = 0 < mm < self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
-            self.sonar_mm = mm
-            self._send("SONAR", range_mm=min(mm, 65535), valid=int(self.sonar_valid))
-            if self.p.side_sonars:
-                left, right = (sensors.sonar_mm_from_adc(b.analog_read(pin)) for pin in (PIN_SONAR_LEFT,
-                                                                                         PIN_SONAR_RIGHT))
-                limit = self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
-                self._send("SONAR_SIDES", left_mm=min(left, 65535), right_mm=min(right, 65535),
-                           left_valid=int(0 < left < limit), right_valid=int(0 < right < limit))
-        if self.p.conveyor_slots:
-            self._conveyor(now, dt)
-        if now >= self.next_ms["odom"]:
-            self.next_ms["odom"] += PERIOD_ODOM_MS
-            self._send("ENCODERS", left=counts[0], right=counts[1])
-            # a motion-capture receiver, when fitted, replaces the dead-reckoned pose in the report
-            x, y, theta = self.x, self.y, self.theta
-            if b.external_pose is not None:
-                x, y, yaw = b.external_pose
-                theta = math.atan2(math.sin(yaw), math.cos(yaw))
-            self._send(
-                "ODOMETRY",
-                x_mm=_clamp16(round(x * 1000)),
-                y_mm=_clamp16(round(y * 1000)),
-                theta_mrad=round(theta * 1000),
-                v_mm_s=_clamp16(round(self.v_est * 1000)),
-            )
-        if self.move_state in (MOVE_ROTATING, MOVE_FORWARD) and now >= self.next_ms["move"]:
-            self._move_status(now)
-        if now >= self.next_ms["light"]:
-            self.next_ms["light"] += PERIOD_LIGHT_MS
-            self.ldr_raw = b.analog_read(PIN_LDR)
-            self._send("LIGHT", ldr_raw=self.ldr_raw)
-        if self.p.rssi_pwm_input and now >= self.next_ms["rssi"]:
-            # sampled at 10 Hz, sent when it changed (a new packet came in, or the output went off) and
-            # at least once a second
-            self.next_ms["rssi"] += PERIOD_RSSI_MS
-            period_us = round(1e6 / RSSI_PWM_HZ)
-            high_us = b.pulse_in(PIN_RSSI, timeout_us=2 * period_us)
-            if high_us == 0 and b.digital_read(PIN_RSSI):  # no edge but held high: the duty saturated at 100 %
-                high_us = period_us
-            if high_us != self.rssi_pulse_us or now >= self.rssi_sent_ms + RSSI_KEEPALIVE_MS:
-                self.rssi_pulse_us = high_us
-                self.rssi_sent_ms = now
-                duty = min(1.0, high_us * RSSI_PWM_HZ / 1e6)
-                dbm = rssi_dbm_from_pwm(duty, self.p.xbee_sensitivity_dbm)
-                self._send("RADIO_RSSI", pulse_us=min(high_us, 65535), duty_permille=min(1000, round(duty * 1000)),
-                           rssi_dbm=max(-128, min(0, round(dbm))) if high_us else -128, valid=int(high_us > 0))
-        if now >= self.next_ms["battery"]:
-            self.next_ms["battery"] += PERIOD_BATTERY_MS
-            self._sample_battery()
-            self._send("BATTERY", voltage_mv=self.batt_mv, soc_pct=self._soc_pct())
-        if now >= self.next_ms["status"]:
-            self.next_ms["status"] += PERIOD_STATUS_MS
-            self.heartbeat = (self.heartbeat + 1) & 0xFF
-            can = b.can
-            self._send(
-                "STATUS",
-                heartbeat=self.heartbeat,
-                fault_watchdog=int(self.fault_watchdog),
-                fault_stall=int(self.fault_stall),
-                fault_battery_low=int(self.fault_battery_low),
-                fault_can_overflow=int(can.rx_overflows > self.overflows_reported),
-                fault_bad_frame=int(self.fault_bad_frame),
-                pose_ideal=int(b.external_pose is not None),
-                fault_bus_off=int(self.fault_bus_off),
-                rx_bad_frames=min(255, self.rx_bad + can.rx_errors),
-                rx_overflows=min(255, can.rx_overflows),
-                uptime_s=min(65535, now // 1000),
-            )
-            self.overflows_reported = can.rx_overflows
-            if not can.bus_off:  # sent: the host has been told
-                self.fault_bus_off = False
-        b.led_strip(*self.led)
+    def _report_sonar(self, now: int) -> None:
+        """Sample the sonar (and the side ones, if fitted) and send SONAR (SONAR_SIDES) every PERIOD_SONAR_MS."""
+        if now < self.next_ms["sonar"]:
+            return
+        b = self.board
+        self.next_ms["sonar"] += PERIOD_SONAR_MS
+        mm = sensors.sonar_mm_from_adc(b.analog_read(PIN_SONAR))
+        # a reading at the top of the scale means no echo (the ranger outputs its maximum); anything
+        # nearer than its minimum range reads as the minimum, which is a valid "very close"
+        self.sonar_valid = 0 < mm < self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
+        self.sonar_mm = mm
+        self._send("SONAR", range_mm=min(mm, 65535), valid=int(self.sonar_valid))
+        if self.p.side_sonars:
+            left, right = (sensors.sonar_mm_from_adc(b.analog_read(pin)) for pin in (PIN_SONAR_LEFT,
+                                                                                     PIN_SONAR_RIGHT))
+            limit = self.p.sonar_max_mm - SONAR_NO_ECHO_MARGIN_MM
+            self._send("SONAR_SIDES", left_mm=min(left, 65535), right_mm=min(right, 65535),
+                       left_valid=int(0 < left < limit), right_valid=int(0 < right < limit))
+
+    def _report_odometry(self, now: int, counts: tuple[int, int]) -> None:
+        """Send ENCODERS and ODOMETRY every PERIOD_ODOM_MS (the motion-capture pose instead, when fitted)."""
+        if now < self.next_ms["odom"]:
+            return
+        b = self.board
+        self.next_ms["odom"] += PERIOD_ODOM_MS
+        self._send("ENCODERS", left=counts[0], right=counts[1])
+        # a motion-capture receiver, when fitted, replaces the dead-reckoned pose in the report
+        x, y, theta = self.x, self.y, self.theta
+        if b.external_pose is not None:
+            x, y, yaw = b.external_pose
+            theta = math.atan2(math.sin(yaw), math.cos(yaw))
+        self._send(
+            "ODOMETRY",
+            x_mm=_clamp16(round(x * 1000)),
+            y_mm=_clamp16(round(y * 1000)),
+            theta_mrad=round(theta * 1000),
+            v_mm_s=_clamp16(round(self.v_est * 1000)),
+        )
+
+    def _report_light(self, now: int) -> None:
+        """Sample the light sensor and send LIGHT every PERIOD_LIGHT_MS."""
+        if now < self.next_ms["light"]:
+            return
+        self.next_ms["light"] += PERIOD_LIGHT_MS
+        self.ldr_raw = self.board.analog_read(PIN_LDR)
+        self._send("LIGHT", ldr_raw=self.ldr_raw)
+
+    def _report_rssi(self, now: int) -> None:
+        """Measure the XBee's RSSI PWM output (if wired) at 10 Hz; send RADIO_RSSI on a change and at least at 1 Hz."""
+        # a change: a new packet came in, or the output went off
+        if not (self.p.rssi_pwm_input and now >= self.next_ms["rssi"]):
+            return
+        b = self.board
+        self.next_ms["rssi"] += PERIOD_RSSI_MS
+        period_us = round(1e6 / RSSI_PWM_HZ)
+        high_us = b.pulse_in(PIN_RSSI, timeout_us=2 * period_us)
+        if high_us == 0 and b.digital_read(PIN_RSSI):  # no edge but held high: the duty saturated at 100 %
+            high_us = period_us
+        if high_us != self.rssi_pulse_us or now >= self.rssi_sent_ms + RSSI_KEEPALIVE_MS:
+            self.rssi_pulse_us = high_us
+            self.rssi_sent_ms = now
+            duty = min(1.0, high_us * RSSI_PWM_HZ / 1e6)
+            dbm = rssi_dbm_from_pwm(duty, self.p.xbee_sensitivity_dbm)
+            self._send("RADIO_RSSI", pulse_us=min(high_us, 65535), duty_permille=min(1000, round(duty * 1000)),
+                       rssi_dbm=max(-128, min(0, round(dbm))) if high_us else -128, valid=int(high_us > 0))
+
+    def _report_battery(self, now: int) -> None:
+        """Sample the battery and send BATTERY every PERIOD_BATTERY_MS."""
+        if now < self.next_ms["battery"]:
+            return
+        self.next_ms["battery"] += PERIOD_BATTERY_MS
+        self._sample_battery()
+        self._send("BATTERY", voltage_mv=self.batt_mv, soc_pct=self._soc_pct())
+
+    def _report_status(self, now: int) -> None:
+        """Send STATUS (heartbeat, faults, CAN counters) every PERIOD_STATUS_MS, so the host sees the faults."""
+        if now < self.next_ms["status"]:
+            return
+        b = self.board
+        self.next_ms["status"] += PERIOD_STATUS_MS
+        self.heartbeat = (self.heartbeat + 1) & 0xFF
+        can = b.can
+        self._send(
+            "STATUS",
+            heartbeat=self.heartbeat,
+            fault_watchdog=int(self.fault_watchdog),
+            fault_stall=int(self.fault_stall),
+            fault_battery_low=int(self.fault_battery_low),
+            fault_can_overflow=int(can.rx_overflows > self.overflows_reported),
+            fault_bad_frame=int(self.fault_bad_frame),
+            pose_ideal=int(b.external_pose is not None),
+            fault_bus_off=int(self.fault_bus_off),
+            rx_bad_frames=min(255, self.rx_bad + can.rx_errors),
+            rx_overflows=min(255, can.rx_overflows),
+            uptime_s=min(65535, now // 1000),
+        )
+        self.overflows_reported = can.rx_overflows
+        if not can.bus_off:  # sent: the host has been told
+            self.fault_bus_off = False
 
     # -- helpers ------------------------------------------------------------------------------------
     def _read_can(self, now: int) -> None:

@@ -1,0 +1,75 @@
+"""The robot's devices, built from the parts of a HAL config that name them (``Robot.open`` calls these).
+
+The low level is an LLC on a python-can bus (``llc_can``) or a vehicle that speaks only MAVLink (``llc_mavlink``);
+the XBee, the UWB module and the MAVLink face each sit on a serial port (a pyserial URL or device) or, for the face,
+a pymavlink connection. A driver is imported when its device is built, so a robot without an XBee or a MAVLink face
+does not load their libraries. Nothing here knows the robot: the dependency runs from ``swarm_logic.robot`` to here
+and on to the drivers.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import can
+import serial
+
+from swarm_logic.clock import Clock
+from swarm_logic.drivers.llc_client import LlcClient
+
+if TYPE_CHECKING:
+    from swarm_logic.drivers.uwb import Uwb
+    from swarm_logic.drivers.xbee import XBee
+    from swarm_logic.hal import LowLevel
+    from swarm_logic.mavlink.face import MavlinkFace
+
+
+def open_low_level(hal: dict[str, Any], clock: Clock) -> tuple[LowLevel, list[can.BusABC]]:
+    """The low level the HAL config names, and the CAN buses it holds (none for a MAVLink vehicle)."""
+    if hal.get("llc_mavlink") is not None:
+        if hal.get("llc_can"):
+            raise ValueError("HAL config llc_mavlink: the robot has one low-level controller; give llc_can or "
+                             "llc_mavlink, not both")
+        from swarm_logic.mavlink.low_level import open_low_level as open_mavlink_low_level
+
+        return open_mavlink_low_level(hal["llc_mavlink"], clock), []
+    llc_cfg = dict(hal.get("llc_can") or {})
+    if "interface" not in llc_cfg:
+        raise ValueError("HAL config needs llc_can.interface (a python-can interface name) or llc_mavlink")
+    bus = can.Bus(**llc_cfg)
+    return LlcClient(bus), [bus]
+
+
+def open_xbee(cfg: dict[str, Any], clock: Clock, ports: list[serial.SerialBase]) -> XBee:
+    """The XBee a HAL ``xbee`` table describes; its port goes into ``ports`` as soon as it is open."""
+    from swarm_logic.drivers.xbee import XBee
+
+    x = dict(cfg)
+    port = open_port(x, "xbee", 9600)
+    ports.append(port)
+    return XBee(port, clock, api_mode=int(x.get("api_mode", 1)), rssi_from_db=bool(x.get("rssi_from_db", False)))
+
+
+def open_uwb(cfg: dict[str, Any], clock: Clock, ports: list[serial.SerialBase]) -> Uwb:
+    """The UWB module a HAL ``uwb`` table describes; its port goes into ``ports`` as soon as it is open."""
+    from swarm_logic.drivers.uwb import Uwb
+
+    u = dict(cfg)
+    port = open_port(u, "uwb", 115200)
+    ports.append(port)
+    return Uwb(port, clock)
+
+
+def open_mavlink(cfg: dict[str, Any], robot_id: int, clock: Clock) -> MavlinkFace:
+    """The MAVLink face a HAL ``mavlink`` table describes (``swarm_logic.mavlink.face.open_face``)."""
+    from swarm_logic.mavlink.face import open_face
+
+    return open_face(cfg, robot_id, clock)
+
+
+def open_port(cfg: dict[str, Any], what: str, default_baud: int) -> serial.SerialBase:
+    """The serial port of a HAL table (``port``, ``baudrate``), non-blocking; ``what`` names the table."""
+    url = cfg.get("port")
+    if not url:
+        raise ValueError(f"HAL config {what}.port: a serial device or URL is needed (e.g. /dev/ttyUSB0, sitl://{what})")
+    return serial.serial_for_url(str(url), baudrate=int(cfg.get("baudrate", default_baud)), timeout=0)
