@@ -60,6 +60,13 @@ class Hub:
         self.rec = Recorder(self.out / "session.mcap", {"config": json.dumps(plan.config, sort_keys=True),
                                                         "robots": str(len(plan.robots))})
         self.n = len(plan.robots)
+        self._entities(plan)
+        self._failure_state(cfg)
+        self._wiring(plan)
+        self._plugins(cfg)
+
+    def _entities(self, plan: Plan) -> None:
+        """Every process and entity, and when each first wakes."""
         self.procs = {p.name: p for p in plan.procs}
         self.proc_of: dict[str, str] = {}
         for p in plan.procs:
@@ -83,6 +90,9 @@ class Hub:
         self.inbox: dict[str, list] = {e: [] for e in self.ents}
         # what is due at a time: (handler, args), run in the order scheduled (which the schedule fixes)
         self.deliveries: dict[int, list[tuple]] = defaultdict(list)
+
+    def _failure_state(self, cfg: Config) -> None:
+        """Deaths, failures and the stop, the session's counters, and the control queue."""
         self._dead_detail: dict[str, str] = {}
         self.dead: set[int] = set()
         self.live_procs: set[str] = set(self.procs)
@@ -102,15 +112,21 @@ class Hub:
         self.k = 0
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.status_pub: Any = None
+        # battery deaths to come: (time, robot)
+        self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
+        self.module_stats: dict[str, dict] = {}
+
+    def _wiring(self, plan: Plan) -> None:
+        """Each LLC's wiring in the world, and the robots carried on board."""
         self._pins_topics = [f"/r{r:03d}/llc/pins" for r in range(self.n)]  # the CAN medium keeps its own
         self.pin_inputs: list[dict[str, Any]] = [{} for _ in range(self.n)]  # values media put on an LLC's pins
         self.ideal_pose = {r for r, rp in enumerate(plan.robots) if rp.pose_source == "ground_truth"}
         self.pin_io = [self.robot_spec(r).pins for r in range(self.n)]  # each LLC's wiring in the world
         self.releases: list[dict[str, Any]] = []
         self.carriers = {rp.carrier for rp in plan.robots if rp.carrier is not None}  # robots with robots on board
-        # battery deaths to come: (time, robot)
-        self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
-        self.module_stats: dict[str, dict] = {}
+
+    def _plugins(self, cfg: Config) -> None:
+        """The studies' loop functions and the media this session uses, and the route table."""
         # the studies' loop functions first (a medium may call them), then the media the session uses, in order
         self.loop_functions: list[LoopFunctions] = [
             study.loop_functions(self) for _, study in STUDIES.items()
@@ -422,7 +438,7 @@ class Hub:
 
     def run(self) -> dict[str, Any]:
         q = self.q_ns
-        world, rec = self.world, self.rec
+        world = self.world
         speed = self.cfg.session.speed
         poses_every = self.cfg.session.poses_every_quanta
         wall0 = time.monotonic()
@@ -431,48 +447,19 @@ class Hub:
             t = self.k * q
             if t >= self.end_ns:
                 break
-            while self.battery_deaths and self.battery_deaths[0][0] <= t:  # injected: the battery is empty
-                at, r = self.battery_deaths.pop(0)
-                self.world.deplete(r)
-                self.robot_failed(r, t, "battery_depleted", f"battery exhausted at {at / 1e9:g} s: motors stopped, "
-                                                            "radio silent")
+            self._battery_deaths(t)
             self._deliver(t)
             for lf in self.loop_functions:
                 lf.pre_step(t)
             for m in self._media:
                 m.start_quantum(t)
-            due = self._due(t)
-            for p in list(due):
-                if p not in self.live_procs:
-                    del due[p]
+            due = {p: ents for p, ents in self._due(t).items() if p in self.live_procs}
             t_pub = time.perf_counter()
-            sensed: dict[str, dict] = {}
-            for p in sorted(due):
-                run: dict[str, Any] = {}
-                for e in due[p]:
-                    self.wakeups[e[e.index("/") + 1:]] += 1
-                    entry: dict[str, Any] = {"in": self.inbox[e]}
-                    self.inbox[e] = []
-                    if e.endswith("/llc"):  # the board's pins, as its robot is wired
-                        r = robot_of(e)
-                        entry["sens"], sensed[e] = self.pin_io[r].sense(world, r, self.pin_inputs[r],
-                                                                         r in self.ideal_pose)
-                    run[e] = entry
-                self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
-                self.proc_ticks += 1
+            sensed = self._publish_ticks(t, due)
             if self.k % poses_every == 0:
-                poses = {"x": np.round(world.pos[:, 0], 5).tolist(), "y": np.round(world.pos[:, 1], 5).tolist(),
-                         "yaw": np.round(world.yaw, 5).tolist(), "alive": world.alive.tolist(),
-                         "led": world.led.tolist()}
-                if self.carriers:
-                    poses["carried"] = [r in world.carried for r in range(self.n)]
-                rec.write(t, "/world/poses", "swarm_sitl.Poses", poses)
+                self._record_poses(t)
             world.step_quantum(t, q)
-            for ev in world.released:  # robots that went down from their carriers in this quantum
-                rel = {k: ev[k] for k in ("robot", "carrier", "slot", "pose")}
-                self.deliver_at(ev["t_ns"], self.record, "/world/releases", "swarm_sitl.Release", rel)
-                self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})
-            world.released.clear()
+            self._take_releases()
             if due:
                 results = self._collect(set(due), t)
                 self.barrier_us.append((time.perf_counter() - t_pub) * 1e6)
@@ -497,6 +484,50 @@ class Hub:
         self.sim_end_ns = self.k * q
         self.wall_s = time.monotonic() - wall0
         return self.result()
+
+    def _battery_deaths(self, t: int) -> None:
+        """Injected faults: the batteries that are empty by ``t``."""
+        while self.battery_deaths and self.battery_deaths[0][0] <= t:
+            at, r = self.battery_deaths.pop(0)
+            self.world.deplete(r)
+            self.robot_failed(r, t, "battery_depleted", f"battery exhausted at {at / 1e9:g} s: motors stopped, "
+                                                        "radio silent")
+
+    def _publish_ticks(self, t: int, due: dict[str, list[str]]) -> dict[str, dict]:
+        """One tick to each due process: its entities' inboxes, and an LLC's pins as its robot is wired. Returns
+        what each LLC's pins sensed (for its record)."""
+        sensed: dict[str, dict] = {}
+        for p in sorted(due):
+            run: dict[str, Any] = {}
+            for e in due[p]:
+                self.wakeups[e[e.index("/") + 1:]] += 1
+                entry: dict[str, Any] = {"in": self.inbox[e]}
+                self.inbox[e] = []
+                if e.endswith("/llc"):
+                    r = robot_of(e)
+                    entry["sens"], sensed[e] = self.pin_io[r].sense(self.world, r, self.pin_inputs[r],
+                                                                     r in self.ideal_pose)
+                run[e] = entry
+            self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
+            self.proc_ticks += 1
+        return sensed
+
+    def _record_poses(self, t: int) -> None:
+        world = self.world
+        poses = {"x": np.round(world.pos[:, 0], 5).tolist(), "y": np.round(world.pos[:, 1], 5).tolist(),
+                 "yaw": np.round(world.yaw, 5).tolist(), "alive": world.alive.tolist(), "led": world.led.tolist()}
+        if self.carriers:
+            poses["carried"] = [r in world.carried for r in range(self.n)]
+        self.rec.write(t, "/world/poses", "swarm_sitl.Poses", poses)
+
+    def _take_releases(self) -> None:
+        """Robots that went down from their carriers in this quantum: recorded at their own time."""
+        world = self.world
+        for ev in world.released:
+            rel = {k: ev[k] for k in ("robot", "carrier", "slot", "pose")}
+            self.deliver_at(ev["t_ns"], self.record, "/world/releases", "swarm_sitl.Release", rel)
+            self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})
+        world.released.clear()
 
     def _drain_control(self, t: int) -> None:
         while True:
