@@ -34,6 +34,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from bridge.core.rng import stream_seed
+from bridge.experiments.stats import finite_values, quartiles
 
 RESERVED_COLUMNS = ("index", "seed", "error")
 _RESULT_FILES = ("trials.csv", "timings.csv", "report.md")
@@ -500,7 +501,7 @@ def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outc
     for metric, ylabel in exp.boxes:
         path = plots / f"box-{_file_name(metric)}.png"
         try:
-            data = [_values(outs, metric) for outs in by_cell]
+            data = [finite_values(outs, metric) for outs in by_cell]
             fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(cells) + 2), 4.5), dpi=110)
             pos = [i + 1 for i, d in enumerate(data) if len(d)]
             if pos:
@@ -526,13 +527,6 @@ def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outc
     return lines
 
 
-def _values(outs: list[Outcome], metric: str) -> np.ndarray:
-    """A numeric metric's finite values (bools as 0/1) over a cell's successful trials."""
-    vals = [o.result.metrics.get(metric) for o in outs if o.result is not None]
-    nums = np.array([float(v) for v in vals if isinstance(v, int | float)], dtype=float)
-    return nums[np.isfinite(nums)]
-
-
 def _summary(metric: str, outs: list[Outcome]) -> list[str]:
     vals = [v for o in outs if o.result is not None and (v := o.result.metrics.get(metric)) is not None]
     if not vals:
@@ -544,7 +538,7 @@ def _summary(metric: str, outs: list[Outcome]) -> list[str]:
         fin = nums[np.isfinite(nums)]
         if not len(fin):
             return [metric, "not finite", "", f"0 of {len(nums)}"]
-        q25, q50, q75 = np.percentile(fin, [25, 50, 75])
+        q25, q50, q75 = quartiles(fin)
         n = str(len(fin)) if len(fin) == len(nums) else f"{len(fin)} of {len(nums)} finite"
         return [metric, _num(q50), f"{_num(q25)} to {_num(q75)}", n]
     common = Counter(str(v) for v in vals).most_common(4)

@@ -1,11 +1,19 @@
-"""Objective fields and random obstacles for the numerical (point-robot) runner.
+"""The objective fields, one family, and random obstacles for the numerical (point-robot) runner.
 
 A robot "senses" the field at its position as a normalised fitness f in [0, 1], 1 at the optimum: a cost F to
-minimise becomes f = (F - max F) / (min F - max F) (thesis eq. 4.23). The static benchmarks (Gaussian = MATLAB
-``peaks``, Rastrigin, Rosenbrock, thesis §7.4.1) are mapped linearly from their canonical domain onto the arena;
-``fdo_peaks`` is the dynamic landscape of Algorithm 7.1 (thesis §7.4.2), whose peak regions are moved by forced
-Duffing oscillators. Everything is deterministic from the seed and vectorised: hundreds of trials call ``value``
-for every robot at every iteration.
+minimise becomes f = (F - max F) / (min F - max F) (thesis eq. 4.23). Every objective is a :class:`Field`, made by
+name with :func:`make_field` (``FIELDS``), for the numerical runner and for the sessions (whose light sensors read
+a field as lux, e.g. the mapping objective):
+
+- ``peaks``, ``rastrigin``, ``rosenbrock``: the static benchmarks (Gaussian = MATLAB ``peaks``, thesis §7.4.1),
+  mapped linearly from their canonical domain onto the arena (:class:`StaticField`);
+- ``fdo_peaks``: the dynamic landscape of Algorithm 7.1 (thesis §7.4.2), whose peak regions are moved by forced
+  Duffing oscillators (:class:`FdoPeaks`);
+- ``light``: a session config's light spots, normalised (:class:`LightField`);
+- ``mapping``: eq. 8.1 on an entropy map the robots' scans build (:class:`MappingField`, thesis chapter 8).
+
+Everything is deterministic from the seed and vectorised: hundreds of trials call ``value`` for every robot at
+every iteration.
 
 Obstacles are axis-aligned rectangles (x0, y0, x1, y1), closed (their boundary belongs to them); the arena border
 is not an obstacle here.
@@ -21,13 +29,16 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from bridge.numerical.entropy_map import EntropyMap, rasterise_rects
+
 Bounds = tuple[float, float, float, float]
 Cost = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 @runtime_checkable
 class Field(Protocol):
-    """What the numerical runner needs of an objective: f in [0, 1] at any arena point (eq. 4.23)."""
+    """An objective field: f in [0, 1] at any arena point (eq. 4.23), what the numerical runner's robots and a
+    session's light sensors read. A field the robots build by scanning also has ``observe(x, y, iteration)``."""
 
     bounds: Bounds  # (x0, y0, x1, y1), metres of the arena
     dynamic: bool
@@ -394,13 +405,99 @@ class FdoPeaks:
         return self._opt
 
 
-FIELDS = ("peaks", "rastrigin", "rosenbrock", "fdo_peaks")
+# ---------------------------------------------------------------------------------------------------------------
+# A session's light field
+
+
+class LightField:
+    """A session config's light field (``LightCfg``: Gaussian spots on an ambient level) as a field, normalised to 1
+    at its brightest spot's centre: a session's light arena in the numerical runner (E8, B11)."""
+
+    dynamic = False
+
+    def __init__(self, spots: list[tuple[float, float, float, float]], size: tuple[float, float],
+                 ambient: float = 0.0) -> None:
+        from bridge.core.config import LightCfg, LightSource
+
+        self.light = LightCfg(ambient_lux=ambient, sources=[
+            LightSource(x=x, y=y, peak_lux=peak, sigma_m=sigma) for x, y, peak, sigma in spots])  # (x, y, peak, sigma)
+        self.bounds = (0.0, 0.0, *size)
+        best = max(spots, key=lambda s: s[2])
+        self._opt = (best[0], best[1])
+        self._max = float(self.light.illuminance(best[0], best[1]))
+
+    def value(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return self.light.illuminance(np.asarray(x, float), np.asarray(y, float)) / self._max
+
+    def optimum(self) -> tuple[float, float]:
+        return self._opt
+
+    def advance(self, iteration: int) -> None:
+        """Static: nothing moves."""
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The mapping objective (thesis chapter 8): eq. 8.1 on an entropy map the robots build
+
+
+class MappingField:
+    """The mapping objective (``bridge.numerical.entropy_map``) as a field, plus ``observe``: the robots' scans.
+
+    ``value`` is eq. 8.1 on the map as it stands; ``observe(x, y, iteration)`` enters the robots' scans and records
+    eta_exp after ``iteration`` rounds (the numerical runner calls it with the start positions, 0, then after every
+    round k with k + 1; a session after every scan). ``eta_curve(iterations)`` is eta_exp[0..iterations] (a round
+    without moves repeats the previous value). The truth is ``obstacles`` (rectangles, rasterised) or ``occupied``
+    (a grid, rows along y, as a session's arena gives it)."""
+
+    dynamic = True
+
+    def __init__(self, size: tuple[float, float], obstacles: np.ndarray | None = None, *, cell_m: float = 0.5,
+                 r_w_m: float = 3.0, occupied: np.ndarray | None = None, **options: Any) -> None:
+        w, h = float(size[0]), float(size[1])
+        self.bounds: Bounds = (0.0, 0.0, w, h)
+        if occupied is None:
+            nx, ny = math.ceil(w / cell_m - 1e-9), math.ceil(h / cell_m - 1e-9)
+            rects = np.zeros((0, 4)) if obstacles is None else np.asarray(obstacles, float)
+            occupied = rasterise_rects(rects, self.bounds, cell_m, (ny, nx))
+        self.map = EntropyMap(self.bounds, occupied, cell_m, r_w_m, **options)
+        self.eta_at: dict[int, float] = {}
+
+    def value(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return self.map.value(x, y)
+
+    def optimum(self) -> tuple[float, float]:
+        return self.map.best_frontier()
+
+    def advance(self, iteration: int) -> None:
+        """The map changes by observation only (``observe``)."""
+
+    def observe(self, x: np.ndarray, y: np.ndarray, iteration: int) -> None:
+        self.map.observe(x, y)
+        self.eta_at[int(iteration)] = self.map.eta()
+
+    def eta(self) -> float:
+        """Eq. 8.3 now: explored free cells over free cells."""
+        return self.map.eta()
+
+    def eta_curve(self, iterations: int) -> np.ndarray:
+        out = np.zeros(iterations + 1)
+        last = 0.0
+        for k in range(iterations + 1):
+            last = self.eta_at.get(k, last)
+            out[k] = last
+        return out
+
+
+FIELDS = ("peaks", "rastrigin", "rosenbrock", "fdo_peaks", "light", "mapping")
 
 
 def make_field(name: str, size_m: float | tuple[float, float], seed: int = 0, **options: Any) -> Field:
-    """The field ``name`` over a ``size_m`` arena (square if a number), origin at (0, 0).
+    """The field ``name`` over a ``size_m`` arena (square if a number), origin at (0, 0): the one factory of the
+    objective family, for the numerical runner and the sessions alike.
 
-    Static fields take no options (their seed is irrelevant); ``fdo_peaks`` takes those of :class:`FdoPeaks`.
+    Static benchmarks take no options (their seed is irrelevant); ``fdo_peaks`` takes those of :class:`FdoPeaks`,
+    ``light`` ``spots`` and ``ambient`` (:class:`LightField`), ``mapping`` ``obstacles`` or ``occupied`` and the
+    map's options (:class:`MappingField`).
     """
     if name == "fdo_peaks":
         return FdoPeaks(size_m, seed, **options)
@@ -408,6 +505,11 @@ def make_field(name: str, size_m: float | tuple[float, float], seed: int = 0, **
         if options:
             raise TypeError(f"field {name!r} takes no options, got {sorted(options)}")
         return StaticField(name, size_m)
+    if name in ("light", "mapping"):
+        size = _arena_bounds(size_m)[2:]
+        if name == "light":
+            return LightField(size=size, **options)
+        return MappingField(size, **options)
     raise ValueError(f"unknown field {name!r}; known: {', '.join(FIELDS)}")
 
 

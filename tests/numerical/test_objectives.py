@@ -305,3 +305,20 @@ def test_random_obstacles_respect_the_arena_sizes_and_keep_clear() -> None:
     assert len(a) == 25 and np.array_equal(a, b) and a[:, 3].max() <= 100
     with pytest.raises(ValueError):
         random_obstacles(100.0, 5, rng=np.random.default_rng(0), keep_clear=[(50.0, 50.0, 200.0)])
+
+
+def test_make_field_builds_the_whole_family_by_name() -> None:
+    from bridge.numerical.objectives import LightField, MappingField
+
+    light = make_field("light", (2.55, 2.45), spots=[(1.0, 1.0, 1.0, 0.5)])
+    assert isinstance(light, LightField) and isinstance(light, Field) and not light.dynamic
+    assert light.optimum() == (1.0, 1.0) and float(light.value(np.array(1.0), np.array(1.0))) == 1.0
+    obstacles = np.array([[10.0, 5.0, 12.0, 15.0]])
+    mapping = make_field("mapping", (30.0, 20.0), obstacles=obstacles, cell_m=0.5, r_w_m=2.0)
+    direct = MappingField((30.0, 20.0), obstacles, cell_m=0.5, r_w_m=2.0)
+    assert isinstance(mapping, MappingField) and isinstance(mapping, Field) and mapping.dynamic
+    assert np.array_equal(mapping.map.truth, direct.map.truth)
+    same = make_field("mapping", (30.0, 20.0), occupied=direct.map.truth, cell_m=0.5, r_w_m=2.0)
+    for f in (mapping, same):
+        f.observe(np.array([5.0]), np.array([5.0]), 0)  # type: ignore[attr-defined]
+    assert mapping.eta() == same.eta() > 0  # type: ignore[attr-defined]

@@ -1,10 +1,9 @@
 """The benchmark chapter's mapping study (thesis section 8.2.1, digest E11, target B13) in the numerical runner.
 
-RDPSO and the four baselines (EPSO, PPSO, GSO, AFS) explore a garage with the entropy-map objective of
-``bridge.studies.rdpso.mapping``
-(eq. 8.1 sensed, eq. 8.3's exploration ratio eta_exp and eq. 8.4's normalised AUC scored). The
-controllers are the co-simulation's, unchanged; parameters the thesis does not give are chosen here and in
-``docs/baselines.md`` ("Mapping objective (chapter 8)").
+RDPSO and the four baselines (EPSO, PPSO, GSO, AFS) explore a garage with the objective family's ``mapping`` field
+(``bridge.numerical.objectives.MappingField`` on ``bridge.numerical.entropy_map``; eq. 8.1 sensed, eq. 8.3's
+exploration ratio eta_exp and eq. 8.4's normalised AUC scored). The controllers are the co-simulation's, unchanged;
+parameters the thesis does not give are chosen here and in ``docs/baselines.md`` ("Mapping objective (chapter 8)").
 """
 
 from __future__ import annotations
@@ -15,9 +14,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
+from bridge.experiments.stats import iqr, median, ok
 from bridge.numerical import runner as numerical
-from bridge.studies.rdpso.experiments import SETS, iqr, median, ok
-from bridge.studies.rdpso.mapping import MappingField, normalised_auc
+from bridge.numerical.entropy_map import normalised_auc
+from bridge.numerical.objectives import MappingField
+from bridge.studies.rdpso.parameter_sets import SETS
 
 # the ISR-UC garage as we lay it out: 85 x 35 m = 2975 m^2 (the thesis' A), 4 rows x 14 columns of 1.6 m square
 # pillars (56 obstacles, 4.8 % of the floor; the thesis counts 56 obstacles and a density of 4.93 %, section 9.2.3)
@@ -86,7 +87,7 @@ class B13Benchmark(Experiment):
         "range (and RDPSO's connectivity target, EPSO's R_r, GSO's r_s), 500 iterations of 1 s, dx_max = 1 m "
         "(v = 1 m/s, Table 9.1). Each robot scans the cells within R_w = 3 m in line of sight and senses eq. 8.1: "
         "its best frontier cell's line-of-sight factor x normalised smoothed entropy gradient "
-        "(bridge/studies/rdpso/mapping.py). "
+        "(bridge/numerical/entropy_map.py). "
         "eta_exp = explored free cells / free cells (eq. 8.3); AUC = mean of eta_exp[0..500] (eq. 8.4). RDPSO: "
         "S1 (alpha 0.632, rho 0.1/0.3/0.79/0.79), subgroups 0/(N_T/5)/(2 N_T/5), SC_max 30, R_w 3 m. EPSO and PPSO "
         f"forget personal (and PPSO's heard-of) bests older than {MEMORY_ITERATIONS} iterations; GSO step = dx_max, "

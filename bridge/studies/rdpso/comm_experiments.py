@@ -15,9 +15,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
+from bridge.experiments.stats import median, ok
 from bridge.numerical import runner as numerical
+from bridge.numerical.objectives import LightField
 from bridge.studies.rdpso.comm_stats import comm_metrics, comm_totals
-from bridge.studies.rdpso.experiments import CONFIGS, LightField, median, ok, read_rdpso_session, values
+from bridge.studies.rdpso.sessions import CONFIGS, read_rdpso_session, run_checked
 
 
 def pavilion_variant(path: Path, seed: int, duration: float, comm: str, routing: str, group: int) -> Path:
@@ -74,16 +76,12 @@ class E6Comm(Experiment):
         return [{"comm": "optimised", "routing": "rdpso", "group": 5}] if smoke else list(self.CELLS)
 
     def run(self, trial: Trial) -> TrialResult:
-        from bridge.core.launcher import run_session
-
         duration = 30.0 if trial.smoke else 360.0
         c = trial.cell
         cfg = pavilion_variant(Path(trial.workdir) / "pavilion.toml", trial.seed, duration, c["comm"], c["routing"],
                                c["group"])
         out = Path(trial.workdir) / "session"
-        res = run_session(str(cfg), None, str(out), progress=None, plot=False)
-        if res.code != 0:
-            raise RuntimeError(f"session failed ({res.code}): {res.summary.get('error')}")
+        run_checked(cfg, out)
         return score_comm(out, duration)
 
     def targets(self) -> list[Target]:
@@ -235,6 +233,6 @@ class B11CommRatio(Experiment):
         rs = [o.result for o in outcomes if o.result is not None]
         if not rs:
             return "no data", None, "no successful trial"
-        first, late = float(np.median(values(rs, "ratio_first"))), float(np.median(values(rs, "ratio_late")))
+        first, late = median(rs, "ratio_first"), median(rs, "ratio_late")
         return (f"{first:.2f} first window, {late:.2f} second-half median", bool(late <= 0.3 and late < first),
                 "medians over trials")

@@ -9,90 +9,28 @@ and the choices made here are named in each experiment's description.
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import tomllib
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import stats
 
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
+from bridge.experiments.stats import iqr, mann_whitney, mean, median, ok, values
 from bridge.numerical import runner as numerical
-from bridge.numerical.objectives import make_field, random_obstacles
+from bridge.numerical.objectives import LightField, make_field, random_obstacles
+from bridge.studies.rdpso.parameter_sets import SETS
+from bridge.studies.rdpso.sessions import CONFIGS, REPO, read_rdpso_session, run_checked, score_arena
 from swarm_logic.families.rdpso.controller import Rdpso
 
-REPO = Path(__file__).resolve().parents[3]
-CONFIGS = REPO / "hil_configs" / "rdpso"  # the study's sessions
-
-# Table 7.1 static parameter sets (digest 4.1), and the chapter 4-6 set (Tables 4.3, 4.6, 5.1)
-SETS = {
-    "S1": {"alpha": 0.632, "rho1": 0.1, "rho2": 0.3, "rho3": 0.79, "rho4": 0.79},
-    "S2": {"alpha": 0.632, "rho1": 0.4, "rho2": 0.69, "rho3": 0.2, "rho4": 0.69},
-    "ch4": {"alpha": 0.5, "rho1": 0.2, "rho2": 0.4, "rho3": 0.8, "rho4": 0.8},
-}
 # the thesis' numerical studies: no radio payload limit, no medium access (so no send jitter needed)
 NUMERIC = {"payload_max": 4096, "log_every": 1, "send_jitter_s": 0.0}
 
 
-class LightField:
-    """A session config's light field (``LightCfg``: Gaussian spots on an ambient level) as a numerical objective,
-    normalised to 1 at its brightest spot's centre; for the small-arena numerical studies (E8)."""
-
-    dynamic = False
-
-    def __init__(self, spots: list[tuple[float, float, float, float]], size: tuple[float, float],
-                 ambient: float = 0.0) -> None:
-        from bridge.core.config import LightCfg, LightSource
-
-        self.light = LightCfg(ambient_lux=ambient, sources=[
-            LightSource(x=x, y=y, peak_lux=peak, sigma_m=sigma) for x, y, peak, sigma in spots])  # (x, y, peak, sigma)
-        self.bounds = (0.0, 0.0, *size)
-        best = max(spots, key=lambda s: s[2])
-        self._opt = (best[0], best[1])
-        self._max = float(self.light.illuminance(best[0], best[1]))
-
-    def value(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return self.light.illuminance(np.asarray(x, float), np.asarray(y, float)) / self._max
-
-    def optimum(self) -> tuple[float, float]:
-        return self._opt
-
-    def advance(self, iteration: int) -> None:
-        pass
-
-
-# -- shared scoring -------------------------------------------------------------------------------------------
-
 def first_at_least(curve: np.ndarray, level: float) -> int | None:
     idx = np.flatnonzero(curve >= level)
     return int(idx[0]) if len(idx) else None
-
-
-def ok(outcomes: list[Outcome], **cell: Any) -> list[TrialResult]:
-    return [o.result for o in outcomes if o.result is not None
-            and all(o.trial.cell.get(k) == v for k, v in cell.items())]
-
-
-def values(results: list[TrialResult], metric: str) -> np.ndarray:
-    return np.array([float(r.metrics[metric]) for r in results if r.metrics.get(metric) is not None], float)
-
-
-def median(results: list[TrialResult], metric: str) -> float:
-    v = values(results, metric)
-    return float(np.median(v)) if len(v) else math.nan
-
-
-def iqr(results: list[TrialResult], metric: str) -> float:
-    v = values(results, metric)
-    return float(np.subtract(*np.percentile(v, [75, 25]))) if len(v) else math.nan
-
-
-def mann_whitney(a: np.ndarray, b: np.ndarray, alternative: str = "two-sided") -> float:
-    if len(a) < 2 or len(b) < 2 or (np.all(a == a[0]) and np.all(b == a[0])):
-        return 1.0
-    return float(stats.mannwhitneyu(a, b, alternative=alternative).pvalue)
 
 
 def numeric_trial(trial: Trial, field_name: str, size: float, n: int, iterations: int, params: dict[str, Any],
@@ -468,7 +406,7 @@ class E8TwoRobots(Experiment):
         for r in (0.4, 0.8, 1.2):
             rs = ok(outcomes, study="obstacle", rho=r)
             if rs:
-                rows[r] = (float(np.mean(values(rs, "collisions"))), float(np.mean(values(rs, "follower_reached"))),
+                rows[r] = (mean(rs, "collisions"), mean(rs, "follower_reached"),
                            median(rs, "follower_retreat"))
         if len(rows) < 3:
             return "no trials", None, ""
@@ -501,41 +439,6 @@ class E8TwoRobots(Experiment):
 
 # -- co-simulation: E2 arena (R1, R2) ----------------------------------------------------------------------------
 
-def arena_peaks(cfg_path: Path) -> tuple[tuple[float, float], float, float]:
-    """The brighter spot's position and the LDR counts at the two spots' centres (the sensor's own transfer)."""
-    from bridge.core.config import load_config
-    from firmware_sim.board import sensors
-    from firmware_sim.board.arduino import Board
-    from firmware_sim.robots.eswarbot.llc import PIN_LDR
-
-    cfg = load_config(cfg_path)
-    spots = sorted(cfg.light.sources, key=lambda s: -s.peak_lux)
-
-    board = Board()
-
-    def counts(x: float, y: float) -> int:  # what the robot's LLC reads there (no sensor noise)
-        board.analog_volts[PIN_LDR] = sensors.ldr_volts(float(cfg.light.illuminance(x, y)))
-        return board.analog_read(PIN_LDR)
-
-    best = spots[0]
-    return (best.x, best.y), counts(best.x, best.y), counts(spots[1].x, spots[1].y) if len(spots) > 1 else 0.0
-
-
-def read_rdpso_session(out: Path) -> tuple[dict[int, list[dict[str, Any]]], np.ndarray, np.ndarray, np.ndarray]:
-    """The robots' "rdpso" log records and the ground-truth poses (t, x, y) of a session's recording."""
-    from bridge.core.plot import read_poses
-    from bridge.core.recorder import iter_messages
-
-    logs: dict[int, list[dict[str, Any]]] = {}
-    for topic, t_ns, data in iter_messages(out / "session.mcap"):
-        if topic.endswith("/log/rdpso"):
-            rec = json.loads(data)
-            rec["t"] = t_ns * 1e-9
-            logs.setdefault(int(topic[2:5]), []).append(rec)
-    ts, xs, ys, _ = read_poses(out / "session.mcap")
-    return logs, ts, xs, ys
-
-
 @register
 class E2Arena(Experiment):
     name = "e2-arena"
@@ -566,8 +469,6 @@ class E2Arena(Experiment):
         return [{"n": n, "crashes": 0} for n in self.SIZES] + [{"n": 12, "crashes": 2}]
 
     def run(self, trial: Trial) -> TrialResult:
-        from bridge.core.launcher import run_session
-
         n = trial.cell["n"]
         duration = 40.0 if trial.smoke else 180.0
         rng = np.random.default_rng(trial.seed)
@@ -575,9 +476,7 @@ class E2Arena(Experiment):
         cfg = arena_variant(Path(trial.workdir) / "arena.toml", n, trial.seed, duration,
                             faults=[{"robot": r, "at_s": CRASH_AT_S} for r in crashed])
         out = Path(trial.workdir) / "session"
-        res = run_session(str(cfg), None, str(out), progress=None, plot=False)
-        if res.code != 0:
-            raise RuntimeError(f"session failed ({res.code}): {res.summary.get('error')}")
+        run_checked(cfg, out)
         res = score_arena(out, cfg, n, duration)
         res.metrics |= crash_figures(out, crashed, float(tomllib.loads(cfg.read_text())["robots"][0]["params"][
             "iteration_s"])) if crashed else {}
@@ -601,7 +500,7 @@ class E2Arena(Experiment):
         if not rs:
             return "no trials", None, ""
         worst = values(rs, "notice_max_iterations")
-        rate = float(np.mean(values(rs, "converged")))
+        rate = mean(rs, "converged")
         ours = (f"slowest mate noticed after {worst.max():.0f} iterations (median {np.median(worst):.0f}); "
                 f"converged in {rate:.0%} of {len(rs)} trials")
         return ours, bool(worst.max() <= 3), "counted from the first hello the crashed robots missed"
@@ -611,7 +510,7 @@ class E2Arena(Experiment):
         for n in self.SIZES:
             rs = ok(outcomes, n=n, crashes=0)
             if rs:
-                rate = float(np.mean(values(rs, "converged")))
+                rate = mean(rs, "converged")
                 good &= rate >= 0.8
                 parts.append(f"{n}: {rate:.0%} of {len(rs)}")
         return ("; ".join(parts) or "no trials"), (good if parts else None), ""
@@ -621,7 +520,7 @@ class E2Arena(Experiment):
         for n in self.SIZES:
             rs = [r for r in ok(outcomes, n=n, crashes=0) if r.metrics.get("converged")]
             if rs:
-                m = float(np.mean(values(rs, "t_converge")))
+                m = mean(rs, "t_converge")
                 means.append(m)
                 good &= abs(m - self.THESIS_T[n]) <= 0.3 * self.THESIS_T[n]
                 parts.append(f"{n}: {m:.0f} s")
@@ -685,43 +584,6 @@ def crash_figures(out: Path, crashed: list[int], iteration_s: float, crash_s: fl
             delays.append(later[-1] - k_missed + 2 if later else 1)
     return {"crashed": " ".join(map(str, crashed)), "mates_of_crashed": len(delays),
             "notice_max_iterations": max(delays) if delays else None}
-
-
-def score_arena(out: Path, cfg: Path, n: int, duration: float) -> TrialResult:
-    """R1/R2 figures of one arena session from its recording."""
-    (ox, oy), peak, sub_peak = arena_peaks(cfg)
-    logs, ts, xs, ys = read_rdpso_session(out)
-    best_by_second = np.full(int(duration), np.nan)
-    t_light = None
-    improved = total = 0
-    for recs in logs.values():
-        for rec in recs:
-            total += 1
-            improved += bool(rec["improved"])
-            if rec["sid"] and rec["ledger_h"] is not None:
-                s = int(rec["t"])
-                if 0 <= s < len(best_by_second):
-                    best_by_second[s] = max(np.nan_to_num(best_by_second[s], nan=-1), rec["ledger_h"])
-                if rec["ledger_h"] >= 0.95 * peak and (t_light is None or rec["t"] < t_light):
-                    t_light = rec["t"]
-    curve = np.fmax.accumulate(np.nan_to_num(best_by_second, nan=0.0))
-    t_near = None
-    if len(ts):
-        d = np.hypot(xs - ox, ys - oy)
-        hit = np.flatnonzero((d <= 0.25).any(axis=1))
-        t_near = float(ts[hit[0]]) if len(hit) else None
-    metrics = {
-        "converged": t_light is not None,
-        "t_converge": None if t_light is None else round(t_light, 2),
-        "t_near_025": None if t_near is None else round(t_near, 2),
-        "final_best": float(curve[-1]) if len(curve) else None,
-        "peak_counts": peak,
-        "suboptimal_counts": sub_peak,
-        "improvement_rate": round(improved / max(1, total), 4),
-        "robot_iterations": total,
-        "robots": n,
-    }
-    return TrialResult(metrics, {"best_light": curve.tolist()}, {"best_light": list(range(len(curve)))})
 
 
 # -- N1: the XBee radio's figures in the pavilion (co-simulation) -----------------------------------------------

@@ -22,10 +22,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
+from bridge.experiments.stats import mean_pm_sd, ok, pooled_mean_sd, values
 from bridge.numerical.objectives import obstacle_distance, random_obstacles
 from bridge.numerical.runner import LinkModel
 from bridge.studies.rdpso.deployment import dispersion
-from bridge.studies.rdpso.experiments import CONFIGS, ok, read_rdpso_session, score_arena, values
+from bridge.studies.rdpso.sessions import CONFIGS, read_rdpso_session, run_checked, score_arena
 from swarm_logic.families.rdpso.spiral import est_next, k_first_threshold_dbm
 
 Q_MIN_DBM = -75.0
@@ -55,11 +56,7 @@ def pavilion_variant(path: Path, seed: int, duration: float, mode: str = "est", 
 
 
 def _run(cfg: Path, out: Path) -> dict[str, Any]:
-    from bridge.core.launcher import run_session
-
-    res = run_session(str(cfg), None, str(out), progress=None, plot=False)
-    if res.code != 0:
-        raise RuntimeError(f"session failed ({res.code}): {res.summary.get('error')}")
+    run_checked(cfg, out)
     return json.loads((out / "summary.json").read_text())
 
 
@@ -85,22 +82,6 @@ def isolated_exclusions(logs: dict[int, list[dict[str, Any]]]) -> int:
             if prev["sid"] and {"punished", "dismantled"} & set(rec["events"]) and prev["n_s"] <= 1:
                 count += 1
     return count
-
-
-def pooled(rows: list[TrialResult], key: str) -> tuple[float, float, int]:
-    """Mean and sd over all samples of all trials, from each trial's (mean, sd, samples) of ``key``."""
-    parts = [(r.metrics.get(f"{key}_mean"), r.metrics.get(f"{key}_sd"), r.metrics.get(f"{key}_n")) for r in rows]
-    parts = [(float(m), float(s), int(n)) for m, s, n in parts if m is not None and n]
-    total = sum(n for *_, n in parts)
-    if not total:
-        return math.nan, math.nan, 0
-    mean = sum(m * n for m, _, n in parts) / total
-    ss = sum((n - 1) * s * s + n * (m - mean) ** 2 for m, s, n in parts)
-    return mean, math.sqrt(ss / max(1, total - 1)), total
-
-
-def _pm(values_: np.ndarray) -> str:
-    return f"{np.mean(values_):.1f} +- {np.std(values_, ddof=1) if len(values_) > 1 else 0.0:.1f}"
 
 
 # -- E4: the pavilion, EST vs random, k = 1 vs k = 2, battery deaths (R3-R7) ------------------------------------
@@ -195,7 +176,7 @@ class E4Pavilion(Experiment):
         rnd = self._times(ok(outcomes, deploy="random", deaths=0))
         if not len(est) or not len(rnd):
             return "no trials", None, ""
-        ours = f"EST {_pm(est)} s (n = {len(est)}), random {_pm(rnd)} s (n = {len(rnd)})"
+        ours = f"EST {mean_pm_sd(est)} s (n = {len(est)}), random {mean_pm_sd(rnd)} s (n = {len(rnd)})"
         good = abs(np.mean(est) - 126.1) <= 0.2 * 126.1 and np.mean(rnd) < np.mean(est) and \
             np.std(rnd) > np.std(est)
         return ours, bool(good), "per subgroup, over the death-free EST (k = 1 and 2) and random trials"
@@ -207,7 +188,8 @@ class E4Pavilion(Experiment):
             rows = ok(outcomes, deploy=dep, k=k, deaths=0)
             if not rows:
                 continue
-            (rm, rs, rn), (hm, hs, _), (lm, ls, _) = (pooled(rows, key) for key in ("rssi_dbm", "relays", "lambda2"))
+            (rm, rs, rn), (hm, hs, _), (lm, ls, _) = (pooled_mean_sd(rows, key)
+                                                      for key in ("rssi_dbm", "relays", "lambda2"))
             lam[(dep, k)] = lm
             parts.append(f"{dep} k={k}: {rm:.1f} +- {rs:.1f} dBm, {hm:.2f} +- {hs:.2f} relays, lambda2 {lm:.2f} +- "
                          f"{ls:.2f} ({rn} samples)")

@@ -298,7 +298,8 @@ def test_routed_sharing_in_the_co_simulation(tmp_path) -> None:
     import json
 
     from bridge.studies.rdpso.comm_stats import comm_metrics, comm_totals
-    from bridge.studies.rdpso.experiments import arena_variant, read_rdpso_session
+    from bridge.studies.rdpso.experiments import arena_variant
+    from bridge.studies.rdpso.sessions import read_rdpso_session
     from tests.core.test_session import run as run_session
 
     cfg = arena_variant(tmp_path / "arena.toml", 6, seed=5, duration=20.0, comm="regular")

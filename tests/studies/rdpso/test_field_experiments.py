@@ -14,8 +14,9 @@ import pytest
 from bridge.core.config import ConfigError, load_config
 from bridge.core.plan import make_plan
 from bridge.experiments.runner import TrialResult
+from bridge.experiments.stats import pooled_mean_sd
 from bridge.studies.rdpso.deployment import link_stats, mean_sd
-from bridge.studies.rdpso.field_experiments import est_subgroup, isolated_exclusions, pooled, random_subgroup
+from bridge.studies.rdpso.field_experiments import est_subgroup, isolated_exclusions, random_subgroup
 from tests.conftest import ROOT
 from tests.core.test_session import cli
 
@@ -144,7 +145,7 @@ def test_pooled_mean_and_sd_equal_those_of_all_samples() -> None:
     for x in parts:
         s = mean_sd(list(x))
         rows.append(TrialResult({"r_mean": s["mean"], "r_sd": s["sd"], "r_n": s["samples"]}))
-    m, sd, n = pooled(rows, "r")
+    m, sd, n = pooled_mean_sd(rows, "r")
     every = np.concatenate(parts)
     assert n == 18 and m == pytest.approx(every.mean(), abs=1e-3) and sd == pytest.approx(every.std(ddof=1), abs=1e-3)
 

@@ -1,6 +1,6 @@
-"""The chapter 8 mapping objective (bridge/studies/rdpso/mapping.py):
-entropy map maths, the numerical runner with the mapping
-field, the windowed bests of EPSO/PPSO, B13's smoke cells, and a short co-simulation with the mapping objective."""
+"""The chapter 8 mapping objective (bridge/numerical/entropy_map.py; the objective family's ``mapping`` field, and
+bridge/studies/rdpso/mapping.py in a session): entropy map maths, the numerical runner with the mapping field, the
+windowed bests of EPSO/PPSO, B13's smoke cells, and a short co-simulation with the mapping objective."""
 
 from __future__ import annotations
 
@@ -15,7 +15,9 @@ import pytest
 from bridge.core.config import ConfigError, load_config, to_toml
 from bridge.core.recorder import iter_messages
 from bridge.numerical import runner as numerical
-from bridge.studies.rdpso.mapping import EntropyMap, MappingField, config_occupancy, entropy, normalised_auc
+from bridge.numerical.entropy_map import EntropyMap, entropy, normalised_auc
+from bridge.numerical.objectives import MappingField
+from bridge.studies.rdpso.mapping import config_occupancy
 from swarm_logic.families.baselines.common import WindowBest
 
 ROOT = Path(__file__).resolve().parents[3]

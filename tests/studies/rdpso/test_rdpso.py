@@ -13,7 +13,8 @@ import pytest
 
 from bridge.core.config import ConfigError, config_warnings, load_config
 from bridge.numerical import runner as numerical
-from bridge.studies.rdpso.experiments import SETS, LightField
+from bridge.numerical.objectives import LightField
+from bridge.studies.rdpso.parameter_sets import SETS
 from firmware_sim.modules.xbee import rssi_pwm_formula
 from swarm_logic.families.rdpso.controller import Rdpso, chance, colour, new_subgroup_id
 from swarm_logic.families.rdpso.messages import F_CALL, F_IMPROVED, HEADER, ZIGBEE_BROADCAST_MAX, Hello, decode, encode

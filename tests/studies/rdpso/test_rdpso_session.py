@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from bridge.core.config import to_toml
-from bridge.studies.rdpso.experiments import arena_variant, crash_figures, read_rdpso_session, score_arena
+from bridge.studies.rdpso.experiments import arena_variant, crash_figures
+from bridge.studies.rdpso.sessions import read_rdpso_session, score_arena
 from tests.core.test_session import run
 
 pytestmark = pytest.mark.session
