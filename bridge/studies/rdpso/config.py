@@ -11,9 +11,9 @@ from bridge.core.config import Section
 
 class ObjectiveCfg(Section):
     """``[objective]``: what the robots' light sensor reads: the light field, or the chapter 8 mapping objective
-    (``mapping.py``):
-    eq. 8.1 on an entropy map the world keeps from the robots' true poses, as lux from ``lux_min`` (nothing to map
-    nearby) to ``lux_max`` (the best frontier)."""
+    (the objective family's ``mapping`` field, ``bridge.numerical.objectives``, driven in a session by
+    ``mapping.SessionMap``): eq. 8.1 on an entropy map the world keeps from the robots' true poses, as lux from
+    ``lux_min`` (nothing to map nearby) to ``lux_max`` (the best frontier)."""
 
     kind: Literal["light", "mapping"] = "light"
     r_w_m: float = Field(1.0, gt=0, description="mapping: sensing radius R_w of each robot's scan")
