@@ -6,10 +6,12 @@ One loader for the world (collision boxes), placement (free space) and the plot.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bridge.core.config import ArenaCfg
+if TYPE_CHECKING:  # the config reads maps too: the dependency runs config -> arena_map at run time
+    from bridge.core.config import ArenaCfg
 
 
 def occupancy(a: ArenaCfg) -> np.ndarray:
