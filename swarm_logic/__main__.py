@@ -14,6 +14,7 @@ from typing import Any
 
 from swarm_logic.behaviours import load_behaviour
 from swarm_logic.clock import Clock, RealtimeClock, WallClock
+from swarm_logic.devices import BUILT_IN, NOT_DEVICES
 from swarm_logic.robot import Robot
 from swarm_logic.runner import run_controller
 
@@ -29,12 +30,18 @@ def load_hal(path: str) -> dict[str, Any]:
     if isinstance(hal.get("llc_mavlink"), dict):  # a vehicle that only speaks MAVLink (swarm_logic.mavlink.low_level)
         if "llc_can" in hal:
             raise SystemExit(f"{p}: llc_can and llc_mavlink: name one low level, not both")
-    elif not isinstance(hal.get("llc_can"), dict) or "interface" not in hal["llc_can"]:
+    elif ((isinstance(hal.get("llc_can"), dict) or not _own_devices(hal))
+          and (not isinstance(hal.get("llc_can"), dict) or "interface" not in hal["llc_can"])):
         raise SystemExit(f"{p}: llc_can.interface: missing (a python-can interface, e.g. 'socketcan' or 'slcan'; "
-                         "or llc_mavlink.url for a MAVLink vehicle)")
+                         "or llc_mavlink.url for a MAVLink vehicle, or the robot's own locomotion device)")
     if hal.get("clock", "monotonic") not in CLOCKS:
         raise SystemExit(f"{p}: clock: {hal['clock']!r} is not one of {', '.join(CLOCKS)}")
     return hal
+
+
+def _own_devices(hal: dict[str, Any]) -> list[str]:
+    """The HAL tables that are a robot's own devices (a Zebro's legs), not the LLC's or the built-in radios'."""
+    return [k for k, v in hal.items() if isinstance(v, dict) and k not in BUILT_IN and k not in NOT_DEVICES]
 
 
 # monotonic: this computer's own time; realtime: synchronised wall time, for swarms that number their steps by it

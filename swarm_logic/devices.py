@@ -16,6 +16,7 @@ import serial
 
 from swarm_logic.clock import Clock
 from swarm_logic.drivers.llc_client import LlcClient
+from swarm_logic.plugins import Registry
 
 if TYPE_CHECKING:
     from swarm_logic.drivers.uwb import Uwb
@@ -24,8 +25,17 @@ if TYPE_CHECKING:
     from swarm_logic.mavlink.face import MavlinkFace
 
 
-def open_low_level(hal: dict[str, Any], clock: Clock) -> tuple[LowLevel, list[can.BusABC]]:
-    """The low level the HAL config names, and the CAN buses it holds (none for a MAVLink vehicle)."""
+# A robot's own devices beyond the built-in ones (a Zebro's legs on I2C, its UWB data radio): HAL table name ->
+# ``open(cfg, robot)``, which returns the device (its ``poll()`` and ``close()``, when it has them, are called with
+# the robot's). Found by entry point (group ``swarm_sitl.devices``) or ``DEVICES.register``.
+DEVICES: Registry[Any] = Registry("swarm_sitl.devices", "device", callable)
+BUILT_IN = ("llc_can", "llc_mavlink", "xbee", "uwb", "mavlink")  # the HAL tables Robot.open opens itself
+NOT_DEVICES = ("start_pose", "payload", "log", "robot_id", "behaviour", "seed", "params", "clock")
+
+
+def open_low_level(hal: dict[str, Any], clock: Clock) -> tuple[LowLevel | None, list[can.BusABC]]:
+    """The low level the HAL config names, and the CAN buses it holds (none for a MAVLink vehicle); None for a robot
+    without an LLC (a Zebro's legs are a device of their own)."""
     if hal.get("llc_mavlink") is not None:
         if hal.get("llc_can"):
             raise ValueError("HAL config llc_mavlink: the robot has one low-level controller; give llc_can or "
@@ -33,6 +43,8 @@ def open_low_level(hal: dict[str, Any], clock: Clock) -> tuple[LowLevel, list[ca
         from swarm_logic.mavlink.low_level import open_low_level as open_mavlink_low_level
 
         return open_mavlink_low_level(hal["llc_mavlink"], clock), []
+    if hal.get("llc_can") is None:
+        return None, []
     llc_cfg = dict(hal.get("llc_can") or {})
     if "interface" not in llc_cfg:
         raise ValueError("HAL config needs llc_can.interface (a python-can interface name) or llc_mavlink")
@@ -65,6 +77,24 @@ def open_mavlink(cfg: dict[str, Any], robot_id: int, clock: Clock) -> MavlinkFac
     from swarm_logic.mavlink.face import open_face
 
     return open_face(cfg, robot_id, clock)
+
+
+def open_devices(hal: dict[str, Any], robot: Any) -> dict[str, Any]:
+    """The robot's own devices its HAL config names (``DEVICES``), in the config's order; a table that is neither a
+    built-in device, a robot setting nor a registered device is a ValueError naming what there is."""
+    out: dict[str, Any] = {}
+    for name, cfg in hal.items():
+        if name in BUILT_IN or name in NOT_DEVICES:
+            continue
+        if not isinstance(cfg, dict):
+            raise ValueError(f"HAL config {name}: a table of the device's settings expected, got {cfg!r}")
+        try:
+            opener = DEVICES.get(name)
+        except LookupError:
+            raise ValueError(f"HAL config {name}: not a device; devices: "
+                             f"{', '.join([*BUILT_IN, *DEVICES.names()])}") from None
+        out[name] = opener(cfg, robot)
+    return out
 
 
 def open_port(cfg: dict[str, Any], what: str, default_baud: int) -> serial.SerialBase:

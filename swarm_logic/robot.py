@@ -7,7 +7,10 @@ real robot, e.g. in a session::
      "xbee": {"port": "sitl://xbee", "baudrate": 9600}, "uwb": {"port": "sitl://uwb", "baudrate": 115200}}
 
 and on the robot ``{"llc_can": {"interface": "socketcan", "channel": "can0"}, "xbee": {"port": "/dev/ttyUSB0"},
-"log": {"path": "robot.jsonl"}, "start_pose": [1.2, 0.4, 0.0]}``. The XBee and UWB modules are optional: a robot
+"log": {"path": "robot.jsonl"}, "start_pose": [1.2, 0.4, 0.0]}``. A robot model's own devices (a Zebro's legs on
+I2C and its UWB data radio) are HAL tables too, opened by the opener registered under the table's name
+(``swarm_logic.devices.DEVICES``, entry-point group ``swarm_sitl.devices``) and reached as ``robot.device(name)``;
+such a robot may have no LLC (``llc`` None). The XBee and UWB modules are optional: a robot
 without them has ``xbee`` / ``uwb`` set to None. ``start_pose`` (x, y, yaw in the arena frame) is where the robot
 was put down, as the operator or the deploying robot tells it; a session fills it in from the placement.
 
@@ -43,7 +46,7 @@ if TYPE_CHECKING:
 class Robot:
     id: int
     clock: Clock
-    llc: LowLevel
+    llc: LowLevel | None  # None for a robot without an LLC (its locomotion is one of its ``devices``)
     rng: np.random.Generator
     params: dict[str, Any] = field(default_factory=dict)
     buses: list[can.BusABC] = field(default_factory=list)
@@ -54,6 +57,7 @@ class Robot:
     start_pose: tuple[float, float, float] | None = None
     mavlink: MavlinkFace | None = None
     payload: tuple[int, ...] = ()  # a carrier (TraxBot): the robots on its conveyor, in the order they drop off
+    devices: dict[str, Any] = field(default_factory=dict)  # its own devices by HAL table name (swarm_logic.devices)
     rng_py: random.Random = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -81,6 +85,7 @@ class Robot:
                 robot.uwb = devices.open_uwb(hal["uwb"], clock, robot.ports)
             if hal.get("mavlink") is not None:
                 robot.mavlink = devices.open_mavlink(hal["mavlink"], robot_id, clock)
+            robot.devices = devices.open_devices(hal, robot)
             if log_sink is None and (hal.get("log") or {}).get("path"):
                 log_sink = JsonlLog(hal["log"]["path"], clock)
             robot.log_sink = log_sink
@@ -94,13 +99,30 @@ class Robot:
         if self.log_sink is not None:
             self.log_sink(topic, values)
 
+    def device(self, name: str) -> Any:
+        """Its device called ``name`` (the HAL table that opened it); KeyError naming the devices it has."""
+        try:
+            return self.devices[name]
+        except KeyError:
+            raise KeyError(f"robot {self.id} has no device {name!r}; it has: "
+                           f"{', '.join(self.devices) or 'none of its own'}") from None
+
     def poll(self) -> None:
         """Drain every device's receive queue (non-blocking)."""
-        self.llc.poll()
+        if self.llc is not None:
+            self.llc.poll()
         if self.xbee is not None:
             self.xbee.poll()
+        for d in self.devices.values():
+            poll = getattr(d, "poll", None)
+            if poll is not None:
+                poll()
 
     def close(self) -> None:
+        for d in reversed(list(self.devices.values())):
+            close = getattr(d, "close", None)
+            if close is not None:
+                close()
         if self.mavlink is not None:
             self.mavlink.close()
         close_llc = getattr(self.llc, "close", None)  # a MAVLink low level holds a connection
