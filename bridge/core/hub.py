@@ -529,6 +529,15 @@ class Hub:
             self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})
         world.released.clear()
 
+    def firmware_report(self, robots: list[dict[str, Any]]) -> None:
+        """Each robot model's own firmware entities' counters into its ``robots`` entry (``firmware``: role ->
+        counters), for robots that have some. After ``shutdown``: the modules report their counters then."""
+        for r, entry in enumerate(robots):
+            rp = self.plan.robots[r]
+            roles = () if rp.gateway is not None else self.robot_spec(r).own_roles(rp)
+            if roles:
+                entry["firmware"] = {role: self.module_stats.get(entity(r, role)) for role in roles}
+
     def _drain_control(self, t: int) -> None:
         while True:
             try:
