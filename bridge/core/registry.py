@@ -64,6 +64,9 @@ class RobotSpec:
     # when it has them)
     roles: Callable[[Any], tuple[str, ...]] | None = None
     modules: Callable[[Any, Any], dict[str, Any]] | None = None
+    # what its own modules' pins meet in the world: role -> a wiring as ``pins`` is (``sense``, ``valid``,
+    # ``actuate``, ``schema``), None for a module without pins (a radio)
+    wiring: Callable[[str], Any] | None = None
     # the HAL tables its robot program gets in a session beyond the shared ones: (rp, cfg) -> {table: settings}
     hal: Callable[[Any, Any], dict[str, Any]] | None = None
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.recorder import iter_messages
 from bridge.core.registry import MEDIA, ROBOTS, STUDIES, RobotSpec, register_robot, robot_profile
 from swarm_logic.behaviours import BEHAVIOURS, load_behaviour, register_behaviour
 from swarm_logic.controller import Controller
@@ -26,18 +27,40 @@ from dataclasses import replace
 from typing import Any, ClassVar
 
 from bridge.core.loop_functions import LoopFunctions
+from bridge.core.recorder import register_schema
 from bridge.core.registry import Study, robot_spec
 from swarm_logic.controller import Controller
 
 class Beacon:
-    """A firmware entity of the minibot's own: it runs twice a second and counts its runs."""
+    """A firmware entity of the minibot's own: it runs twice a second, counts its runs, reads the battery voltage at
+    its pin and blinks its lamp."""
 
     def __init__(self, rp):
-        self.counters = {"runs": 0, "robot": rp.id}
+        self.counters = {"runs": 0, "robot": rp.id, "min_v": 99.0}
 
     def run(self, t_ns, inputs):
         self.counters["runs"] += 1
-        return {"out": [], "wake": t_ns + 500_000_000, "wom": False}
+        self.counters["min_v"] = min(self.counters["min_v"], inputs["sens"]["v"])
+        return {"out": [], "wake": t_ns + 500_000_000, "wom": False, "pins": {"lamp": self.counters["runs"] % 2}}
+
+
+class BeaconWiring:
+    """What the beacon's pins meet in the world: the battery; its lamp lights nothing the world models."""
+
+    schema = "lab.BeaconPins"
+
+    def sense(self, world, r, media, ideal_pose):
+        reading = {"v": world.sensors(r)["battery_v"]}
+        return reading, reading
+
+    def valid(self, pins):
+        return isinstance(pins, dict) and pins.get("lamp") in (0, 1)
+
+    def actuate(self, world, r, pins):
+        pass
+
+
+register_schema("lab.BeaconPins", {"type": "object", "properties": {"v": {"type": "number"}, "lamp": {}}})
 
 
 class Odo:
@@ -55,6 +78,7 @@ ESWARBOT = robot_spec("eswarbot")  # its board, wiring and CAN interface; a smal
 MINIBOT = replace(ESWARBOT, name="minibot", title="Minibot: a smaller eSwarBot", default=False,
                   profile=ESWARBOT.profile.model_copy(update={"name": "minibot", "radius_m": 0.05, "mass_kg": 0.4}),
                   roles=lambda rp: ("beacon",), modules=lambda rp, cfg: {"beacon": Beacon(rp)},
+                  wiring=lambda role: BeaconWiring() if role == "beacon" else None,
                   hal=lambda rp, cfg: {"odo": {"scale": 2}})
 
 
@@ -180,6 +204,9 @@ def test_a_robot_behaviour_and_study_from_outside_run_a_session(lab_package: Pat
     # the minibot's own firmware entity ran on its schedule (twice a simulated second), its own device was polled
     runs = [rr["firmware"]["beacon"]["runs"] for rr in s["per_robot"]]
     assert all(abs(n - 2 * s["sim_time_s"]) <= 2 for n in runs), (runs, s["sim_time_s"])
+    assert all(7.0 < rr["firmware"]["beacon"]["min_v"] < 8.5 for rr in s["per_robot"])  # its pin read the battery
+    lamp = [json.loads(data) for topic, _t, data in iter_messages(out / "session.mcap") if topic == "/r001/beacon/pins"]
+    assert len(lamp) == runs[1] and {m["lamp"] for m in lamp[1:]} == {0, 1}  # one record per run, as a board's
     assert laps["device_polls"] > 10
     assert found["devices"]["odo"] == "labplugins:Odo"
 
