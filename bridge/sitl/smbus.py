@@ -1,0 +1,204 @@
+"""``sitl://i2c``: a robot's simulated I2C bus as an ``smbus2.SMBus``, for the robot program's thread in a session.
+
+The swarm logic opens its bus by name (``swarm_logic.drivers.i2c.open_smbus``): ``1`` is ``smbus2.SMBus(1)`` on the
+robot (``/dev/i2c-1``), ``"sitl://i2c"`` this class in a session (entry point group ``swarm_sitl.i2c``, name
+``sitl``). What smbus2 users call works as it does on a Raspberry Pi, whose ``i2c-bcm2835`` adapter is plain I2C with
+the kernel's SMBus emulation: every call is one I2C transaction (``i2c_rdwr`` as given; ``read_i2c_block_data`` a
+write of the register then a read after a repeated START; ``write_i2c_block_data`` one write), sent on the session's
+I2C medium (``bridge.media.i2c``) and timed there at ``scl_hz``. The call blocks in simulated time until the
+transaction has ended; an address nobody ACKs raises ``OSError(EREMOTEIO)`` as the driver does, a transaction the
+adapter refuses ``OSError(EINVAL)``, one that gets no answer within the adapter's 1 s ``OSError(ETIMEDOUT)``. SMBus
+block reads (a count byte first) and PEC are not offered, as that adapter does not offer them.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import itertools
+import os
+import threading
+import weakref
+from collections import deque
+from typing import Any
+
+from smbus2 import I2cFunc, i2c_msg
+from smbus2 import SMBus as _SMBus
+
+from bridge.hosts import sim_context
+from bridge.media.i2c import EINVAL, EREMOTEIO, ETIMEDOUT, SIM_URL, _check
+
+BLOCK_MAX = 32  # I2C_SMBUS_BLOCK_MAX
+ADAPTER_TIMEOUT_NS = 1_000_000_000  # i2c-bcm2835 gives up on a transaction after 1 s
+EBADF, EOPNOTSUPP = 9, 95
+I2C_M_RD, I2C_M_TEN = 0x0001, 0x0010
+FUNCS = I2cFunc.I2C | (I2cFunc.SMBUS_EMUL & ~I2cFunc.SMBUS_PEC)  # what i2c-bcm2835 offers, less PEC
+
+_seq = itertools.count(1)
+_users: weakref.WeakKeyDictionary[sim_context.RobotRuntime, int] = weakref.WeakKeyDictionary()
+
+
+def _error(code: int) -> OSError:
+    return OSError(code, os.strerror(code))
+
+
+class SMBus(_SMBus):
+    """``SMBus("sitl://i2c", scl_hz=100_000)``: the robot's simulated bus (``scl_hz`` stands for the Pi's
+    ``i2c_arm_baudrate`` boot setting: 100 kHz by default, 400 kHz fast mode)."""
+
+    def __init__(self, bus: Any = None, force: bool = False, *, scl_hz: int = 100_000) -> None:
+        self.scl_hz = int(scl_hz)
+        self._rt: sim_context.RobotRuntime | None = None
+        self._rx: deque | None = None
+        super().__init__(bus, force)
+
+    # -- opening and closing ----------------------------------------------------------------------------------
+    def open(self, bus: Any) -> None:
+        if bus != SIM_URL:
+            raise TypeError(f"the simulated I2C bus is {SIM_URL!r}, got {bus!r} (a real bus: smbus2.SMBus(1))")
+        if self._rt is not None:
+            self.close()
+        try:
+            rt = sim_context.current()
+        except sim_context.NotInSession as e:
+            raise FileNotFoundError(2, f"{SIM_URL}: {e}") from None
+        rx = rt.rx.get("i2c")
+        if rx is None:  # several SMBus objects of one robot share its bus, as several opens of /dev/i2c-1 do
+            rx = rt.open_bus("i2c")
+        _users[rt] = _users.get(rt, 0) + 1
+        self._rt, self._rx = rt, rx
+        self.fd = -1  # open (smbus2 looks at fd)
+        self.funcs = FUNCS
+
+    def close(self) -> None:
+        rt = self._rt
+        if rt is not None:
+            left = _users.get(rt, 1) - 1
+            if left <= 0:
+                _users.pop(rt, None)
+                rt.close_bus("i2c")
+            else:
+                _users[rt] = left
+        self._rt = self._rx = None
+        self.fd = None
+        self.address = None
+        self._force_last = None
+
+    def enable_pec(self, enable: bool = True) -> None:
+        raise OSError("SMBUS_PEC is not a feature")
+
+    def _set_address(self, address: int, force: bool | None = None) -> None:
+        self.address = address
+        self._force_last = force if force is not None else self.force
+
+    # -- one transaction ---------------------------------------------------------------------------------------
+    def _transfer(self, msgs: list[list]) -> list[bytes]:
+        """Send one transaction and wait in simulated time for its end; the bytes its reads got."""
+        rt, rx = self._rt, self._rx
+        if rt is None or rx is None:
+            raise _error(EBADF)
+        if threading.current_thread() is not rt.thread:
+            raise RuntimeError("a sitl I2C bus is used from its robot's own thread only (simulated time)")
+        try:
+            _check(msgs, self.scl_hz)
+        except (ValueError, TypeError):
+            raise _error(EINVAL) from None
+        seq = next(_seq)
+        rt.outbox.append(["i2c", seq, msgs, self.scl_hz])
+        deadline = rt.t_ns + ADAPTER_TIMEOUT_NS
+        while True:
+            while rx:
+                got = rx.popleft()
+                if isinstance(got, list | tuple) and len(got) == 4 and got[0] == seq:
+                    _, errno_, reads, _end = got
+                    if errno_:
+                        raise _error(int(errno_))
+                    return [bytes(b) for b in reads]
+                # a late answer to a transaction this bus gave up on: dropped
+            if rt.t_ns >= deadline:
+                raise _error(ETIMEDOUT)
+            rt.block(deadline, "i2c")
+
+    def _write(self, addr: int, data: bytes) -> None:
+        self._transfer([[addr, False, bytes(data)]])
+
+    def _write_read(self, addr: int, data: bytes, n: int) -> bytes:
+        return self._transfer([[addr, False, bytes(data)], [addr, True, n]])[0]
+
+    # -- the SMBus calls, as the kernel emulates them on a plain I2C adapter ---------------------------------------
+    def write_quick(self, i2c_addr: int, force: bool | None = None) -> None:
+        self._set_address(i2c_addr, force)
+        self._write(i2c_addr, b"")
+
+    def read_byte(self, i2c_addr: int, force: bool | None = None) -> int:
+        self._set_address(i2c_addr, force)
+        return self._transfer([[i2c_addr, True, 1]])[0][0]
+
+    def write_byte(self, i2c_addr: int, value: int, force: bool | None = None) -> None:
+        self._set_address(i2c_addr, force)
+        self._write(i2c_addr, bytes([value & 0xFF]))
+
+    def read_byte_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
+        self._set_address(i2c_addr, force)
+        return self._write_read(i2c_addr, bytes([register & 0xFF]), 1)[0]
+
+    def write_byte_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
+        self._set_address(i2c_addr, force)
+        self._write(i2c_addr, bytes([register & 0xFF, value & 0xFF]))
+
+    def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
+        """SMBus words are little-endian (low byte first)."""
+        self._set_address(i2c_addr, force)
+        return int.from_bytes(self._write_read(i2c_addr, bytes([register & 0xFF]), 2), "little")
+
+    def write_word_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
+        self._set_address(i2c_addr, force)
+        self._write(i2c_addr, bytes([register & 0xFF]) + (value & 0xFFFF).to_bytes(2, "little"))
+
+    def process_call(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> int:
+        self._set_address(i2c_addr, force)
+        out = bytes([register & 0xFF]) + (value & 0xFFFF).to_bytes(2, "little")
+        return int.from_bytes(self._write_read(i2c_addr, out, 2), "little")
+
+    def read_block_data(self, i2c_addr: int, register: int, force: bool | None = None) -> list[int]:
+        raise _error(EOPNOTSUPP)  # needs I2C_M_RECV_LEN, which i2c-bcm2835 does not offer
+
+    def block_process_call(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> list[int]:
+        raise _error(EOPNOTSUPP)
+
+    def write_block_data(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> None:
+        """SMBus block write: the register, a count byte, the data."""
+        data = bytes(data)
+        if len(data) > BLOCK_MAX:
+            raise ValueError(f"Data length cannot exceed {BLOCK_MAX} bytes")
+        self._set_address(i2c_addr, force)
+        self._write(i2c_addr, bytes([register & 0xFF, len(data)]) + data)
+
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int, force: bool | None = None) -> list[int]:
+        if length > BLOCK_MAX:
+            raise ValueError(f"Desired block length over {BLOCK_MAX} bytes")
+        self._set_address(i2c_addr, force)
+        return list(self._write_read(i2c_addr, bytes([register & 0xFF]), length))
+
+    def write_i2c_block_data(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> None:
+        data = bytes(data)
+        if len(data) > BLOCK_MAX:
+            raise ValueError(f"Data length cannot exceed {BLOCK_MAX} bytes")
+        self._set_address(i2c_addr, force)
+        self._write(i2c_addr, bytes([register & 0xFF]) + data)
+
+    def i2c_rdwr(self, *i2c_msgs: i2c_msg) -> None:
+        """One combined transaction (repeated STARTs, one STOP); read messages' buffers are filled in place."""
+        msgs: list[list] = []
+        for m in i2c_msgs:
+            if m.flags & I2C_M_TEN:
+                raise _error(EINVAL)  # no 10-bit addresses on this adapter
+            read = bool(m.flags & I2C_M_RD)
+            msgs.append([int(m.addr), read, int(m.len) if read else bytes(m)])
+        reads = iter(self._transfer(msgs))
+        for m in i2c_msgs:
+            if m.flags & I2C_M_RD:
+                data = next(reads)
+                ctypes.memmove(m.buf, data, min(len(data), m.len))
+
+
+__all__ = ["EREMOTEIO", "ETIMEDOUT", "SMBus", "i2c_msg"]
