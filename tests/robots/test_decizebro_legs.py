@@ -34,7 +34,7 @@ def walk(w: World, seconds: float, speed_rad_s: tuple[float, float], t0: int = 0
             s = speed_rad_s[0] if leg in LEFT else speed_rad_s[1]
             offset = 0.0 if leg in (0, 2, 4) else math.pi  # tripods 0-2-4 and 1-3-5, half a turn apart
             target = s * t / 1e9 + offset
-            err = math.remainder(target - legs.leg_angle(0, leg), 2 * math.pi)
+            err = math.remainder(target - legs.angle(0, leg), 2 * math.pi)
             legs.set_duty(0, leg, s / legs.w_max[0] / 1.15 + 0.6 * err)
             phase[leg] = target
         w.step_quantum(t, Q)

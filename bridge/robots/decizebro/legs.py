@@ -48,8 +48,8 @@ class Legs(WorldModel):
         super().__init__(world, robots, parts)
         n, p = len(robots), parts
         self.duty = np.zeros((n, LEGS))
-        self.omega = np.zeros((n, LEGS))
-        self.angle = np.zeros((n, LEGS))
+        self.rate = np.zeros((n, LEGS))
+        self.theta = np.zeros((n, LEGS))
         self.traction = np.empty((n, LEGS))
         for k, r in enumerate(robots):
             g = stream(world.seed, "robot", r, "legs")
@@ -74,12 +74,13 @@ class Legs(WorldModel):
         if self.world.alive[r]:
             self.duty[self.local[r], leg] = min(1.0, max(-1.0, float(duty)))
 
-    def leg_angle(self, r: int, leg: int) -> float:
+    def angle(self, r: int, leg: int) -> float:
         """The leg's angle (rad, 0 = pointing down, growing as it walks forward), wrapped to [0, 2 pi)."""
-        return float(self.angle[self.local[r], leg] % TWO_PI)
+        return float(self.theta[self.local[r], leg] % TWO_PI)
 
-    def leg_omega(self, r: int, leg: int) -> float:
-        return float(self.omega[self.local[r], leg])
+    def omega(self, r: int, leg: int) -> float:
+        """The leg's angular speed (rad/s)."""
+        return float(self.rate[self.local[r], leg])
 
     def kill(self, r: int) -> None:
         self.duty[self.local[r]] = 0.0
@@ -94,11 +95,11 @@ class Legs(WorldModel):
     def before_step(self) -> None:
         """The legs' exact first-order response over one step, then the body's twist from the legs in stance."""
         dt = self.world.dt
-        dev = self.omega - self._w_ss
-        self.angle += self._w_ss * dt + dev * self._tau_1ma
-        self.omega = self._w_ss + dev * self._decay
-        down = np.abs((self.angle + math.pi) % TWO_PI - math.pi) <= self.stance[:, None]
-        rim = self.omega * self.leg_r[:, None] * self.traction
+        dev = self.rate - self._w_ss
+        self.theta += self._w_ss * dt + dev * self._tau_1ma
+        self.rate = self._w_ss + dev * self._decay
+        down = np.abs((self.theta + math.pi) % TWO_PI - math.pi) <= self.stance[:, None]
+        rim = self.rate * self.leg_r[:, None] * self.traction
         sides = []
         for legs in (LEFT, RIGHT):
             on = down[:, legs]
@@ -119,12 +120,12 @@ class Legs(WorldModel):
         load[self.ids] += self.i_leg * np.abs(self.duty).sum(axis=1)
 
     def drive_speed(self, speed: np.ndarray) -> None:
-        speed[self.ids] = np.abs(self.omega).max(axis=1) * self.leg_r
+        speed[self.ids] = np.abs(self.rate).max(axis=1) * self.leg_r
 
     def sense(self, r: int) -> dict[str, Any]:
         """The six legs' angles (rad, wrapped) and speeds (rad/s)."""
         k = self.local[r]
-        return {"leg_angles": (self.angle[k] % TWO_PI).tolist(), "leg_omegas": self.omega[k].tolist()}
+        return {"leg_angles": (self.theta[k] % TWO_PI).tolist(), "leg_omegas": self.rate[k].tolist()}
 
 
 LegsParams.world_model = Legs
