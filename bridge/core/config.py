@@ -354,12 +354,14 @@ class RobotGroup(_Model):
     def _robot_options(self) -> RobotGroup:
         """Fields beyond a group's own are options of its robot model: its plugin's model validates them (an error
         names the field, as for the group's own)."""
+        try:
+            spec = robot_spec(self.profile)
+        except PluginError:
+            return self  # the profile's own error says why
+        for name in sorted(set(spec.refuses) & self.model_fields_set):
+            raise ValueError(f"{name}: {spec.refuses[name]}")
         extra = self.model_extra or {}
         if extra:
-            try:
-                spec = robot_spec(self.profile)
-            except PluginError:
-                return self  # the profile's own error says why
             (spec.options or _NoOptions).model_validate(extra)
         return self
 

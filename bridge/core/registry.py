@@ -67,6 +67,9 @@ class RobotSpec:
     # what its own modules' pins meet in the world: role -> a wiring as ``pins`` is (``sense``, ``valid``,
     # ``actuate``, ``schema``), None for a module without pins (a radio)
     wiring: Callable[[str], Any] | None = None
+    # robot-group fields that do not apply to this model, with why (a legged robot given an LLC's or a wheeled
+    # robot's options): field -> reason; a config that sets one is refused naming it
+    refuses: dict[str, str] = field(default_factory=dict)
     # the HAL tables its robot program gets in a session beyond the shared ones: (rp, cfg) -> {table: settings}
     hal: Callable[[Any, Any], dict[str, Any]] | None = None
 

@@ -54,4 +54,10 @@ DECIZEBRO = RobotProfile(
     ),
 )
 
-SPEC = RobotSpec("decizebro", DECIZEBRO, title="DeciZebro: hexapod, six ZebroBus leg modules on I2C, DWM1001 UWB radio")
+NO_LLC = "a decizebro has no LLC on CAN: its legs are ZebroBus modules on I2C"
+SPEC = RobotSpec(
+    "decizebro", DECIZEBRO, title="DeciZebro: hexapod, six ZebroBus leg modules on I2C, DWM1001 UWB radio",
+    refuses={"xbee": "a decizebro has no XBee: its radio is the DWM1001 UWB module, which carries its messages",
+             "uwb": "a decizebro always has its DWM1001 UWB radio; the eSwarBot's ranging-only module does not fit",
+             "can": NO_LLC, "vehicle": NO_LLC,
+             "pose_source": "a decizebro has no LLC to report a pose (no odometry on legs, thesis section 1.1)"})
