@@ -15,6 +15,7 @@ from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
 from bridge.models.sonar import SonarParams
 from bridge.robots.decizebro.legs import LegsParams
+from bridge.robots.decizebro.utility import UtilityParams
 
 DECIZEBRO = RobotProfile(
     name="decizebro",
@@ -51,6 +52,7 @@ DECIZEBRO = RobotProfile(
             noise_rel=0.01,
             outlier_p=0.02,
         ),
+        UtilityParams(cone_deg=60.0, range_m=3 * 0.268),  # 60 degrees, three body lengths (section 4.2.1)
     ),
 )
 
