@@ -67,6 +67,9 @@ class RobotSpec:
     # what its own modules' pins meet in the world: role -> a wiring as ``pins`` is (``sense``, ``valid``,
     # ``actuate``, ``schema``), None for a module without pins (a radio)
     wiring: Callable[[str], Any] | None = None
+    # robot-group fields that do not apply to this model, with why (a legged robot given an LLC's or a wheeled
+    # robot's options): field -> reason; a config that sets one is refused naming it
+    refuses: dict[str, str] = field(default_factory=dict)
     # the HAL tables its robot program gets in a session beyond the shared ones: (rp, cfg) -> {table: settings}
     hal: Callable[[Any, Any], dict[str, Any]] | None = None
 
@@ -119,7 +122,11 @@ class Study:
     loop_functions: type[LoopFunctions] | None = None
     configs: str = ""  # its session configs, relative to the repository
     sections: tuple[str, ...] = field(default=())  # the summary.json sections its loop functions write
-    config: dict[str, Any] = field(default_factory=dict)  # its own top-level config sections: name -> pydantic model
+    # its own top-level config sections: name -> their type (a pydantic model, or e.g. list[Model] for [[name]])
+    config: dict[str, Any] = field(default_factory=dict)
+    # checks across sections once a config is whole (a particle inside an obstacle): (config) -> None, raising
+    # ValueError naming the field
+    check: Callable[[Any], None] | None = None
 
 
 def _is_medium(obj: Any) -> bool:

@@ -217,7 +217,8 @@ def test_plugins_not_installed_are_unknown(tmp_path: Path) -> None:
     r = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "validate", str(cfg)], capture_output=True,
                        text=True, timeout=600, cwd=ROOT)
     assert r.returncode == 2
-    assert "robots[0].profile: unknown robot profile 'minibot'; known: eswarbot, traxbot" in r.stderr, r.stderr
+    known = "known: decizebro, eswarbot, traxbot"
+    assert f"robots[0].profile: unknown robot profile 'minibot'; {known}" in r.stderr, r.stderr
 
 
 def test_the_registry_calls(monkeypatch: pytest.MonkeyPatch) -> None:
