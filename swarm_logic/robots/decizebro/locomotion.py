@@ -208,6 +208,7 @@ class ZebroLegs:
                 self.counters["motion_writes"] += 1
                 self.legs = [_Leg(sent=True) for _ in range(LEGS)]
             return
+        tau = self._tau(self.clock.now())  # one time for all the legs written now: they keep their gait's phases
         for side, rpm in zip((LEFT, RIGHT), self.target_rpm, strict=True):
             speed, trim = quantise(rpm)
             for i in side:
@@ -215,12 +216,10 @@ class ZebroLegs:
                 same = leg.mode == MODE_WALK and abs(leg_rpm(leg.speed, leg.trim) - leg_rpm(speed, trim)) < RESEND_RPM
                 if leg.sent and same:
                     continue
-                self._send_walk(i, leg, speed, trim)
+                self._send_walk(i, leg, speed, trim, tau)
 
-    def _send_walk(self, i: int, leg: _Leg, speed: int, trim: int) -> None:
-        """Leg ``i`` walks at (speed, trim), its target going on from where it is (or from its gait offset)."""
-        t = self.clock.now()
-        tau = self._tau(t)
+    def _send_walk(self, i: int, leg: _Leg, speed: int, trim: int, tau: float) -> None:
+        """Leg ``i`` walks at (speed, trim), its target going on at ``tau`` from where it is (or its gait offset)."""
         where = (leg.phase_rad + leg.omega * tau) if leg.mode == MODE_WALK else self.offsets[i]
         new = _Leg(MODE_WALK, speed, trim)
         steps = round(((where - new.omega * tau) % TWO_PI) / TWO_PI * PHASE_STEPS) % PHASE_STEPS
