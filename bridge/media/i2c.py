@@ -311,10 +311,11 @@ class I2cBuses(Medium):
                     "slaves": {f"0x{a:02X}": e[e.index("/") + 1:] for a, e in sorted(bus.slaves.items())},
                     **{k: v for k, v in c.items() if k != "busy_ns"},
                     "bus_load": round(c["busy_ns"] / sim_ns, 5)}
+        counts = result.setdefault("message_counts", {})
         for key in ("transactions", "nacks", "timeouts", "bytes"):
             total = sum(b.counts[key] for b in self.buses)
             if total:
-                self.hub.counts[f"i2c_{key}"] = total
+                counts[f"i2c_{key}"] = total
 
 
 def _ceil(t: int, q: int) -> int:
