@@ -152,7 +152,7 @@ class I2cBuses(Medium):
         done = self._to_program(r)
         try:
             _, _, msgs, hz = item
-            checked = _check(msgs, hz)
+            checked = check_transaction(msgs, hz)
         except (ValueError, TypeError):
             self.hub.counts["i2c_invalid"] += 1
             self.buses[r].counts["invalid"] += 1
@@ -329,7 +329,7 @@ def _hal(hub: Hub, r: int, rp: Any) -> dict[str, Any]:
     return dict(spec.hal(rp, hub.cfg))
 
 
-def _check(msgs: Any, hz: Any) -> list[tuple[int, bool, bytes | int]]:
+def check_transaction(msgs: Any, hz: Any) -> list[tuple[int, bool, bytes | int]]:
     """A transaction as the adapter takes it: 1-42 messages of an address, a direction and 1-8192 bytes (a write
     may be empty: a quick command), at a sane SCL rate. Anything else is refused (``EINVAL``)."""
     if type(hz) is not int or not MIN_HZ <= hz <= MAX_HZ:

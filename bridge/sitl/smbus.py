@@ -25,7 +25,7 @@ from smbus2 import I2cFunc, i2c_msg
 from smbus2 import SMBus as _SMBus
 
 from bridge.hosts import sim_context
-from bridge.media.i2c import EINVAL, EREMOTEIO, ETIMEDOUT, SIM_URL, _check
+from bridge.media.i2c import EINVAL, EREMOTEIO, ETIMEDOUT, SIM_URL, check_transaction
 
 BLOCK_MAX = 32  # I2C_SMBUS_BLOCK_MAX
 ADAPTER_TIMEOUT_NS = 1_000_000_000  # i2c-bcm2835 gives up on a transaction after 1 s
@@ -99,7 +99,7 @@ class SMBus(_SMBus):
         if threading.current_thread() is not rt.thread:
             raise RuntimeError("a sitl I2C bus is used from its robot's own thread only (simulated time)")
         try:
-            _check(msgs, self.scl_hz)
+            check_transaction(msgs, self.scl_hz)
         except (ValueError, TypeError):
             raise _error(EINVAL) from None
         seq = next(_seq)

@@ -164,6 +164,12 @@ def test_out_of_range_phase_and_unknown_mode_are_errors() -> None:
     assert leg.m.mode == zb.MODE_IDLE and leg.m.vregs[zb.LAST_ERROR] == zb.ERR_MOTION_PHASE
 
 
+def test_malformed_bus_items_are_counted_and_dropped() -> None:
+    leg = Leg()
+    leg.tick([["i2c", 1, [[0x10, False, "text"]]], ["i2c", 2], ["other"], ["i2c", 3, [[0x10, True, "n"]]]])
+    assert leg.m.counters["malformed"] == 4 and leg.m.counters["transactions"] == 0
+
+
 def test_a_write_queue_overflow_is_an_error() -> None:
     leg = Leg()
     leg.write(zb.TEST_FIELD, *range(60))  # 49 are queued (0x61 on are read-only), the rest is lost

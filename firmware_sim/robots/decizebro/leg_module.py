@@ -76,7 +76,7 @@ class LegModule(zb.ZebroBusSlave):
         self.integral = 0.0
         self.duty = 0.0
         self.last_loop_ns: int | None = None
-        self.counters.update(loops=0, estops=0, motion_updates=0, sync_writes=0)
+        self.counters.update(loops=0, estops=0, motion_updates=0, sync_writes=0, malformed=0)
 
     # -- the firmware host's tick ------------------------------------------------------------------------------
     def run(self, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
@@ -89,11 +89,18 @@ class LegModule(zb.ZebroBusSlave):
             self.rtc_deadline = t_ns + zb.SYNC_TIMEOUT_COUNTS * 1_000_000_000 // zb.RTC_HZ
             out.append(["i2c_attach", self.address, True])
         for item in inputs.get("in", ()):
-            if item[0] == "i2c" and len(item) == 3:
-                segs = [(int(a), bool(rd), d) for a, rd, d in item[2]]
-                replies = self.receive(segs)
-                if any(rd for _, rd, _ in segs):
-                    out.append(["i2c", item[1], replies])
+            try:
+                segs = [(int(a), bool(rd), int(d) if rd else bytes(d)) for a, rd, d in item[2]]
+            except (TypeError, ValueError, IndexError):
+                segs = None
+            if item[0] != "i2c":
+                segs = None
+            if segs is None:  # not bus traffic as the medium sends it: dropped and counted
+                self.counters["malformed"] += 1
+                continue
+            replies = self.receive(segs)
+            if any(rd for _, rd, _ in segs):
+                out.append(["i2c", item[1], replies])
         if t_ns >= self.rtc_deadline:
             self._overflow()
         res: dict[str, Any] = {"out": out, "wom": ["i2c"]}
