@@ -91,9 +91,9 @@ class LegModule(zb.ZebroBusSlave):
         for item in inputs.get("in", ()):
             try:
                 segs = [(int(a), bool(rd), int(d) if rd else bytes(d)) for a, rd, d in item[2]]
+                if item[0] != "i2c":
+                    segs = None
             except (TypeError, ValueError, IndexError):
-                segs = None
-            if item[0] != "i2c":
                 segs = None
             if segs is None:  # not bus traffic as the medium sends it: dropped and counted
                 self.counters["malformed"] += 1
