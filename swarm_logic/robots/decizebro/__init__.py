@@ -1,2 +1,2 @@
-"""The DeciZebro's robot code on its main computer (a Raspberry Pi Zero W): its locomotion layer over the legs' I2C
-bus (``locomotion``)."""
+"""The DeciZebro's interfaces as its companion computer sees them (``interfaces``): the UWB radio with data, the
+utility sensor, the IMU and the legs, each a device of the robot reached as ``robot.device(name)``."""
