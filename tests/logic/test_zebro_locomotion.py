@@ -38,6 +38,7 @@ class Bus:
 
     def __init__(self, absent: set[int] = frozenset()) -> None:  # type: ignore[assignment]
         self.writes: list[tuple[int, int, list[int]]] = []
+        self.transactions = 0  # i2c_rdwr calls
         self.absent = set(absent)
         self.status = dict.fromkeys(range(0x10, 0x16), 0)
 
@@ -45,6 +46,15 @@ class Bus:
         if addr in self.absent:
             raise OSError(121, "Remote I/O error")
         self.writes.append((addr, reg, list(data)))
+
+    def i2c_rdwr(self, *msgs: Any) -> None:
+        """One transaction of write messages; as on Linux, those before a NACKed one went out, then it fails."""
+        self.transactions += 1
+        for m in msgs:
+            if m.addr in self.absent:
+                raise OSError(121, "Remote I/O error")
+            data = list(bytes(m))
+            self.writes.append((m.addr, data[0], data[1:]))
 
     def read_byte_data(self, addr: int, reg: int) -> int:
         if addr in self.absent:
@@ -92,6 +102,7 @@ def test_it_syncs_once_a_second_by_general_call_and_starts_the_tripod() -> None:
     assert phases == [0, 120, 0, 120, 0, 120]  # 0-2-4 and 1-3-5 half a turn apart
     assert math.isclose(legs.speed_mps, 0.05 * TWO_PI)  # 60 rpm of a 50 mm leg
     assert legs.counters["motion_writes"] == 7  # the halt it starts with (one general call), then one per leg
+    assert bus.transactions == 1  # the six legs' blocks in one transaction: they start together
 
 
 def test_turning_is_a_speed_difference_and_never_backwards() -> None:
@@ -142,10 +153,11 @@ def test_a_speed_change_keeps_each_legs_target_continuous() -> None:
 def test_halt_is_one_general_call_and_bus_errors_are_counted() -> None:
     clock, bus = Clock(), Bus(absent={0x12})
     legs = ZebroLegs(bus, clock)
-    legs.walk(0.0)
-    assert legs.counters["bus_errors"] == 1 and "0x12" in legs.last_error
+    legs.walk(0.0)  # the six blocks in one transaction fail; then one each: leg 2's fails
+    assert legs.counters["bus_errors"] == 2 and "0x12" in legs.last_error
+    assert sorted(bus.motions()) == [0x10, 0x11, 0x13, 0x14, 0x15]
     legs.poll()  # retried at each poll
-    assert legs.counters["bus_errors"] == 2
+    assert legs.counters["bus_errors"] == 3
     bus.absent.clear()
     legs.poll()
     assert 0x12 in bus.motions()

@@ -12,7 +12,8 @@ ZebroBus walk mode, phase-locked to the synchronised time: the layer writes the 
 (general call 0x00) once a second, when the robot polls its devices, and each leg module tracks ``phase + omega *
 tau`` with ``tau`` that counter plus the time since it was written. A side's speed is ``10 rpm x motion speed + 0.1
 rpm x motion extra`` (the trim); when it changes, each of its legs gets a new phase so that its target goes on
-from where it was. A leg module that has heard no sync for 2 s stops its leg (emergency stop); every
+from where it was. The motion blocks of the legs that change go in one transaction (``i2c_rdwr``, a message to each
+leg), so they start together. A leg module that has heard no sync for 2 s stops its leg (emergency stop); every
 ``check_every_s`` the layer reads each leg's quick status and clears an emergency stop it finds, then resends that
 leg's motion.
 
@@ -26,6 +27,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import Any
+
+from smbus2 import i2c_msg
 
 from swarm_logic.clock import Clock
 from swarm_logic.drivers.i2c import open_smbus
@@ -209,26 +212,43 @@ class ZebroLegs:
                 self.legs = [_Leg(sent=True) for _ in range(LEGS)]
             return
         tau = self._tau(self.clock.now())  # one time for all the legs written now: they keep their gait's phases
+        todo: list[tuple[int, _Leg, list[int]]] = []
         for side, rpm in zip((LEFT, RIGHT), self.target_rpm, strict=True):
             speed, trim = quantise(rpm)
             for i in side:
                 leg = self.legs[i]
                 same = leg.mode == MODE_WALK and abs(leg_rpm(leg.speed, leg.trim) - leg_rpm(speed, trim)) < RESEND_RPM
-                if leg.sent and same:
-                    continue
-                self._send_walk(i, leg, speed, trim, tau)
+                if not (leg.sent and same):
+                    todo.append((i, *self._walk_block(i, leg, speed, trim, tau)))
+        if not todo:
+            return
+        for (i, new, _), ok in zip(todo, self._write_legs([(i, block) for i, _, block in todo]), strict=True):
+            if ok:
+                self.legs[i] = new
+                self.halted_sent = False
+                self.counters["motion_writes"] += 1
 
-    def _send_walk(self, i: int, leg: _Leg, speed: int, trim: int, tau: float) -> None:
-        """Leg ``i`` walks at (speed, trim), its target going on at ``tau`` from where it is (or its gait offset)."""
+    def _walk_block(self, i: int, leg: _Leg, speed: int, trim: int, tau: float) -> tuple[_Leg, list[int]]:
+        """Leg ``i`` walking at (speed, trim), its target going on at ``tau`` from where it is (or its gait offset):
+        what the leg will hold, and the motion block that tells it."""
         where = (leg.phase_rad + leg.omega * tau) if leg.mode == MODE_WALK else self.offsets[i]
-        new = _Leg(MODE_WALK, speed, trim)
+        new = _Leg(MODE_WALK, speed, trim, sent=True)
         steps = round(((where - new.omega * tau) % TWO_PI) / TWO_PI * PHASE_STEPS) % PHASE_STEPS
-        if self._write(LEG_ADDRESS_BASE + i, MOTION_MODE, [MODE_WALK, speed & 0xFF, steps, trim & 0xFF, 0, 1]):
-            new.phase_rad = steps * TWO_PI / PHASE_STEPS
-            new.sent = True
-            self.legs[i] = new
-            self.halted_sent = False
-            self.counters["motion_writes"] += 1
+        new.phase_rad = steps * TWO_PI / PHASE_STEPS
+        return new, [MODE_WALK, speed & 0xFF, steps, trim & 0xFF, 0, 1]
+
+    def _write_legs(self, blocks: list[tuple[int, list[int]]]) -> list[bool]:
+        """Motion blocks to several legs in one transaction (a message to each, repeated STARTs between them, one
+        STOP), so they start together; if that fails (a leg does not answer: Linux does not tell which), one
+        transaction each."""
+        if len(blocks) > 1 and hasattr(self.bus, "i2c_rdwr"):
+            try:
+                self.bus.i2c_rdwr(*(i2c_msg.write(LEG_ADDRESS_BASE + i, [MOTION_MODE, *b]) for i, b in blocks))
+                return [True] * len(blocks)
+            except OSError as e:
+                self.counters["bus_errors"] += 1
+                self.last_error = f"motion blocks to {len(blocks)} legs: {e}"
+        return [self._write(LEG_ADDRESS_BASE + i, MOTION_MODE, b) for i, b in blocks]
 
 
 def open_legs(cfg: dict[str, Any], robot: Any) -> ZebroLegs:
