@@ -17,7 +17,9 @@ issues it (the quantum its program ran in), or when the bus is free.
   boundary after the read's address byte (``t1``); the slave answers in that quantum; the read bytes and the STOP then
   follow at the bus rate from ``t1`` (or from where the wire had got to, if later), and the master's call returns at
   the boundary after that, one quantum after ``t1`` at the earliest. A read therefore costs at least two quanta in a
-  session. A slave that does not answer within its quantum times the transaction out (``ETIMEDOUT``).
+  session. The stretch is the session's: a real leg module answers from its TWI interrupt within microseconds (and
+  the Pi's BCM2835 controller is known not to tolerate long stretches), so a read takes up to a quantum longer here
+  than on the robot. A slave that does not answer within its quantum times the transaction out (``ETIMEDOUT``).
 
 Items: the master sends ``["i2c", seq, [[addr, read, data_or_length], ...], scl_hz]`` and gets
 ``["i2c", [seq, errno, [read bytes, ...], end_ns]]`` (errno 0: done); a slave gets ``["i2c", txn, [[addr, read,
