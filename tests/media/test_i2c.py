@@ -5,12 +5,15 @@ the general call, time-outs, refused transactions, and the smbus2 calls."""
 from __future__ import annotations
 
 import errno
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
 from smbus2 import i2c_msg
 
+from bridge.core.registry import MEDIA
 from bridge.media.i2c import EINVAL, EREMOTEIO, ETIMEDOUT, I2cBuses, uses_i2c
+from bridge.robots.decizebro import firmware
 from bridge.sitl.smbus import SMBus
 from firmware_sim.robots.decizebro import zebrobus as zb
 from swarm_logic.drivers.i2c import open_smbus
@@ -224,7 +227,17 @@ def test_transactions_from_two_masters_share_the_bus_in_turn() -> None:
 
 def test_the_medium_is_built_for_robots_whose_hal_names_the_bus_and_found_by_url() -> None:
     assert uses_i2c({"legs": {"bus": "sitl://i2c"}}) and not uses_i2c({"legs": {"bus": 1}, "uwb": {}})
-    assert I2cBuses.name == "i2c"
+    specs = {"plain": SimpleNamespace(hal=None), "legged": SimpleNamespace(hal=firmware.hal)}
+
+    def hub(*kinds: str) -> Any:
+        robots = [SimpleNamespace(profile=k, gateway=None) for k in kinds]
+        return SimpleNamespace(plan=SimpleNamespace(robots=robots), cfg=None,
+                               robot_spec=lambda r: specs[robots[r].profile])
+
+    assert I2cBuses.wanted(hub("plain", "legged")) and not I2cBuses.wanted(hub("plain"))
+    assert MEDIA.get("i2c") is I2cBuses
+    others = [key for name, cls in MEDIA.items() if name != "i2c" for key in cls.routes]
+    assert not set(I2cBuses.routes) & set(others)  # no other medium carries its items
     with pytest.raises(FileNotFoundError, match="no SITL robot"):
         open_smbus("sitl://i2c")  # found by its scheme; outside a session there is no bus to open
     with pytest.raises(ValueError):
