@@ -19,6 +19,7 @@ import os
 import threading
 import weakref
 from collections import deque
+from collections.abc import Iterator
 from typing import Any
 
 from smbus2 import I2cFunc, i2c_msg
@@ -33,8 +34,10 @@ EBADF, EOPNOTSUPP = 9, 95
 I2C_M_RD, I2C_M_TEN = 0x0001, 0x0010
 FUNCS = I2cFunc.I2C | (I2cFunc.SMBUS_EMUL & ~I2cFunc.SMBUS_PEC)  # what i2c-bcm2835 offers, less PEC
 
-_seq = itertools.count(1)
+# per robot: how many SMBus objects have its bus open, and its transactions' numbers (each robot counts its own, so
+# the recording does not depend on which robots share a process)
 _users: weakref.WeakKeyDictionary[sim_context.RobotRuntime, int] = weakref.WeakKeyDictionary()
+_seqs: weakref.WeakKeyDictionary[sim_context.RobotRuntime, Iterator[int]] = weakref.WeakKeyDictionary()
 
 
 def _error(code: int) -> OSError:
@@ -102,7 +105,7 @@ class SMBus(_SMBus):
             check_transaction(msgs, self.scl_hz)
         except (ValueError, TypeError):
             raise _error(EINVAL) from None
-        seq = next(_seq)
+        seq = next(_seqs.setdefault(rt, itertools.count(1)))
         rt.outbox.append(["i2c", seq, msgs, self.scl_hz])
         deadline = rt.t_ns + ADAPTER_TIMEOUT_NS
         while True:

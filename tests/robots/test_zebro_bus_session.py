@@ -46,14 +46,20 @@ placement = { kind = "explicit", poses = [[1.5, 5.0, 0.0]] }
 Q = 10_000_000
 
 
+def run(cfg: Path, out: Path, *extra: str) -> dict:
+    cmd = [sys.executable, "-m", "bridge.tools.cli", "run", str(cfg), "--out", str(out), "--quiet", *extra]
+    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return json.loads((out / "summary.json").read_text())
+
+
 def test_zebros_walk_on_their_leg_bus_and_stop_when_the_sync_stops(tmp_path: Path) -> None:
     cfg = tmp_path / "zebro.toml"
     cfg.write_text(CONFIG)
     out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "run", str(cfg), "--out", str(out), "--quiet"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stdout + r.stderr
-    s = json.loads((out / "summary.json").read_text())
+    s = run(cfg, out)
+    # the same session with both robots' firmware and logic in one process each records the same, byte for byte
+    assert run(cfg, tmp_path / "packed", "--robots-per-process", "2")["digest"] == s["digest"]
     walker, frozen = s["per_robot"]
     assert not s["failures"]
     for rob in (walker, frozen):
