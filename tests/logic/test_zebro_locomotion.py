@@ -5,6 +5,7 @@ when the sync stops."""
 
 from __future__ import annotations
 
+import ctypes
 import math
 from typing import Any
 
@@ -48,13 +49,20 @@ class Bus:
         self.writes.append((addr, reg, list(data)))
 
     def i2c_rdwr(self, *msgs: Any) -> None:
-        """One transaction of write messages; as on Linux, those before a NACKed one went out, then it fails."""
+        """One transaction; as on Linux, the messages before a NACKed one went out, then it fails."""
         self.transactions += 1
+        pointer: dict[int, int] = {}
         for m in msgs:
             if m.addr in self.absent:
                 raise OSError(121, "Remote I/O error")
+            if m.flags & 1:  # a read: at the register last written to that address
+                value = self.read_byte_data(m.addr, pointer.get(m.addr, 0))
+                ctypes.memmove(m.buf, bytes([value]), 1)
+                continue
             data = list(bytes(m))
-            self.writes.append((m.addr, data[0], data[1:]))
+            pointer[m.addr] = data[0]
+            if len(data) > 1:
+                self.writes.append((m.addr, data[0], data[1:]))
 
     def read_byte_data(self, addr: int, reg: int) -> int:
         if addr in self.absent:
@@ -178,6 +186,11 @@ def test_an_emergency_stop_found_is_cleared_and_the_motion_resent() -> None:
     legs.poll()
     assert (0x13, loco.EMERGENCY_STOP, [loco.ESTOP_CLEAR]) in bus.writes and 0x13 in bus.motions()
     assert legs.counters["estops_cleared"] == 1 and set(bus.motions()) == {0x13}
+    assert bus.transactions == 2  # the six legs' statuses were read in one transaction
+    bus.absent.add(0x15)
+    clock.sleep(1.0)
+    legs.poll()  # the transaction fails; then one read each: five answer
+    assert legs.counters["bus_errors"] == 2 and "0x15" in legs.last_error
 
 
 def test_open_legs_takes_the_hal_table() -> None:

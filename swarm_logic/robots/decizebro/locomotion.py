@@ -14,8 +14,8 @@ tau`` with ``tau`` that counter plus the time since it was written. A side's spe
 rpm x motion extra`` (the trim); when it changes, each of its legs gets a new phase so that its target goes on
 from where it was. The motion blocks of the legs that change go in one transaction (``i2c_rdwr``, a message to each
 leg), so they start together. A leg module that has heard no sync for 2 s stops its leg (emergency stop); every
-``check_every_s`` the layer reads each leg's quick status and clears an emergency stop it finds, then resends that
-leg's motion.
+``check_every_s`` the layer reads the legs' quick status (one transaction) and clears an emergency stop it finds,
+then resends that leg's motion.
 
 The bus is anything with smbus2's ``write_i2c_block_data`` and ``read_byte_data``: a real ``smbus2.SMBus(1)`` on
 the robot (HAL ``legs = {bus = 1}``), the simulated one in a session (``{bus = "sitl://i2c"}``). A bus error (a leg
@@ -190,18 +190,36 @@ class ZebroLegs:
 
     def _check(self) -> None:
         """Read each leg's quick status; clear an emergency stop and resend that leg's motion."""
-        for i in range(LEGS):
+        for i, status in enumerate(self._statuses()):
             addr = LEG_ADDRESS_BASE + i
-            try:
-                status = self.bus.read_byte_data(addr, QUICK_STATUS)
-            except OSError as e:
-                self.counters["bus_errors"] += 1
-                self.last_error = f"read quick status of 0x{addr:02X}: {e}"
-                continue
-            if status & QS_ESTOP and self._write(addr, EMERGENCY_STOP, [ESTOP_CLEAR]):
+            if status is not None and status & QS_ESTOP and self._write(addr, EMERGENCY_STOP, [ESTOP_CLEAR]):
                 self.counters["estops_cleared"] += 1
                 self.legs[i] = _Leg()  # the module fell back to idle: the motion is to be sent again
                 self.halted_sent = False
+
+    def _statuses(self) -> list[int | None]:
+        """Every leg's quick status (None: it did not answer): in one transaction (the register, then a byte read, for
+        each leg), or, if that fails, one read each."""
+        if hasattr(self.bus, "i2c_rdwr"):
+            msgs = []
+            for i in range(LEGS):
+                msgs += [i2c_msg.write(LEG_ADDRESS_BASE + i, [QUICK_STATUS]), i2c_msg.read(LEG_ADDRESS_BASE + i, 1)]
+            try:
+                self.bus.i2c_rdwr(*msgs)
+                return [bytes(m)[0] for m in msgs[1::2]]
+            except OSError as e:
+                self.counters["bus_errors"] += 1
+                self.last_error = f"read the legs' quick status: {e}"
+        out: list[int | None] = []
+        for i in range(LEGS):
+            addr = LEG_ADDRESS_BASE + i
+            try:
+                out.append(self.bus.read_byte_data(addr, QUICK_STATUS))
+            except OSError as e:
+                self.counters["bus_errors"] += 1
+                self.last_error = f"read quick status of 0x{addr:02X}: {e}"
+                out.append(None)
+        return out
 
     def _apply(self) -> None:
         """Write what the legs do not have yet: the halt (one general call), or each side's new speed."""
