@@ -17,11 +17,11 @@ Q = 10_000_000
 
 
 def test_six_leg_modules_at_their_addresses_with_serials_of_their_own() -> None:
-    rp = SimpleNamespace(id=3)
+    rp = SimpleNamespace(id=3, profile="decizebro", options=None)
     assert firmware.roles(rp) == ("leg0", "leg1", "leg2", "leg3", "leg4", "leg5")
     mods = firmware.modules(rp, None)
     assert [m.address for m in mods.values()] == [0x10, 0x11, 0x12, 0x13, 0x14, 0x15]
-    assert all(isinstance(m, LegModule) for m in mods.values())
+    assert all(isinstance(m, LegModule) and m.period_ns == Q for m in mods.values())  # the profile's 100 Hz
     assert len({m.vregs[0x04] for m in mods.values()}) == 6
     assert firmware.hal(rp, None) == {"legs": {"bus": "sitl://i2c", "scl_hz": 100_000}}
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from bridge.core.registry import robot_profile
 from bridge.media.i2c import SIM_URL
 from firmware_sim.robots.decizebro.leg_module import LegModule
 
@@ -19,8 +20,9 @@ def roles(rp: Any) -> tuple[str, ...]:
 
 
 def modules(rp: Any, cfg: Any) -> dict[str, Any]:
-    """The six leg modules of robot ``rp``, each with a serial id of its own."""
-    return {role: LegModule(i, serial_id=(rp.id * 6 + i) % 255 + 1) for i, role in enumerate(LEG_ROLES)}
+    """The six leg modules of robot ``rp``, each with a serial id of its own, looping at the profile's rate."""
+    hz = robot_profile(rp.profile, rp.options).llc_loop_hz
+    return {role: LegModule(i, serial_id=(rp.id * 6 + i) % 255 + 1, loop_hz=hz) for i, role in enumerate(LEG_ROLES)}
 
 
 def hal(rp: Any, cfg: Any) -> dict[str, Any]:
