@@ -183,8 +183,9 @@ class I2cBuses(Medium):
         self.touched.add(r)
 
     # -- the quantum --------------------------------------------------------------------------------------------
-    def end_outputs(self, t: int) -> None:
-        """Finish the reads whose slaves were due in this quantum, then put what waits on the bus."""
+    def advance(self, t: int) -> None:
+        """At the end of every quantum (``end_outputs`` runs only in quanta where some entity ran): finish the reads
+        whose slaves answered in this quantum, then put what waits on the bus."""
         for r in sorted(self.touched):
             bus = self.buses[r]
             if bus.active is not None and bus.active.t1 <= t:

@@ -2,7 +2,7 @@
 modules run as the firmware host runs them (on their wake times and on bus traffic), each on a first-order leg motor
 as the world's legs model has it, and a robot program in a ``RobotRuntime`` thread as the logic host runs it. One
 ``step()`` is one quantum, in the hub's order: deliveries, the entities that are due, their outputs to the medium
-(sorted by entity), the medium's ``end_outputs``."""
+(sorted by entity), the medium's ``end_outputs`` and ``advance``."""
 
 from __future__ import annotations
 
@@ -99,6 +99,7 @@ class I2cBench:
             else:
                 self.medium.attach(e, 0, t, item)
         self.medium.end_outputs(t)
+        self.medium.advance(t)
         self._motors(q / 1e9)
         self.k += 1
 
