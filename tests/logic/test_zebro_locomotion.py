@@ -111,6 +111,10 @@ def test_it_syncs_once_a_second_by_general_call_and_starts_the_tripod() -> None:
     assert math.isclose(legs.speed_mps, 0.05 * TWO_PI)  # 60 rpm of a 50 mm leg
     assert legs.counters["motion_writes"] == 7  # the halt it starts with (one general call), then one per leg
     assert bus.transactions == 1  # the six legs' blocks in one transaction: they start together
+    assert legs.counters["late_syncs"] == 0
+    clock.sleep(1.5)  # the program did not poll for 2 s
+    legs.poll()
+    assert legs.counters["late_syncs"] == 1
 
 
 def test_turning_is_a_speed_difference_and_never_backwards() -> None:

@@ -17,6 +17,10 @@ leg), so they start together. A leg module that has heard no sync for 2 s stops 
 ``check_every_s`` the layer reads the legs' quick status (one transaction) and clears an emergency stop it finds,
 then resends that leg's motion.
 
+The sync is written when the robot polls its devices, so the robot program must poll them at least once a second
+(a controller period of 1 s or less): a late sync is counted (``late_syncs``), and two seconds without one stop the
+legs, which is what the legs' emergency stop is for (a program that hangs).
+
 The bus is anything with smbus2's ``write_i2c_block_data`` and ``read_byte_data``: a real ``smbus2.SMBus(1)`` on
 the robot (HAL ``legs = {bus = 1}``), the simulated one in a session (``{bus = "sitl://i2c"}``). A bus error (a leg
 that does not answer) is counted (``counters``) and retried at the next poll; it never reaches the algorithm.
@@ -52,6 +56,7 @@ GAITS = {  # each leg's phase offset (rad): 0-2 left front to back, 3-5 right fr
     "tripod": (0.0, math.pi, 0.0, math.pi, 0.0, math.pi),  # 0-2-4 and 1-3-5 half a turn apart
 }
 RESEND_RPM = 0.3  # a side's speed is rewritten when it changes by this much (3 trim steps)
+LATE_SYNC_S = 0.5  # a sync written this much after it was due is counted late
 
 
 def rpm_to_rad_s(rpm: float) -> float:
@@ -113,7 +118,7 @@ class ZebroLegs:
         self.next_sync = now
         self.next_check = now + check_every_s
         self.halted_sent = False
-        self.counters = {"sync_writes": 0, "motion_writes": 0, "bus_errors": 0, "estops_cleared": 0}
+        self.counters = {"sync_writes": 0, "late_syncs": 0, "motion_writes": 0, "bus_errors": 0, "estops_cleared": 0}
         self.last_error = ""
         self.poll()
 
@@ -175,6 +180,8 @@ class ZebroLegs:
         return max(self.sync_value, 0) + (t - self.sync_at)
 
     def _write_sync(self) -> None:
+        if self.sync_value >= 0 and self.clock.now() - self.next_sync > LATE_SYNC_S:
+            self.counters["late_syncs"] += 1  # the robot polls its devices too rarely: the legs may stop
         value = (self.sync_value + 1) % 256
         if not self._write(GENERAL_CALL, SYNC_COUNTER, [value]):
             return
