@@ -25,7 +25,7 @@ Items: the master sends ``["i2c", seq, [[addr, read, data_or_length], ...], scl_
 ``["i2c", [seq, errno, [read bytes, ...], end_ns]]`` (errno 0: done); a slave gets ``["i2c", txn, [[addr, read,
 data_or_length], ...]]`` (its own messages and the general calls, in order, then the STOP) and answers reads with
 ``["i2c", txn, [bytes, ...]]``. Every transaction is recorded on ``/rNNN/i2c`` at its end, and counted in the
-summary (``robots[].i2c``). Any master can use a robot's bus through :meth:`I2cBuses.submit`: the robot program
+summary (``per_robot[].i2c``). Any master can use a robot's bus through :meth:`I2cBuses.submit`: the robot program
 does through its items, a program outside the session could through an endpoint that calls it.
 """
 
