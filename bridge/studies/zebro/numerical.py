@@ -60,6 +60,8 @@ class Model:
     cone_len_u: float = 3.0
     consume_u: float = 0.5
     max_turn_deg: float = 90.0  # what the legs can turn in a tick
+    delivery: str = "at_once"  # at_once (NetLogo: later robots in the tick read it) | next_tick (one hop per tick)
+    frozen: bool = False  # robots never move (a static graph, for the unit targets)
 
 
 class ZebroWorld:
@@ -81,6 +83,10 @@ class ZebroWorld:
         self.consume = model.consume_u * U
         self.max_turn = math.radians(model.max_turn_deg)
         self.inbox: list[list[Message]] = [[] for _ in range(self.n)]
+        self.pending: list[tuple[int, Message]] = []  # next_tick delivery: (receiver, frame) until the tick ends
+        self.at_once = model.delivery == "at_once"
+        if model.delivery not in ("at_once", "next_tick"):
+            raise ValueError(f"delivery: at_once or next_tick, got {model.delivery!r}")
         self.cmd: list[tuple[float, bool, bool]] = [(0.0, False, False)] * self.n  # (turn rate, fast, walking)
         self.eaten = [0] * self.n
         self.eat_count = 0
@@ -110,7 +116,10 @@ class ZebroWorld:
         msg = Message(i, bytes(data))
         for j in range(self.n):
             if j != i and math.hypot(self.x[j] - xi, self.y[j] - yi) <= r:
-                self.inbox[j].append(msg)
+                if self.at_once:
+                    self.inbox[j].append(msg)
+                else:
+                    self.pending.append((j, msg))
                 self.rx[kind] += 1
                 self.rx_bytes += len(data)
         return True
@@ -132,6 +141,8 @@ class ZebroWorld:
     def advance(self, i: int) -> None:
         """Robot i's walk for this tick (its command), then whatever it reached is eaten."""
         rate, fast, walking = self.cmd[i]
+        if self.m.frozen:
+            return
         turn = max(-self.max_turn, min(self.max_turn, rate * self.dt))
         self.h[i] = wrap(self.h[i] + turn)
         if not walking:
@@ -144,6 +155,12 @@ class ZebroWorld:
                 self.eat_count += 1
                 p.eaten_by, p.tick, p.order = i, self.tick, self.eat_count
                 self.eaten[i] += p.utility
+
+    def end_tick(self) -> None:
+        """Deliver what waits for the next tick (``next_tick`` delivery)."""
+        for j, m in self.pending:
+            self.inbox[j].append(m)
+        self.pending.clear()
 
     def adjacency(self) -> np.ndarray:
         x, y = np.array(self.x), np.array(self.y)
@@ -327,25 +344,42 @@ class ZebroRun:
         return self.consumed[0] if self.consumed else None
 
 
-def build(cls: type[Controller], params: dict[str, Any], scenario: Scenario, seed: int, model: Model | None = None,
-          logs: list[dict[str, Any]] | None = None) -> tuple[ZebroWorld, list[Controller], SteppedClock]:
-    """The world of ``scenario`` and one started controller per robot (their devices the point robot's)."""
-    model = model or Model()
-    parts = [Particle(x * U, y * U, u) for x, y, u in scenario.particles]
-    world = ZebroWorld(scenario.pos, scenario.heading, scenario.r_comm, parts, model)
-    clock = SteppedClock("the Zebro model drives controllers by ticks; they must not sleep")
-    ctls = []
-    for i in range(world.n):
-        def sink(topic: str, values: dict[str, Any], i: int = i) -> None:
-            if logs is not None:
-                logs.append({"tick": world.tick, "robot": i, "topic": topic, **values})
-        robot = Robot(i, clock, None, np.random.Generator(np.random.PCG64([seed, i])), dict(params), log_sink=sink,
-                      devices={UWB_RADIO: PointRadio(world, i), UTILITY: PointUtility(world, i),
-                               IMU: PointImu(world, i), LEGS: PointLegs(world, i)})
-        c = cls()
-        c.init(robot)
-        ctls.append(c)
-    return world, ctls, clock
+class Swarm:
+    """A scenario's world and one started controller per robot (their devices the point robot's), stepped a tick
+    at a time: every robot's ``step()`` once, in a random order from the seeded stream, each walking in its turn."""
+
+    def __init__(self, cls: type[Controller], params: dict[str, Any], scenario: Scenario, seed: int,
+                 model: Model | None = None, keep_logs: bool = False) -> None:
+        self.model = model = model or Model()
+        self.logs: list[dict[str, Any]] = []
+        parts = [Particle(x * U, y * U, u) for x, y, u in scenario.particles]
+        self.world = world = ZebroWorld(scenario.pos, scenario.heading, scenario.r_comm, parts, model)
+        self.clock = SteppedClock("the Zebro model drives controllers by ticks; they must not sleep")
+        self.order_rng = np.random.default_rng(seed)
+        self.ctls: list[Controller] = []
+        for i in range(world.n):
+            def sink(topic: str, values: dict[str, Any], i: int = i) -> None:
+                if keep_logs:
+                    self.logs.append({"tick": world.tick, "robot": i, "topic": topic, **values})
+            robot = Robot(i, self.clock, None, np.random.Generator(np.random.PCG64([seed, i])), dict(params),
+                          log_sink=sink, devices={UWB_RADIO: PointRadio(world, i), UTILITY: PointUtility(world, i),
+                                                  IMU: PointImu(world, i), LEGS: PointLegs(world, i)})
+            c = cls()
+            c.init(robot)
+            self.ctls.append(c)
+
+    def tick(self) -> None:
+        w = self.world
+        w.tick += 1
+        self.clock.t = w.tick * self.model.tick_s
+        for i in self.order_rng.permutation(w.n).tolist():
+            self.ctls[i].step()
+            w.advance(i)
+        w.end_tick()
+
+    def topic(self, name: str) -> list[dict[str, Any]]:
+        """The log records of one topic (``keep_logs``)."""
+        return [r for r in self.logs if r["topic"] == name]
 
 
 def run(cls: type[Controller], params: dict[str, Any], scenario: Scenario, seed: int, max_ticks: int = 300,
@@ -354,29 +388,22 @@ def run(cls: type[Controller], params: dict[str, Any], scenario: Scenario, seed:
 
     A-13: the swarm split when its communication graph was in two or more pieces for ``split_ticks`` ticks in a
     row, or is at the end."""
-    model = model or Model()
-    logs: list[dict[str, Any]] | None = [] if keep_logs else None
-    world, ctls, clock = build(cls, params, scenario, seed, model, logs)
-    order_rng = np.random.default_rng(seed)
-    run_len = apart = most = comps = 0
+    swarm = Swarm(cls, params, scenario, seed, model, keep_logs)
+    world = swarm.world
+    apart = most = comps = 0
     split = False
     first_tick: int | None = None
-    for tick in range(1, max_ticks + 1):
-        world.tick = tick
-        clock.t = tick * model.tick_s
-        for i in order_rng.permutation(world.n).tolist():
-            ctls[i].step()
-            world.advance(i)
+    while world.tick < max_ticks:
+        swarm.tick()
         comps = components(world.adjacency())
         most = max(most, comps)
         apart = apart + 1 if comps > 1 else 0
         split |= apart >= split_ticks
-        run_len = tick
-        if first_tick is None and any(p.eaten_by is not None for p in world.particles):
-            first_tick = tick
-        if first_tick is not None and tick >= first_tick + settle_ticks:
+        if first_tick is None and world.eat_count:
+            first_tick = world.tick
+        if first_tick is not None and world.tick >= first_tick + settle_ticks:
             break
     split |= comps > 1
     eaten = [(p.tick, p.eaten_by, p.utility) for p in sorted(world.particles, key=lambda p: p.order) if p.order]
-    return ZebroRun(run_len, eaten, split, most, comps, {NAMES.get(k, str(k)): v for k, v in world.tx.items()},
-                    {NAMES.get(k, str(k)): v for k, v in world.rx.items()}, world.rx_bytes, logs or [], world)
+    return ZebroRun(world.tick, eaten, split, most, comps, {NAMES.get(k, str(k)): v for k, v in world.tx.items()},
+                    {NAMES.get(k, str(k)): v for k, v in world.rx.items()}, world.rx_bytes, swarm.logs, world)

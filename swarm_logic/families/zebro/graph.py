@@ -1,11 +1,12 @@
 """Developing the graph (thesis Algorithm 11): link lists gossiped into an adjacency matrix.
 
-A robot's own links are (me, j) for each neighbour j of its list N1. It broadcasts its link list M when it changed
-(its own links, or links learnt from a neighbour's M); a receiver merges M into its adjacency list and, when that
-grew, sends the merged list on. A broken link travels with its negation bit: a receiver deletes it and keeps the
-deletion (a tombstone) so that stale copies of the link from third parties do not bring it back; only the link's
-owner (robot i of (i, j)) can assert it again. The list is complete when the matrix equals its transpose, which
-proves every robot has reported only because links are symmetric (equal radii). It is never used to decide.
+A robot's own links are (me, j) for each neighbour j of its list N1; when j leaves N1 the robot negates both (me, j)
+and (j, me), since links are symmetric and j may be unable to tell anyone. It broadcasts its link list M when it
+changed (its own links, or links learnt from a neighbour's M); a receiver merges M into its adjacency list and, when
+that grew, sends the merged list on. A broken link travels with its negation bit: a receiver deletes it and keeps
+the deletion (a tombstone) so that stale copies of the link from third parties do not bring it back; only the
+link's owner (robot i of (i, j)) can assert it again. The list is complete when the matrix equals its transpose,
+which proves every robot has reported only because links are symmetric (equal radii). It is never used to decide.
 """
 
 from __future__ import annotations
@@ -34,26 +35,29 @@ class LinkGossip:
             self.links.add((self.me, j))
             self.deleted.discard((self.me, j))
             self.changed = True
-        for j in self.own - now:
-            self.links.discard((self.me, j))
-            self.deleted.add((self.me, j))
+        for j in self.own - now:  # links are symmetric: the link is gone both ways
+            for link in ((self.me, j), (j, self.me)):
+                self.links.discard(link)
+                self.deleted.add(link)
             self.changed = True
         self.own = now
 
     def receive(self, src: int, entries: Iterable[tuple[int, int, bool]]) -> None:
         """RECEIVE LIST OF LINKS: merge a neighbour's M (a negated link deletes, any other adds)."""
-        for i, j, neg in entries:
-            link = (i, j)
-            if i == self.me:
-                continue  # my own links are mine to tell
-            if neg:
-                if link not in self.deleted:
-                    self.links.discard(link)
-                    self.deleted.add(link)
-                    self.changed = True
-            elif link not in self.links and (link not in self.deleted or src == i):
-                self.links.add(link)
-                self.deleted.discard(link)
+        me = self.me
+        told = {(i, j) for i, j, neg in entries if not neg and i != me}
+        negated = {(i, j) for i, j, neg in entries if neg and i != me}
+        gone = negated - self.deleted
+        if gone:
+            self.links -= gone
+            self.deleted |= gone
+            self.changed = True
+        new = told - self.links
+        if new:
+            new = {link for link in new if link not in self.deleted or link[0] == src}
+            if new:
+                self.links |= new
+                self.deleted -= new
                 self.changed = True
 
     def outgoing(self) -> list[tuple[int, int, bool]] | None:

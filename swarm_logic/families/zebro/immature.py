@@ -115,8 +115,11 @@ class ZebroImmature(ZebroController):
         if u > 0 and (self.my_leader is None or u > self.max_utility or self.my_leader == me):
             self.my_leader, self.max_utility, self.relay = me, u, None
         for value, leader, src in heard:
-            if leader == me or value <= 0 or (timeout and self.refused.get((leader, value), 0) > k):
-                continue  # nobody tells me what I lead with; a rumour that died stays dead a while
+            if leader == me or value <= 0:
+                continue  # nobody tells me what I lead with
+            if timeout and src != leader and self.refused.get((leader, value), 0) > k:
+                self.refused[(leader, value)] = k + int(self.p["reset_ticks"]) + 1
+                continue  # a rumour that died here stays dead while anyone around still repeats it
             if self.my_leader is None or value > self.max_utility:
                 self.my_leader, self.max_utility = leader, value
                 self.relay = None if src == leader else src
