@@ -6,7 +6,7 @@ drawn each tick from the run's seeded stream; a robot walks its tick right after
 each turtle in its turn); a broadcast reaches the sender's neighbours within the communication radius at once,
 so robots later in the same tick read it (information can cross several hops in one tick). Sensing is error-free:
 exact ranges, bearings and headings, the utility cone's exact sum. A particle is eaten by the first robot whose
-walk ends within the consumption radius of it.
+walk passes within the consumption radius of it.
 
 Lengths in the scenario are body lengths (1 u = 0.268 m, the DeciZebro); the devices speak SI.
 """
@@ -148,10 +148,12 @@ class ZebroWorld:
         if not walking:
             return
         step = self.speed * (FAST_FACTOR if fast else 1.0) * self.dt
-        self.x[i] += step * math.cos(self.h[i])
-        self.y[i] += step * math.sin(self.h[i])
-        for p in self.particles:
-            if p.eaten_by is None and math.hypot(p.x - self.x[i], p.y - self.y[i]) <= self.consume:
+        x0, y0 = self.x[i], self.y[i]
+        dx, dy = step * math.cos(self.h[i]), step * math.sin(self.h[i])
+        self.x[i], self.y[i] = x0 + dx, y0 + dy
+        for p in self.particles:  # reached: within the radius anywhere along this tick's walk
+            f = max(0.0, min(1.0, ((p.x - x0) * dx + (p.y - y0) * dy) / (step * step))) if step > 0 else 0.0
+            if p.eaten_by is None and math.hypot(p.x - x0 - f * dx, p.y - y0 - f * dy) <= self.consume:
                 self.eat_count += 1
                 p.eaten_by, p.tick, p.order = i, self.tick, self.eat_count
                 self.eaten[i] += p.utility
