@@ -405,6 +405,8 @@ def run(cls: type[Controller], params: dict[str, Any], scenario: Scenario, seed:
             first_tick = world.tick
         if first_tick is not None and world.tick >= first_tick + settle_ticks:
             break
+    for c in swarm.ctls:
+        c.destroy()
     split |= comps > 1
     eaten = [(p.tick, p.eaten_by, p.utility) for p in sorted(world.particles, key=lambda p: p.order) if p.order]
     return ZebroRun(world.tick, eaten, split, most, comps, {NAMES.get(k, str(k)): v for k, v in world.tx.items()},

@@ -9,10 +9,12 @@ next step.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from typing import Any, ClassVar
 
 from swarm_logic.controller import Controller
 from swarm_logic.families.zebro.flocking import FlockRules, turn_away, turn_towards
+from swarm_logic.families.zebro.messages import NAMES
 from swarm_logic.geometry import wrap
 from swarm_logic.robot import Robot
 from swarm_logic.robots.decizebro.interfaces import (
@@ -87,6 +89,8 @@ class ZebroController(Controller):
         self.imu = robot.device(IMU)
         self.legs = robot.device(LEGS)
         self.rules = self._rules()
+        self.sent: Counter[str] = Counter()  # frames broadcast, by type (logged as zebro_tx when it stops)
+        self.refused = 0  # broadcasts the radio's budget refused
         self.reset()
 
     def _rules(self) -> FlockRules:
@@ -94,6 +98,15 @@ class ZebroController(Controller):
         return FlockRules(float(p["d_min_m"]), float(p["d_max_m"]), math.radians(p["align_turn_deg"]),
                           math.radians(p["cohere_turn_deg"]), math.radians(p["separate_turn_deg"]), p["align_mean"],
                           p["cohere_mode"], p["separate_mode"])
+
+    def send(self, data: bytes) -> bool:
+        """Broadcast ``data``, counting it by frame type."""
+        ok = self.radio.broadcast(data)
+        if ok:
+            self.sent[NAMES.get(data[0], "other")] += 1
+        else:
+            self.refused += 1
+        return ok
 
     def steer(self, h_now: float, h_target: float, fast: bool = False) -> None:
         """Walk so that the heading is ``h_target`` one tick from now."""
@@ -128,6 +141,8 @@ class ZebroController(Controller):
         return turn_towards(h, guide.heading_rad, turn)
 
     def destroy(self) -> None:
+        """Halt, and log the frames sent by type (``zebro_tx``)."""
         legs = getattr(self, "legs", None)
         if legs is not None:
             legs.halt()
+            self.robot.log("zebro_tx", refused=self.refused, **self.sent)

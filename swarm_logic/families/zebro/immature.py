@@ -86,14 +86,14 @@ class ZebroImmature(ZebroController):
                 heard.append((f.value, f.origin, f.src))
         u = self.sensor.read()
         if u > 0 and self.sensing <= 0:
-            self.radio.broadcast(msg.m0(me))  # "stagnate the crowd"
+            self.send(msg.m0(me))  # "stagnate the crowd"
         self.sensing = u
         self._choose(u, heard)
-        self.radio.broadcast(msg.m1(me, u if p["m1_utility"] else None))
+        self.send(msg.m1(me, u if p["m1_utility"] else None))
         if u > 0:
-            self.radio.broadcast(msg.m2(me, min(u, 127)))
+            self.send(msg.m2(me, min(u, 127)))
         if self.my_leader is not None:
-            self.radio.broadcast(msg.m3(me, min(self.max_utility, 127), self.my_leader))
+            self.send(msg.m3(me, min(self.max_utility, 127), self.my_leader))
         eaten = self.sensor.consumed()
         if eaten:
             self.robot.log("zebro_consumed", utility=eaten, leader=self.my_leader)

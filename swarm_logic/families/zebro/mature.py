@@ -93,9 +93,6 @@ class ZebroMature(ZebroController):
             self.state = state
             self.robot.log("zebro_state", state=state, seq=self.seq)
 
-    def _send(self, data: bytes) -> None:
-        self.radio.broadcast(data)
-
     # -- the tick ---------------------------------------------------------------------------------------------
 
     def step(self) -> None:
@@ -115,7 +112,7 @@ class ZebroMature(ZebroController):
             if u > 0:  # utility found: the swarm STOPs, election seq opens
                 seq = max(self.seq, self.erased) + 1
                 self.flooded.add((msg.STOP, seq & 0xFF))
-                self._send(msg.stop(self.robot.id, seq))
+                self.send(msg.stop(self.robot.id, seq))
                 self._enter(seq)
         elif self.state == ELECTION and self.sensed <= 0 and self.p["new_contenders"] == "join":
             self._contend(self.sensor.read())
@@ -124,19 +121,19 @@ class ZebroMature(ZebroController):
         if self.state == ELECTION:
             self._check_done(ids)
         if self.p["beacon"]:
-            self._send(msg.n1(self.robot.id))
+            self.send(msg.n1(self.robot.id))
         if self.p["graph"]:
             out = self.graph.outgoing()
             if out is not None:
                 for i in range(0, max(1, len(out)), 255):
-                    self._send(msg.links(self.robot.id, out[i:i + 255]))
+                    self.send(msg.links(self.robot.id, out[i:i + 255]))
         eaten = self.sensor.consumed()
         if eaten:
             self.robot.log("zebro_consumed", utility=eaten, state=self.state, seq=self.seq)
             if self.state in (LEAD, FOLLOW):  # the swarm ate: the decision is executed
                 self._erase(self.seq)
                 self.flooded.add((msg.ERASE, self.seq & 0xFF))
-                self._send(msg.erase(self.robot.id, self.seq))
+                self.send(msg.erase(self.robot.id, self.seq))
         self._move(h0, nbrs)
 
     def _move(self, h0: float, nbrs: list) -> None:
@@ -167,7 +164,7 @@ class ZebroMature(ZebroController):
         key = (kind, seq & 0xFF)
         if key not in self.flooded:
             self.flooded.add(key)
-            self._send(data)
+            self.send(data)
 
     def _newer(self, seq: int, than: int) -> bool:
         """Sequence numbers are one byte: ``seq`` is newer within half the circle."""
@@ -225,7 +222,7 @@ class ZebroMature(ZebroController):
         assert self.best is not None
         me, (x, origin) = self.robot.id, self.best
         self.told = set(getattr(self, "ids", ()))
-        self._send(msg.n2(me, x, kind=kind) if self.literal_tags else msg.n2(me, x, origin, self.parent, kind=kind))
+        self.send(msg.n2(me, x, kind=kind) if self.literal_tags else msg.n2(me, x, origin, self.parent, kind=kind))
 
     def _on_wave(self, f: msg.Frame) -> None:
         """Propagation, lines 6-26: adopt a better tag from its sender (the parent) and pass it on; withdraw as a
@@ -269,12 +266,12 @@ class ZebroMature(ZebroController):
         me = self.robot.id
         if send_ack:
             self.acked = True
-            self._send(msg.n4(me, parent, x) if self.literal_tags else msg.n4(me, parent, x, origin))
+            self.send(msg.n4(me, parent, x) if self.literal_tags else msg.n4(me, parent, x, origin))
         elif lead:
             self.acked = True
             self.the_leader = me
             self.flooded.add((msg.EOE, self.seq & 0xFF))
-            self._send(msg.eoe(me, self.seq, me, x))
+            self.send(msg.eoe(me, self.seq, me, x))
             self.robot.log("zebro_elected", utility=x, seq=self.seq)
             self._set_state(LEAD)
 

@@ -23,6 +23,8 @@ from bridge.studies.zebro.numerical import (
     run,
 )
 from swarm_logic.controller import Controller
+from swarm_logic.families.zebro.immature import ZebroImmature
+from swarm_logic.families.zebro.mature import ZebroMature
 from swarm_logic.families.zebro.silent import ZebroSilent
 from swarm_logic.graph import components
 from swarm_logic.robots.decizebro.interfaces import (
@@ -180,3 +182,17 @@ def test_same_seed_same_metrics(algo: str) -> None:
     b = decision_trial("E5", algo, 1234)
     assert a.metrics == b.metrics
     assert decision_trial("E5", algo, 99).metrics != a.metrics
+
+
+@pytest.mark.parametrize("cls", [ZebroImmature, ZebroMature])
+def test_controllers_log_their_frames_by_type(cls) -> None:
+    """What the controllers log (zebro_tx, at the end) is what the radio carried."""
+    sc = make_scenario(5, 2, False, np.random.default_rng(4))
+    res = run(cls, {}, sc, seed=4, max_ticks=80, keep_logs=True)
+    logged: dict[str, int] = {}
+    for r in res.logs:
+        if r["topic"] == "zebro_tx":
+            for k, v in r.items():
+                if k not in ("tick", "robot", "topic", "refused"):
+                    logged[k] = logged.get(k, 0) + v
+    assert logged == res.tx and sum(logged.values()) > 0
