@@ -117,7 +117,9 @@ class ZebroMature(ZebroController):
         elif self.state == ELECTION and self.sensed <= 0 and self.p["new_contenders"] == "join":
             self._contend(self.sensor.read())
         if self.state == ELECTION and self.best is not None and not ids <= self.told:
-            self._announce(msg.N3)  # I know X: a neighbour that came into range after my n2 learns it too
+            # a neighbour came into range after my n2: STOP (it may have missed the flood) and n3, "I know X"
+            self.send(msg.stop(self.robot.id, self.seq))
+            self._announce(msg.N3)
         if self.state == ELECTION:
             self._check_done(ids)
         if self.p["beacon"]:
