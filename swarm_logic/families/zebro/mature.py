@@ -65,7 +65,7 @@ class ZebroMature(ZebroController):
         self.state = FLOCK
         self.seq = 0  # the newest election this robot took part in
         self.erased = 0  # the newest election it erased
-        self.flooded: set[tuple[int, int]] = set()  # (frame type, seq) already re-broadcast (A-7)
+        self.flooded: set[tuple[int, int]] = set()  # (frame type, election number) already re-broadcast (A-7)
         self.graph = LinkGossip(self.robot.id)
         self.the_leader: int | None = None
         self.guide: int | None = None  # the neighbour EOE came from
@@ -111,7 +111,7 @@ class ZebroMature(ZebroController):
             u = self.sensor.read()
             if u > 0:  # utility found: the swarm STOPs, election seq opens
                 seq = max(self.seq, self.erased) + 1
-                self.flooded.add((msg.STOP, seq & 0xFF))
+                self.flooded.add((msg.STOP, seq))
                 self.send(msg.stop(self.robot.id, seq))
                 self._enter(seq)
         elif self.state == ELECTION and self.sensed <= 0 and self.p["new_contenders"] == "join":
@@ -134,7 +134,7 @@ class ZebroMature(ZebroController):
             self.robot.log("zebro_consumed", utility=eaten, state=self.state, seq=self.seq)
             if self.state in (LEAD, FOLLOW):  # the swarm ate: the decision is executed
                 self._erase(self.seq)
-                self.flooded.add((msg.ERASE, self.seq & 0xFF))
+                self.flooded.add((msg.ERASE, self.seq))
                 self.send(msg.erase(self.robot.id, self.seq))
         self._move(h0, nbrs)
 
@@ -162,9 +162,11 @@ class ZebroMature(ZebroController):
     # -- messages ---------------------------------------------------------------------------------------------
 
     def _flood(self, kind: int, seq: int, data: bytes) -> None:
-        """Re-broadcast STOP / EOE / ERASE once per election (A-7)."""
-        key = (kind, seq & 0xFF)
+        """Re-broadcast STOP / EOE / ERASE once per election (A-7); ``seq`` the election's full number (frames
+        carry its low byte)."""
+        key = (kind, seq)
         if key not in self.flooded:
+            self.flooded = {k for k in self.flooded if k[1] >= seq - 1}  # forget elections long over
             self.flooded.add(key)
             self.send(data)
 
@@ -179,8 +181,9 @@ class ZebroMature(ZebroController):
                 self.graph.receive(f.src, f.links)
         elif f.kind == msg.STOP:
             if self._newer(f.seq, self.seq & 0xFF) and self._newer(f.seq, self.erased & 0xFF):
-                self._flood(msg.STOP, f.seq, msg.stop(me, f.seq))
-                self._enter(self.seq + (f.seq - self.seq) % 256)
+                seq = self.seq + (f.seq - self.seq) % 256  # the full number the byte stands for
+                self._flood(msg.STOP, seq, msg.stop(me, seq))  # STOP first: my n2 must not overtake it
+                self._enter(seq)
         elif self.state == ELECTION and f.kind in (msg.N2, msg.N3):
             self._on_wave(f)
         elif self.state == ELECTION and f.kind == msg.N4:
@@ -190,10 +193,10 @@ class ZebroMature(ZebroController):
         elif f.kind == msg.EOE:
             if self.state == ELECTION and f.seq == self.seq & 0xFF:
                 self.the_leader, self.guide = f.origin, f.src
-                self._flood(msg.EOE, f.seq, msg.eoe(me, f.seq, f.origin, f.value))
+                self._flood(msg.EOE, self.seq, msg.eoe(me, self.seq, f.origin, f.value))
                 self._set_state(FOLLOW)
         elif f.kind == msg.ERASE and f.seq == self.seq & 0xFF and self.erased & 0xFF != f.seq:
-            self._flood(msg.ERASE, f.seq, msg.erase(me, f.seq))
+            self._flood(msg.ERASE, self.seq, msg.erase(me, self.seq))
             self._erase(self.seq)
 
     def _enter(self, seq: int) -> None:
@@ -272,7 +275,7 @@ class ZebroMature(ZebroController):
         elif lead:
             self.acked = True
             self.the_leader = me
-            self.flooded.add((msg.EOE, self.seq & 0xFF))
+            self.flooded.add((msg.EOE, self.seq))
             self.send(msg.eoe(me, self.seq, me, x))
             self.robot.log("zebro_elected", utility=x, seq=self.seq)
             self._set_state(LEAD)

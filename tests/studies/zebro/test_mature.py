@@ -149,3 +149,14 @@ def test_the_link_gossip_builds_the_adjacency_matrix(seed: int) -> None:
     for c in s.ctls:
         assert np.array_equal(c.graph.matrix(20), truth)
         assert c.graph.complete()
+
+
+def test_elections_follow_one_another_past_the_sequence_byte() -> None:
+    """Election numbers are one byte: a swarm that has held 256 elections still floods and elects."""
+    s = swarm(ZebroMature, line(5, {0: 60}), frozen=True)
+    for c in s.ctls:
+        c.seq = c.erased = 255
+        c.flooded = {(0x10, 255), (0x15, 255), (0x16, 255)}
+    elect(s)
+    assert all(c.seq == 256 for c in s.ctls) and len(s.topic("zebro_elected")) == 1
+    assert all((0x10, 256) in c.flooded and (0x10, 255) in c.flooded for c in s.ctls)
