@@ -75,12 +75,14 @@ class ZebroDecisions(Experiment):
         "family's controllers unchanged. Robots uniform in a square of side 2 sqrt(n) body lengths (u), at least 1 u "
         "apart, headings within +-20 deg of a common one (a flock); SRC radius = the MST's longest edge + 1 %, LRC = "
         "the diameter + 1 %. Each particle lies in a different robot's cone (+-30 deg x 3 u) at launch, 1-2.85 u "
-        "ahead; with two, their directions from the swarm's centre differ by >= 90 deg; utilities 95 and 15. Flocking "
+        "ahead, at least 1 u from every robot; with two, their directions from the swarm's centre differ by >= 90 "
+        "deg and their utilities are 95 and 15 (one: 95 or 15). Flocking "
         "speed 0.2 u/tick (the mature leader 0.6), d_min 1 u, d_max 0.8 x the radius, turns per tick: align 5, "
         "cohere 3, separate 1.5, taxis and realign 10, leader 30 deg; every reading of A-1 ... A-19 the repaired "
         "default. Best decision: the first particle eaten is the 95 (A-17); ignorance: none eaten within 300 ticks; "
         "split: communication graph in pieces for 10 ticks in a row, or at the end (A-13); ticks: the tick of the "
-        "first meal; the run ends 10 ticks after it. Messages: frames sent and delivered per tick, by type.")
+        "first meal; the run ends 10 ticks after it. Messages: frames sent and delivered per tick (by type), and "
+        "bytes delivered per tick (Z-S7).")
     trials = 20
     smoke_trials = 2
     boxes = (("ticks", "ticks to the first meal"), ("rx_per_tick", "frames delivered per tick"))
