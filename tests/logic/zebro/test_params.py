@@ -32,3 +32,14 @@ def test_the_docs_name_every_reading() -> None:
             assert f"`{name}`" in text, name
             for value in allowed:
                 assert f"`{value}`" in text, (name, value)
+
+
+def test_a_robot_without_the_zebro_devices_is_refused() -> None:
+    import numpy as np
+
+    from swarm_logic.clock import SteppedClock
+    from swarm_logic.robot import Robot
+
+    robot = Robot(3, SteppedClock(), None, np.random.default_rng(0))
+    with pytest.raises(KeyError, match="uwb_radio"):
+        ZebroMature().init(robot)

@@ -15,7 +15,7 @@ from swarm_logic.families.zebro.silent import ZebroSilent
 
 def test_registered() -> None:
     assert "zebro" in STUDIES.names()
-    assert "zebro-decisions" in experiments()
+    assert {"zebro-decisions", "zebro-sensitivity"} <= set(experiments())
     assert load_behaviour("zebro_silent") is ZebroSilent
     assert load_behaviour("zebro_immature") is ZebroImmature
     assert load_behaviour("zebro_mature") is ZebroMature
