@@ -114,7 +114,38 @@ class ZebroDecisions(Experiment):
                    "R_BD within +-10 (mature), +-15 (others); unity within +-10", zs6),
             Target("Z-S7", "communication load", "mature's ms/tick explodes with n (Table 4.8): it talks most",
                    "mature delivers the most bytes per tick in every setup, and its load grows E3 < E5 < E6", zs7),
+            *table_targets(),
         ]
+
+
+def _thesis_row(table: dict[str, tuple[float, ...]], k: int, setups: tuple[str, ...]) -> str:
+    return "/".join(f"{table[e][k]:g}" if e in table else "-" for e in setups)
+
+
+def table_targets() -> list[Target]:
+    """The thesis' tables side by side with ours, per algorithm (E1-E6 in order): shown, not judged (the Z-S
+    targets judge them)."""
+    specs = (("Table 4.2", "R_BD (%)", THESIS_RBD, "best", ("E3", "E4", "E5", "E6")),
+             ("Table 4.3", "R_I (%)", THESIS_RI, "ignored", SETUP_NAMES),
+             ("Table 4.5", "R_S (%)", THESIS_RS, "split", SETUP_NAMES),
+             ("Table 4.7", "ticks to decide (mean)", THESIS_TICKS, "ticks", SETUP_NAMES))
+    out = []
+    for tid, what, table, metric, setups in specs:
+        thesis = "; ".join(f"{a} {_thesis_row(table, k, setups)}" for k, a in enumerate(ALGOS))
+
+        def evaluate(outcomes: list[Outcome], metric: str = metric, setups: tuple[str, ...] = setups
+                     ) -> tuple[str, bool | None, str]:
+            parts = []
+            for a in ALGOS:
+                if metric == "ticks":
+                    vals = ["-" if math.isnan(v := _ticks(outcomes, e, a)) else f"{v:.1f}" for e in setups]
+                else:
+                    vals = [fmt(cell_rate(outcomes, e, a, metric)) for e in setups]
+                parts.append(f"{a} {'/'.join(vals)}")
+            return "; ".join(parts), None, "shown; judged by the Z-S targets"
+
+        out.append(Target(tid, f"{what}, {'E3-E6' if len(setups) == 4 else 'E1-E6'}", thesis, "-", evaluate))
+    return out
 
 
 def decision_trial(setup: str, algo: str, seed: int, model: Model = MODEL, src_margin: float = 1.01,
