@@ -170,6 +170,10 @@ def decision_trial(setup: str, algo: str, seed: int, model: Model = MODEL, src_m
         "first_utility": None if first is None else first[2],
         "eaten": len(res.consumed),
         "components_max": res.max_components,
+        # when the swarm first fell into pieces: before anyone walked at 3x, while the mature leader walked, after
+        # the first meal (or never)
+        "apart_tick": res.first_apart,
+        "apart_phase": _phase(res.first_apart, res.first_fast, None if first is None else first[0]),
         "r_comm_u": round(sc.r_comm, 3),
         "ticks_run": res.ticks_run,
         "tx_per_tick": round(sum(res.tx.values()) / t, 3),
@@ -179,6 +183,16 @@ def decision_trial(setup: str, algo: str, seed: int, model: Model = MODEL, src_m
     for name, v in sorted(res.tx.items()):
         metrics[f"tx_{name}_per_tick"] = round(v / t, 3)
     return TrialResult(metrics)
+
+
+def _phase(apart: int | None, fast: int | None, meal: int | None) -> str:
+    if apart is None:
+        return "never"
+    if meal is not None and apart > meal:
+        return "after the meal"
+    if fast is not None and apart >= fast:
+        return "leader walking"
+    return "before a leader"
 
 
 # -- targets ---------------------------------------------------------------------------------------------------

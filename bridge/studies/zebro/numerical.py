@@ -91,6 +91,7 @@ class ZebroWorld:
         self.eaten = [0] * self.n
         self.eat_count = 0
         self.tick = 0
+        self.first_fast: int | None = None  # the first tick a robot walked at the leader's pace
         self.tx: Counter[int] = Counter()  # frames sent, by type byte
         self.rx: Counter[int] = Counter()  # frames delivered, by type byte
         self.rx_bytes = 0
@@ -147,6 +148,8 @@ class ZebroWorld:
         self.h[i] = wrap(self.h[i] + turn)
         if not walking:
             return
+        if fast and self.first_fast is None:
+            self.first_fast = self.tick
         step = self.speed * (FAST_FACTOR if fast else 1.0) * self.dt
         x0, y0 = self.x[i], self.y[i]
         dx, dy = step * math.cos(self.h[i]), step * math.sin(self.h[i])
@@ -338,6 +341,8 @@ class ZebroRun:
     tx: dict[str, int]
     rx: dict[str, int]
     rx_bytes: int
+    first_apart: int | None = None  # the first tick the communication graph was in pieces
+    first_fast: int | None = None  # the first tick a robot walked at 3x (the mature leader)
     logs: list[dict[str, Any]] = field(default_factory=list)
     world: ZebroWorld | None = None
 
@@ -394,11 +399,14 @@ def run(cls: type[Controller], params: dict[str, Any], scenario: Scenario, seed:
     world = swarm.world
     apart = most = comps = 0
     split = False
+    first_apart: int | None = None
     first_tick: int | None = None
     while world.tick < max_ticks:
         swarm.tick()
         comps = components(world.adjacency())
         most = max(most, comps)
+        if comps > 1 and first_apart is None:
+            first_apart = world.tick
         apart = apart + 1 if comps > 1 else 0
         split |= apart >= split_ticks
         if first_tick is None and world.eat_count:
@@ -410,4 +418,5 @@ def run(cls: type[Controller], params: dict[str, Any], scenario: Scenario, seed:
     split |= comps > 1
     eaten = [(p.tick, p.eaten_by, p.utility) for p in sorted(world.particles, key=lambda p: p.order) if p.order]
     return ZebroRun(world.tick, eaten, split, most, comps, {NAMES.get(k, str(k)): v for k, v in world.tx.items()},
-                    {NAMES.get(k, str(k)): v for k, v in world.rx.items()}, world.rx_bytes, swarm.logs, world)
+                    {NAMES.get(k, str(k)): v for k, v in world.rx.items()}, world.rx_bytes, first_apart,
+                    world.first_fast, swarm.logs, world)
