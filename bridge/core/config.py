@@ -19,6 +19,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    TypeAdapter,
     ValidationError,
     create_model,
     field_validator,
@@ -354,12 +355,14 @@ class RobotGroup(_Model):
     def _robot_options(self) -> RobotGroup:
         """Fields beyond a group's own are options of its robot model: its plugin's model validates them (an error
         names the field, as for the group's own)."""
+        try:
+            spec = robot_spec(self.profile)
+        except PluginError:
+            return self  # the profile's own error says why
+        for name in sorted(set(spec.refuses) & self.model_fields_set):
+            raise ValueError(f"{name}: {spec.refuses[name]}")
         extra = self.model_extra or {}
         if extra:
-            try:
-                spec = robot_spec(self.profile)
-            except PluginError:
-                return self  # the profile's own error says why
             (spec.options or _NoOptions).model_validate(extra)
         return self
 
@@ -597,12 +600,18 @@ class Config(_Model):
         extra = self.model_extra or {}
         if extra:
             _study_sections_model().model_validate(extra)
+        for _, study in STUDIES.items():
+            if study.check is not None and any(name in extra for name in study.config):
+                study.check(self)
         return self
 
     def section(self, name: str) -> Any:
-        """A study's config section, validated (its defaults if the file does not set it)."""
-        model = study_section(name)
-        return model.model_validate((self.model_extra or {}).get(name, {}))
+        """A study's config section, validated (its defaults, or an empty list, if the file does not set it)."""
+        kind = study_section(name)
+        raw = (self.model_extra or {}).get(name)
+        if isinstance(kind, type) and issubclass(kind, BaseModel):
+            return kind.model_validate(raw or {})
+        return TypeAdapter(kind).validate_python([] if raw is None else raw)
 
     @property
     def robot_count(self) -> int:
@@ -613,8 +622,8 @@ class Config(_Model):
         return robot_profile(group.profile, group.model_extra)
 
 
-def study_section(name: str) -> type[BaseModel]:
-    """The model of a study's config section ``name`` (a ``PluginError`` if no study declares it)."""
+def study_section(name: str) -> Any:
+    """The type of a study's config section ``name`` (a ``PluginError`` if no study declares it)."""
     for _, study in STUDIES.items():
         if name in study.config:
             return study.config[name]

@@ -118,10 +118,20 @@ class Hub:
 
     def _wiring(self, plan: Plan) -> None:
         """Each LLC's wiring in the world, and the robots carried on board."""
-        self._pins_topics = [f"/r{r:03d}/llc/pins" for r in range(self.n)]  # the CAN medium keeps its own
         self.pin_inputs: list[dict[str, Any]] = [{} for _ in range(self.n)]  # values media put on an LLC's pins
         self.ideal_pose = {r for r, rp in enumerate(plan.robots) if rp.pose_source == "ground_truth"}
-        self.pin_io = [self.robot_spec(r).pins for r in range(self.n)]  # each LLC's wiring in the world
+        # each board's wiring in the world, by entity: an LLC's (RobotSpec.pins), a model's own modules'
+        # (RobotSpec.wiring, e.g. a leg module's motor and leg sensor); its pins' record topic
+        self.wiring: dict[str, Any] = {}
+        for r, rp in enumerate(plan.robots):
+            spec = self.robot_spec(r)
+            if rp.llc_role == "llc" and spec.pins is not None:
+                self.wiring[entity(r, "llc")] = spec.pins
+            for role in rp.modules():
+                w = spec.wiring(role) if spec.wiring is not None else None
+                if w is not None:
+                    self.wiring[entity(r, role)] = w
+        self._pins_topics = {e: f"/{e}/pins" for e in self.wiring}  # the CAN medium keeps its own
         self.releases: list[dict[str, Any]] = []
         self.carriers = {rp.carrier for rp in plan.robots if rp.carrier is not None}  # robots with robots on board
 
@@ -285,12 +295,13 @@ class Hub:
             for handler, args in items:
                 handler(t, *args)
 
-    def _pins(self, t: int, r: int, pins: dict[str, Any]) -> None:
-        """A delivery: the pin writes of the LLC's previous loop take effect, as its robot is wired."""
+    def _pins(self, t: int, e: str, pins: dict[str, Any]) -> None:
+        """A delivery: the pin writes of a board's previous loop take effect, as its robot is wired."""
         self.counts["pin_writes"] += 1
+        r = robot_of(e)
         if r in self.dead:
             return
-        self.pin_io[r].actuate(self.world, r, pins)
+        self.wiring[e].actuate(self.world, r, pins)
 
     def _due(self, t: int) -> dict[str, list[str]]:
         due: dict[str, list[str]] = defaultdict(list)
@@ -384,12 +395,13 @@ class Hub:
                 self.robot_failed(r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
                 continue
             pins = res.get("pins")
-            pins_ok = pins is None or self.pin_io[r].valid(pins)
-            if e in sensed:  # one record per LLC loop: what its pins read, and what it wrote
+            wiring = self.wiring.get(e)
+            pins_ok = pins is None or (wiring is not None and wiring.valid(pins))
+            if e in sensed:  # one record per board loop: what its pins read, and what it wrote
                 pins_io = dict(sensed[e])
                 if pins is not None and pins_ok:
                     pins_io.update(pins)
-                self.rec.write(t, self._pins_topics[r], self.pin_io[r].schema, pins_io)
+                self.rec.write(t, self._pins_topics[e], wiring.schema, pins_io)
             if res.get("err"):
                 self.robot_failed(r, t, "raised", res["err"])
                 continue
@@ -404,7 +416,7 @@ class Hub:
                     self._route(e, r, t, item)
             if pins is not None:
                 if pins_ok:
-                    self.deliver_at(t + q, self._pins, r, pins)
+                    self.deliver_at(t + q, self._pins, e, pins)
                 else:
                     self.counts["malformed_pins"] += 1
         for m in self._media:
@@ -503,10 +515,10 @@ class Hub:
                 self.wakeups[e[e.index("/") + 1:]] += 1
                 entry: dict[str, Any] = {"in": self.inbox[e]}
                 self.inbox[e] = []
-                if e.endswith("/llc"):
+                wiring = self.wiring.get(e)
+                if wiring is not None:
                     r = robot_of(e)
-                    entry["sens"], sensed[e] = self.pin_io[r].sense(self.world, r, self.pin_inputs[r],
-                                                                     r in self.ideal_pose)
+                    entry["sens"], sensed[e] = wiring.sense(self.world, r, self.pin_inputs[r], r in self.ideal_pose)
                 run[e] = entry
             self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
             self.proc_ticks += 1
@@ -528,6 +540,15 @@ class Hub:
             self.deliver_at(ev["t_ns"], self.record, "/world/releases", "swarm_sitl.Release", rel)
             self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})
         world.released.clear()
+
+    def firmware_report(self, robots: list[dict[str, Any]]) -> None:
+        """Each robot model's own firmware entities' counters into its ``robots`` entry (``firmware``: role ->
+        counters), for robots that have some. After ``shutdown``: the modules report their counters then."""
+        for r, entry in enumerate(robots):
+            rp = self.plan.robots[r]
+            roles = () if rp.gateway is not None else self.robot_spec(r).own_roles(rp)
+            if roles:
+                entry["firmware"] = {role: self.module_stats.get(entity(r, role)) for role in roles}
 
     def _drain_control(self, t: int) -> None:
         while True:

@@ -17,6 +17,7 @@ from bridge.core.arena_map import blocked as map_blocked
 from bridge.core.arena_map import occupancy
 from bridge.core.config import Config, ConfigError, CylinderObstacle
 from bridge.core.entities import entity
+from bridge.core.registry import robot_spec
 from bridge.core.rng import stream
 from swarm_logic.geometry import theodorus_spiral
 
@@ -45,18 +46,22 @@ class RobotPlan:
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
-        modules it carries, and the slcan adapter on its CAN bus when it is exposed."""
+        modules it carries, the slcan adapter on its CAN bus when it is exposed, and its robot model's own (a
+        Zebro's leg modules: ``RobotSpec.roles``)."""
         llc = () if self.llc_role is None else (self.llc_role,)
+        own = () if self.gateway is not None else robot_spec(self.profile).own_roles(self)
         return (llc + (("xbee",) if self.sim_xbee else ()) + (("uwb",) if self.uwb else ())
-                + (("slcan",) if self.slcan_pty else ()))
+                + (("slcan",) if self.slcan_pty else ()) + own)
 
     @property
     def llc_role(self) -> str | None:
         """``llc`` (simulated), ``can_bridge`` (its real board, reached through a CAN interface) or None (a MAVLink
-        vehicle, an XBee gateway)."""
+        vehicle, an XBee gateway, a robot model without an LLC board)."""
         if self.vehicle is not None or self.gateway is not None:
             return None
-        return "can_bridge" if self.can_device is not None else "llc"
+        if self.can_device is not None:
+            return "can_bridge"
+        return "llc" if robot_spec(self.profile).board is not None else None
 
     @property
     def has_logic(self) -> bool:
@@ -69,7 +74,9 @@ class RobotPlan:
         return bool(self.xbee) and not self.xbee.get("device")
 
     def can_nodes(self) -> tuple[str, ...]:
-        """The roles of the nodes on this robot's CAN bus."""
+        """The roles of the nodes on this robot's CAN bus (none for a robot model without one)."""
+        if self.can_device is None and self.vehicle is None and not robot_spec(self.profile).has_can:
+            return ()
         llc = () if self.llc_role is None else (self.llc_role,)
         return llc + (("logic",) if self.has_logic else ()) + (("slcan",) if self.slcan_pty else ())
 

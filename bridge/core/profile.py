@@ -7,6 +7,7 @@ Each robot plugin (``bridge/robots/<robot>/``) declares one; the figures and the
 
 from __future__ import annotations
 
+import math
 from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict
@@ -20,10 +21,13 @@ class RobotProfile(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     name: str
-    # body (world): a cylinder
+    # body (world): a cylinder of radius_m, or a box of length_m x width_m (radius_m then bounds it: placements keep
+    # robots that far apart)
     radius_m: float
     height_m: float
     mass_kg: float
+    length_m: float | None = None  # a box body: along the heading
+    width_m: float | None = None
     # battery
     battery_capacity_mah: float
     battery_cells: int
@@ -37,6 +41,14 @@ class RobotProfile(BaseModel):
         kinds = [type(p) for p in self.parts]
         if not all(isinstance(p, Part) for p in self.parts) or len(set(kinds)) != len(kinds):
             raise ValueError(f"robot profile {self.name!r}: parts must be Parts, at most one of each kind")
+        if (self.length_m is None) != (self.width_m is None):
+            raise ValueError(f"robot profile {self.name!r}: a box body needs length_m and width_m")
+        if self.is_box and self.radius_m < 0.5 * math.hypot(self.length_m, self.width_m) - 1e-9:
+            raise ValueError(f"robot profile {self.name!r}: radius_m must bound the box (half its diagonal)")
+
+    @property
+    def is_box(self) -> bool:
+        return self.length_m is not None
 
     def part(self, kind: type[P]) -> P | None:
         """Its part of this kind, None if it has none."""

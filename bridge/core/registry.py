@@ -58,12 +58,41 @@ class RobotSpec:
     options: type[BaseModel] | None = None
     configure: Callable[[RobotProfile, Any], RobotProfile] | None = None
     default: bool = False  # the model a robot group without ``profile`` gets (one installed robot says so)
+    # its own firmware entities beyond the LLC and the shared modules (XBee, UWB, slcan adapter): ``roles(rp)``
+    # names them for robot ``rp`` (a Zebro's six leg modules), ``modules(rp, cfg)`` builds them in the firmware host
+    # (role -> an object whose ``run(t_ns, inputs)`` answers a tick as a board's does; ``counters`` and ``close()``
+    # when it has them)
+    roles: Callable[[Any], tuple[str, ...]] | None = None
+    modules: Callable[[Any, Any], dict[str, Any]] | None = None
+    # what its own modules' pins meet in the world: role -> a wiring as ``pins`` is (``sense``, ``valid``,
+    # ``actuate``, ``schema``), None for a module without pins (a radio)
+    wiring: Callable[[str], Any] | None = None
+    # robot-group fields that do not apply to this model, with why (a legged robot given an LLC's or a wheeled
+    # robot's options): field -> reason; a config that sets one is refused naming it
+    refuses: dict[str, str] = field(default_factory=dict)
+    # the HAL tables its robot program gets in a session beyond the shared ones: (rp, cfg) -> {table: settings}
+    hal: Callable[[Any, Any], dict[str, Any]] | None = None
 
     def __post_init__(self) -> None:
         if (self.board is None) != (self.pins is None):
             raise PluginError(f"robot {self.name!r}: an LLC firmware (board) and its wiring (pins) go together")
         if (self.options is None) != (self.configure is None):
             raise PluginError(f"robot {self.name!r}: config options and what they configure go together")
+        if (self.roles is None) != (self.modules is None):
+            raise PluginError(f"robot {self.name!r}: its firmware entities' roles and their modules go together")
+
+    @property
+    def has_can(self) -> bool:
+        """Its boards talk on a CAN bus (an LLC, a CAN interface): the companion computer is a node of it."""
+        return self.board is not None or self.can_db is not None
+
+    def own_roles(self, rp: Any) -> tuple[str, ...]:
+        """The roles of robot ``rp``'s own firmware entities (none for most robots)."""
+        return () if self.roles is None else tuple(self.roles(rp))
+
+    def make_modules(self, rp: Any, cfg: Any) -> dict[str, Any]:
+        """Robot ``rp``'s own firmware entities, by role, as the firmware host runs them."""
+        return {} if self.modules is None else dict(self.modules(rp, cfg))
 
     def profile_with(self, options: dict[str, Any] | None) -> RobotProfile:
         """The profile a group's options make (its own figures without any)."""
@@ -93,7 +122,11 @@ class Study:
     loop_functions: type[LoopFunctions] | None = None
     configs: str = ""  # its session configs, relative to the repository
     sections: tuple[str, ...] = field(default=())  # the summary.json sections its loop functions write
-    config: dict[str, Any] = field(default_factory=dict)  # its own top-level config sections: name -> pydantic model
+    # its own top-level config sections: name -> their type (a pydantic model, or e.g. list[Model] for [[name]])
+    config: dict[str, Any] = field(default_factory=dict)
+    # checks across sections once a config is whole (a particle inside an obstacle): (config) -> None, raising
+    # ValueError naming the field
+    check: Callable[[Any], None] | None = None
 
 
 def _is_medium(obj: Any) -> bool:

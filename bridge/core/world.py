@@ -1,6 +1,6 @@
 """The physical world: one pybullet DIRECT client with the arena, obstacles, light field and robots.
 
-Each robot is one rigid cylinder of its profile's size and mass; what moves it and what it senses are its parts
+Each robot is one rigid cylinder (or box) of its profile's size and mass; what moves it and what it senses are its parts
 (``bridge.core.parts``: a differential drive, sonars, a conveyor, ... from the robot's plugin), each simulated by one
 world model for every robot that has it. The world keeps what every robot has: its pose, whether it is alive, its
 LEDs, its battery, a stated motion for bodies the session does not drive, and robots riding on board another.
@@ -58,6 +58,9 @@ class World:
         # what the light sensors read instead of the light field, when a study installs one (an objective with
         # ``lux(x, y)``)
         self.lux_field: Any = None
+        # objects a study puts in the world for robots' parts to sense, by name (food particles for a utility
+        # sensor); the world itself does nothing with them
+        self.objects: dict[str, Any] = {}
 
     # -- scene ------------------------------------------------------------------------------------
     def _box(self, x: float, y: float, size: tuple[float, float, float], yaw: float = 0.0) -> None:
@@ -126,9 +129,12 @@ class World:
         shapes: dict[str, int] = {}
         for r, prof in zip(robots, self.profiles, strict=True):
             if prof.name not in shapes:
-                shapes[prof.name] = pb.createCollisionShape(
-                    pb.GEOM_CYLINDER, radius=prof.radius_m, height=prof.height_m, physicsClientId=self.cid
-                )
+                shapes[prof.name] = (
+                    pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[prof.length_m / 2, prof.width_m / 2,
+                                                                      prof.height_m / 2], physicsClientId=self.cid)
+                    if prof.is_box else
+                    pb.createCollisionShape(pb.GEOM_CYLINDER, radius=prof.radius_m, height=prof.height_m,
+                                            physicsClientId=self.cid))
             x, y, yaw = r.pose
             if r.gateway is not None:  # a radio's antenna, not a body: nothing collides with it or sees it
                 self.bodies.append(pb.createMultiBody(0, -1, basePosition=[x, y, prof.height_m / 2 + 1e-3],
@@ -138,7 +144,8 @@ class World:
                 prof.mass_kg, shapes[prof.name], basePosition=[x, y, prof.height_m / 2 + 1e-3],
                 baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=self.cid,
             )
-            izz = 0.5 * prof.mass_kg * prof.radius_m**2
+            izz = (prof.mass_kg * (prof.length_m**2 + prof.width_m**2) / 12 if prof.is_box
+                   else 0.5 * prof.mass_kg * prof.radius_m**2)
             # A drive imposes the body's twist every step, so the body itself must not rub on the floor; huge
             # roll/pitch inertia keeps it upright when it hits something.
             pb.changeDynamics(body, -1, localInertiaDiagonal=[1e3, 1e3, izz], lateralFriction=0.0,

@@ -1,6 +1,6 @@
 """Hosts the firmware of one or more robots: per robot its LLC board (as its robot plugin builds it:
-``RobotSpec.make_board``), and the radio modules it carries (an XBee, a UWB module), each an entity with its own
-schedule.
+``RobotSpec.make_board``), the radio modules it carries (an XBee, a UWB module) and its robot model's own firmware
+entities (``RobotSpec.modules``: a Zebro's leg modules), each an entity with its own schedule.
 
 Per tick the host hands a due board the world's physical values and the CAN frames the bus delivered, and returns
 what the board answers (the frames it transmitted, its pin outputs when they changed, its next loop time). A module
@@ -139,13 +139,17 @@ class FirmwareHost:
         self.slcans: dict[int, tuple[SlcanAdapter, PtyLink]] = {}
         self.bridges: dict[int, CanBridge] = {}  # robots whose LLC is a real board
         self.gateways: dict[int, XBeeGateway] = {}
+        self.own: dict[int, dict[str, Any]] = {}  # each robot model's own firmware entities (RobotSpec.modules)
         self.crash_ns = {f.robot: round(f.at_s * 1e9) for f in cfg.faults if f.kind == "firmware_crash"}
         uwb_team = [r.id for r in plan.robots if r.uwb]
         self.uwb_baud = cfg.uwb.uart_baud
         for r in robots:
             rp = plan.robots[r]
+            spec = robot_spec(rp.profile)
+            if rp.gateway is None and spec.roles is not None:
+                self.own[r] = spec.make_modules(rp, cfg)
             if rp.llc_role == "llc":
-                self.llcs[r] = robot_spec(rp.profile).make_board(rp)
+                self.llcs[r] = spec.make_board(rp)
             elif rp.llc_role == "can_bridge":
                 self.bridges[r] = CanBridge(rp.can_device)
             if rp.sim_xbee:
@@ -174,6 +178,9 @@ class FirmwareHost:
         if t_ns >= self.crash_ns.get(r, t_ns + 1):
             raise RuntimeError(f"injected fault: robot {r}'s firmware crashed at {self.crash_ns[r] / 1e9:g} s")
         role = ent[ent.index("/") + 1:]
+        own = self.own.get(r)
+        if own is not None and role in own:
+            return own[role].run(t_ns, inputs)
         if role == "llc":
             return self._llc(r, t_ns, inputs)
         if role == "xbee":
@@ -265,9 +272,18 @@ class FirmwareHost:
             out[entity(r, "can_bridge")] = dict(bridge.counters)
         for r, gw in self.gateways.items():
             out.setdefault(entity(r, "xbee"), {})["gateway"] = gw.stats()
+        for r, own in self.own.items():
+            for role, m in own.items():
+                if getattr(m, "counters", None) is not None:
+                    out[entity(r, role)] = dict(m.counters)
         return out
 
     def stop(self) -> None:
         for link in [*self.ptys.values(), *(link for _, link in self.slcans.values()), *self.bridges.values(),
                      *self.gateways.values()]:
             link.close()
+        for own in self.own.values():
+            for m in own.values():
+                close = getattr(m, "close", None)
+                if close is not None:
+                    close()

@@ -13,6 +13,7 @@ from bridge import sitl as urlhandler
 from bridge.core.config import Config
 from bridge.core.entities import entity, robot_of
 from bridge.core.plan import Plan, RobotPlan
+from bridge.core.registry import robot_spec
 from bridge.core.rng import stream_seed
 from bridge.hosts.sim_context import RobotRuntime, SessionClock
 from swarm_logic.behaviours import load_behaviour
@@ -26,7 +27,8 @@ SITL_CAN = {"interface": "sitl", "channel": "can0", "ignore_config": True}
 
 def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
     """The HAL config of a robot in a session: the devices it carries, on their simulated ports."""
-    hal: dict[str, Any] = {"llc_can": dict(SITL_CAN)}
+    spec = robot_spec(rp.profile)
+    hal: dict[str, Any] = {"llc_can": dict(SITL_CAN)} if spec.board is not None else {}
     if rp.vehicle is not None:  # a real MAVLink vehicle stands for the robot: the logic drives it over its link
         v = rp.vehicle
         hal = {"llc_mavlink": {"url": v["url"], "baudrate": v["baudrate"], "target_system": v["target_system"],
@@ -46,6 +48,8 @@ def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
         hal["mavlink"] = {"port": "sitl://mavlink", "system_id": m.system_id_base + rp.id, "boot": m.boot}
         if m.rates:
             hal["mavlink"]["rates"] = dict(m.rates)
+    if spec.hal is not None:  # the robot model's own devices, on their simulated buses and ports
+        hal.update(spec.hal(rp, cfg))
     hal["start_pose"] = list(rp.pose)  # where the robot was put down, as an operator would tell it
     if rp.payload:  # a carrier: who rides on its conveyor, as its operator loaded it
         hal["payload"] = list(rp.payload)

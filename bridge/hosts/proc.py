@@ -52,6 +52,7 @@ def _world(args: argparse.Namespace, plan) -> int:
             if hasattr(hub, "session"):
                 hub.shutdown()
             result["radio"] = hub.radio_report()
+            hub.firmware_report(result.get("robots", []))
         finally:
             hub.close()
     result["digest"] = hub.rec.digest

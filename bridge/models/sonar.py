@@ -49,7 +49,9 @@ class Sonars(WorldModel):
         self._count = int(sum(counts))
         self._ray_angle = np.concatenate(offsets) if n else np.zeros(0)
         prof = [world.profiles[r] for r in robots]
-        self._ray_r0 = np.array([q.radius_m + 0.005 for q in prof])
+        # rays start just outside the body: a cylinder's side, a box's front face (side sonars of a box: assumed at
+        # the same distance)
+        self._ray_r0 = np.array([(q.length_m / 2 if q.is_box else q.radius_m) + 0.005 for q in prof])
         self._ray_len = np.array([q.max_range_m for q in p])
         self._ray_z = np.array([q.height_m * 0.6 for q in prof])
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.recorder import iter_messages
 from bridge.core.registry import MEDIA, ROBOTS, STUDIES, RobotSpec, register_robot, robot_profile
 from swarm_logic.behaviours import BEHAVIOURS, load_behaviour, register_behaviour
 from swarm_logic.controller import Controller
@@ -19,18 +20,66 @@ from swarm_logic.plugins import PluginError
 from tests.conftest import ROOT
 
 PACKAGE = '''
-"""A lab's own swarm-sitl plugins: the minibot robot, the circler behaviour, the laps study."""
+"""A lab's own swarm-sitl plugins: the minibot robot (with a firmware entity and a device of its own), the circler
+behaviour, the laps study."""
 
 from dataclasses import replace
 from typing import Any, ClassVar
 
 from bridge.core.loop_functions import LoopFunctions
+from bridge.core.recorder import register_schema
 from bridge.core.registry import Study, robot_spec
 from swarm_logic.controller import Controller
 
+class Beacon:
+    """A firmware entity of the minibot's own: it runs twice a second, counts its runs, reads the battery voltage at
+    its pin and blinks its lamp."""
+
+    def __init__(self, rp):
+        self.counters = {"runs": 0, "robot": rp.id, "min_v": 99.0}
+
+    def run(self, t_ns, inputs):
+        self.counters["runs"] += 1
+        self.counters["min_v"] = min(self.counters["min_v"], inputs["sens"]["v"])
+        return {"out": [], "wake": t_ns + 500_000_000, "wom": False, "pins": {"lamp": self.counters["runs"] % 2}}
+
+
+class BeaconWiring:
+    """What the beacon's pins meet in the world: the battery; its lamp lights nothing the world models."""
+
+    schema = "lab.BeaconPins"
+
+    def sense(self, world, r, media, ideal_pose):
+        reading = {"v": world.sensors(r)["battery_v"]}
+        return reading, reading
+
+    def valid(self, pins):
+        return isinstance(pins, dict) and pins.get("lamp") in (0, 1)
+
+    def actuate(self, world, r, pins):
+        pass
+
+
+register_schema("lab.BeaconPins", {"type": "object", "properties": {"v": {"type": "number"}, "lamp": {}}})
+
+
+class Odo:
+    """A device of the minibot's own on its companion computer (HAL table ``odo``), polled with the robot."""
+
+    def __init__(self, cfg, robot):
+        self.scale = cfg["scale"]
+        self.polls = 0
+
+    def poll(self):
+        self.polls += 1
+
+
 ESWARBOT = robot_spec("eswarbot")  # its board, wiring and CAN interface; a smaller, lighter body
-MINIBOT = replace(ESWARBOT, name="minibot", title="Minibot: a smaller eSwarBot",
-                  profile=ESWARBOT.profile.model_copy(update={"name": "minibot", "radius_m": 0.05, "mass_kg": 0.4}))
+MINIBOT = replace(ESWARBOT, name="minibot", title="Minibot: a smaller eSwarBot", default=False,
+                  profile=ESWARBOT.profile.model_copy(update={"name": "minibot", "radius_m": 0.05, "mass_kg": 0.4}),
+                  roles=lambda rp: ("beacon",), modules=lambda rp, cfg: {"beacon": Beacon(rp)},
+                  wiring=lambda role: BeaconWiring() if role == "beacon" else None,
+                  hal=lambda rp, cfg: {"odo": {"scale": 2}})
 
 
 class Circler(Controller):
@@ -46,7 +95,8 @@ class Circler(Controller):
 
     def step(self):
         self.robot.llc.drive(self.p["speed_mps"], self.p["turn_rate_rps"])
-        self.robot.log("lap", t=self.robot.clock.now())
+        odo = self.robot.device("odo")
+        self.robot.log("lap", t=self.robot.clock.now(), polls=odo.polls, scale=odo.scale)
 
 
 class Laps(LoopFunctions):
@@ -60,6 +110,7 @@ class Laps(LoopFunctions):
         super().__init__(hub)
         self.records = {}
         self.pre_steps = 0
+        self.polls = 0
 
     def pre_step(self, t):
         self.pre_steps += 1
@@ -67,12 +118,13 @@ class Laps(LoopFunctions):
     def on_log(self, robot, topic, values, t):
         if topic == "lap":
             self.records[robot] = self.records.get(robot, 0) + 1
+            self.polls = values["polls"] * values["scale"] // 2
             if sum(self.records.values()) >= 40:
                 self.hub.end_ns = min(self.hub.end_ns, t + 1_000_000_000)
 
     def summary(self):
         return {"laps": {"records": {str(r): n for r, n in sorted(self.records.items())},
-                         "pre_steps": self.pre_steps}}
+                         "pre_steps": self.pre_steps, "device_polls": self.polls}}
 
 
 LAPS = Study("laps", "Laps: how often the circlers report", loop_functions=Laps, sections=("laps",))
@@ -84,6 +136,9 @@ minibot = labplugins:MINIBOT
 
 [swarm_sitl.behaviours]
 circler = labplugins:Circler
+
+[swarm_sitl.devices]
+odo = labplugins:Odo
 
 [swarm_sitl.studies]
 laps = labplugins:LAPS
@@ -146,6 +201,14 @@ def test_a_robot_behaviour_and_study_from_outside_run_a_session(lab_package: Pat
     assert s["sim_time_s"] < 30  # its end condition stopped the session before duration_s
     assert laps["pre_steps"] == s["quanta"]
     assert s["deployment"] is None and s["comm"] is None  # the RDPSO study's sections, not measured here
+    # the minibot's own firmware entity ran on its schedule (twice a simulated second), its own device was polled
+    runs = [rr["firmware"]["beacon"]["runs"] for rr in s["per_robot"]]
+    assert all(abs(n - 2 * s["sim_time_s"]) <= 2 for n in runs), (runs, s["sim_time_s"])
+    assert all(7.0 < rr["firmware"]["beacon"]["min_v"] < 8.5 for rr in s["per_robot"])  # its pin read the battery
+    lamp = [json.loads(data) for topic, _t, data in iter_messages(out / "session.mcap") if topic == "/r001/beacon/pins"]
+    assert len(lamp) == runs[1] and {m["lamp"] for m in lamp[1:]} == {0, 1}  # one record per run, as a board's
+    assert laps["device_polls"] > 10
+    assert found["devices"]["odo"] == "labplugins:Odo"
 
 
 def test_plugins_not_installed_are_unknown(tmp_path: Path) -> None:
@@ -154,7 +217,8 @@ def test_plugins_not_installed_are_unknown(tmp_path: Path) -> None:
     r = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "validate", str(cfg)], capture_output=True,
                        text=True, timeout=600, cwd=ROOT)
     assert r.returncode == 2
-    assert "robots[0].profile: unknown robot profile 'minibot'; known: eswarbot, traxbot" in r.stderr, r.stderr
+    known = "known: decizebro, eswarbot, traxbot"
+    assert f"robots[0].profile: unknown robot profile 'minibot'; {known}" in r.stderr, r.stderr
 
 
 def test_the_registry_calls(monkeypatch: pytest.MonkeyPatch) -> None:
