@@ -359,7 +359,9 @@ class RobotGroup(_Model):
         except PluginError:
             return self  # the profile's own error says why
         for name in sorted(set(spec.refuses) & self.model_fields_set):
-            raise ValueError(f"{name}: {spec.refuses[name]}")
+            field = type(self).model_fields[name]
+            if getattr(self, name) != field.get_default(call_default_factory=True):  # a plan's dump has them all
+                raise ValueError(f"{name}: {spec.refuses[name]}")
         extra = self.model_extra or {}
         if extra:
             (spec.options or _NoOptions).model_validate(extra)
