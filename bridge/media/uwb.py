@@ -102,6 +102,17 @@ class UwbCfg(BaseModel):
         "extra first-path attenuation per wall (APS006 Part 2: NLOS gives > 10 dB)"))
     fp_gap_sigma_db: float = Field(2.0, ge=0, description="scatter of RX - first-path power")
 
+    # the data radio's angle of arrival (bridge.media.uwb_radio)
+    pdoa_fov_deg: float = Field(60.0, gt=0, le=90, description=(
+        "data radio: bearings within this angle of the antenna axis are flagged valid (two-antenna PDoA; Dotlic et "
+        "al. 2017; assumption for the field of view)"))
+    pdoa_sigma_deg: float = Field(5.0, ge=0, le=45, description=(
+        "data radio: angle-of-arrival noise at boresight, growing as 1 / cos towards broadside (assumption, of the "
+        "order of the DW1000 PDoA demonstrations in Dotlic et al. 2017)"))
+    pdoa_nlos_sigma_deg: float = Field(15.0, ge=0, le=45, description=(
+        "data radio: extra angle-of-arrival noise through walls (assumption)"))
+    radio_queue_frames: int = Field(16, ge=1, le=255, description="data radio: transmit queue of the module, frames")
+
     def budget(self, n_robots: int) -> dict[str, float]:
         """Ranging rates for ``n_robots`` sharing this budget (see ``firmware_sim.modules.uwb.tdma_budget``)."""
         return tdma_budget(self.frames_per_s, self.frames_per_exchange, n_robots, self.update_rate_hz)

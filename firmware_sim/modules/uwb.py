@@ -198,6 +198,11 @@ class PacedTx:
         self._next_ns += n * self.byte_ns
         return out
 
+    @property
+    def pending(self) -> int:
+        """Bytes queued that have not left yet."""
+        return len(self._tx)
+
     def next_wake(self) -> int | None:
         """When the next queued byte has left (None: nothing queued)."""
         return self._next_ns if self._tx else None
