@@ -202,7 +202,7 @@ class UwbRadioAir(Medium):
         """Z-H1: the frames each robot put on the air per second, against the budget share (``summary.json``:
         ``radio.uwb_radio``, and ``uwb_radio`` per robot)."""
         hub = self.hub
-        dur = max(1e-9, getattr(hub, "sim_end_ns", hub.k * hub.q_ns) / 1e9)
+        dur = max(1e-9, (getattr(hub, "sim_end_ns", None) or hub.k * hub.q_ns) / 1e9)
         n = len(self.team)
         rates = {r: (c["beacons"] + c["data"]) / dur for r, c in self.count.items()}
         vals = list(rates.values())
