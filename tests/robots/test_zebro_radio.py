@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import struct
 from collections import defaultdict
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -15,6 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from bridge.core.config import ConfigError, load_config
 from bridge.core.entities import entity
 from bridge.media.uwb import UwbCfg
 from bridge.media.uwb_radio import UwbRadioAir
@@ -31,6 +33,19 @@ ROLE = "uwb_radio"
 def frames(data: bytes) -> list[Any]:
     """Every frame in ``data`` (the module's bytes to its host), parsed."""
     return P.Parser().feed(0, data)
+
+
+@pytest.mark.parametrize(("extra", "match"), [
+    ('count = 2\nuwb_radio_pty = "x"\n', r"robots\[0\]: uwb_radio_pty: a group of several robots needs '\{id\}'"),
+    ('count = 1\nuwb_radio_pty = "x"\n', r"session.speed = 'max': a session with ports to the outside world "
+                                         r"\(robots\[0\].uwb_radio_pty\)"),
+    ('count = 1\nsensing = "perfect"\n', r"robots\[0\].sensing: Input should be 'realistic' or 'faithful'"),
+])
+def test_radio_options_are_checked(tmp_path: Path, extra: str, match: str) -> None:
+    p = tmp_path / "zebros.toml"
+    p.write_text('[session]\nspeed = "max"\n[[robots]]\nprofile = "decizebro"\n' + extra)
+    with pytest.raises(ConfigError, match=match):
+        load_config(p)
 
 
 # -- the UART protocol --------------------------------------------------------------------------------------------

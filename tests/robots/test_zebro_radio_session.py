@@ -6,12 +6,19 @@ from __future__ import annotations
 
 import json
 import math
+import signal
+import struct
+import subprocess
 from pathlib import Path
 
 import pytest
+import serial
 
 from bridge.core.recorder import file_digest, iter_messages
-from tests.core.test_session import _check_messages_match_their_schemas
+from swarm_logic.clock import WallClock
+from swarm_logic.robots.decizebro.uwb_radio import ZebroUwbRadio
+from tests.conftest import ROOT
+from tests.core.test_session import _check_messages_match_their_schemas, cli, wait_started
 from tests.core.test_session import run as session_run
 
 pytestmark = pytest.mark.session
@@ -96,3 +103,54 @@ def test_z_h1_a_session_of_16_zebros_keeps_to_32_frames_a_second_each(tmp_path: 
     assert radio["budget_per_robot_per_s"] == 32 and radio["off_slot"] == 0
     assert radio["max_frames_per_robot_in_a_second"] == 32  # saturated, and never above
     assert radio["frames_per_robot_per_s"]["mean"] > 29  # the first frames wait for the programs to start
+
+
+PTY_CFG = """
+[session]
+name = "zebro-radio-pty"
+duration_s = 3600
+speed = 1
+[[robots]]
+profile = "decizebro"
+behaviour = "tests.support.zebro_radio_probe:Chatter"
+params = { radio = 0 }
+uwb_radio_pty = "r{id}-uwb"
+placement = { kind = "explicit", poses = [[2.0, 2.0, 0.0]] }
+[[robots]]
+profile = "decizebro"
+behaviour = "tests.support.zebro_radio_probe:Chatter"
+placement = { kind = "explicit", poses = [[4.0, 2.0, 180.0]] }
+"""
+
+
+def test_a_program_outside_the_session_talks_over_the_radio_s_pseudo_terminal(tmp_path: Path) -> None:
+    cfg = tmp_path / "pty.toml"
+    cfg.write_text(PTY_CFG)
+    out = tmp_path / "run"
+    p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        wait_started(p)
+        link = out / "r0-uwb"
+        assert link.is_symlink()
+        clock = WallClock()
+        with serial.Serial(str(link), 115200, timeout=0) as port:
+            radio = ZebroUwbRadio(port, clock, timeout=30)
+            assert radio.info["id"] == 0 and radio.info["n_slots"] == 2
+            radio.set_heading(math.radians(30))
+            t0, got, nbs = clock.now(), [], []
+            while clock.now() - t0 < 60 and not (got and nbs):
+                radio.broadcast(struct.pack("<HI", 0, 7))
+                got += radio.receive()
+                nbs = radio.neighbours()
+                clock.sleep(0.2)
+        assert {m.src for m in got} == {1} and nbs[0].id == 1 and 1.5 < nbs[0].range_m < 2.5
+    finally:
+        p.send_signal(signal.SIGINT)
+        try:
+            p.wait(timeout=240)
+        except subprocess.TimeoutExpired:
+            p.kill()
+    assert not link.exists()  # the link goes with the session
+    heard = {src for rec in chatter(out, 1) for src, _k in rec.get("got", [])}
+    assert heard == {0}  # robot 1's program got what the outside program broadcast

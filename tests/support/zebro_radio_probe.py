@@ -13,18 +13,21 @@ from swarm_logic.controller import Controller
 class Chatter(Controller):
     """Talks over ``robot.device("uwb_radio")`` and logs ``chatter`` records."""
 
-    defaults: ClassVar[dict[str, Any]] = {"burst": 1, "period_s": 0.25}
-    ranges: ClassVar[dict[str, str]] = {"burst": "[0, 64]", "period_s": "(0, 10]"}
+    defaults: ClassVar[dict[str, Any]] = {"burst": 1, "period_s": 0.25, "radio": 1}
+    ranges: ClassVar[dict[str, str]] = {"burst": "[0, 64]", "period_s": "(0, 10]", "radio": "[0, 1]"}
 
     def init(self, robot: Any) -> None:
         super().init(robot)
         self.p = self.with_defaults(robot.params)
         self.period_s = self.p["period_s"]
-        self.radio = robot.device("uwb_radio")
+        self.radio = robot.device("uwb_radio") if self.p["radio"] else None  # 0: its radio is on a pty
         self.imu = robot.device("imu")
         self.k = 0
 
     def step(self) -> None:
+        if self.radio is None:
+            self.robot.log("chatter", t=self.robot.clock.now(), heading=round(math.degrees(self.imu.heading()), 2))
+            return
         sent = 0
         for _ in range(self.p["burst"]):
             if not self.radio.broadcast(struct.pack("<HI", self.robot.id, self.k)):
