@@ -8,7 +8,6 @@ import json
 import math
 import signal
 import struct
-import subprocess
 from pathlib import Path
 
 import pytest
@@ -17,8 +16,7 @@ import serial
 from bridge.core.recorder import file_digest, iter_messages
 from swarm_logic.clock import WallClock
 from swarm_logic.robots.decizebro.uwb_radio import ZebroUwbRadio
-from tests.conftest import ROOT
-from tests.core.test_session import _check_messages_match_their_schemas, cli, wait_started
+from tests.core.test_session import _check_messages_match_their_schemas, check_stopped_cleanly, start, wait_started
 from tests.core.test_session import run as session_run
 
 pytestmark = pytest.mark.session
@@ -127,8 +125,7 @@ def test_a_program_outside_the_session_talks_over_the_radio_s_pseudo_terminal(tm
     cfg = tmp_path / "pty.toml"
     cfg.write_text(PTY_CFG)
     out = tmp_path / "run"
-    p = subprocess.Popen(cli("run", str(cfg), "--out", str(out)), cwd=ROOT, stdout=subprocess.DEVNULL,
-                         stderr=subprocess.PIPE, text=True)
+    p = start(cfg, out)
     try:
         wait_started(p)
         link = out / "r0-uwb"
@@ -147,10 +144,8 @@ def test_a_program_outside_the_session_talks_over_the_radio_s_pseudo_terminal(tm
         assert {m.src for m in got} == {1} and nbs[0].id == 1 and 1.5 < nbs[0].range_m < 2.5
     finally:
         p.send_signal(signal.SIGINT)
-        try:
-            p.wait(timeout=240)
-        except subprocess.TimeoutExpired:
-            p.kill()
+        p.wait(timeout=240)
+    check_stopped_cleanly(p, out)
     assert not link.exists()  # the link goes with the session
     heard = {src for rec in chatter(out, 1) for src, _k in rec.get("got", [])}
     assert heard == {0}  # robot 1's program got what the outside program broadcast
