@@ -19,6 +19,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    TypeAdapter,
     ValidationError,
     create_model,
     field_validator,
@@ -607,12 +608,18 @@ class Config(_Model):
         extra = self.model_extra or {}
         if extra:
             _study_sections_model().model_validate(extra)
+        for _, study in STUDIES.items():
+            if study.check is not None and any(name in extra for name in study.config):
+                study.check(self)
         return self
 
     def section(self, name: str) -> Any:
-        """A study's config section, validated (its defaults if the file does not set it)."""
-        model = study_section(name)
-        return model.model_validate((self.model_extra or {}).get(name, {}))
+        """A study's config section, validated (its defaults, or an empty list, if the file does not set it)."""
+        kind = study_section(name)
+        raw = (self.model_extra or {}).get(name)
+        if isinstance(kind, type) and issubclass(kind, BaseModel):
+            return kind.model_validate(raw or {})
+        return TypeAdapter(kind).validate_python([] if raw is None else raw)
 
     @property
     def robot_count(self) -> int:
@@ -623,8 +630,8 @@ class Config(_Model):
         return robot_profile(group.profile, group.model_extra)
 
 
-def study_section(name: str) -> type[BaseModel]:
-    """The model of a study's config section ``name`` (a ``PluginError`` if no study declares it)."""
+def study_section(name: str) -> Any:
+    """The type of a study's config section ``name`` (a ``PluginError`` if no study declares it)."""
     for _, study in STUDIES.items():
         if name in study.config:
             return study.config[name]

@@ -132,7 +132,11 @@ class Study:
     loop_functions: type[LoopFunctions] | None = None
     configs: str = ""  # its session configs, relative to the repository
     sections: tuple[str, ...] = field(default=())  # the summary.json sections its loop functions write
-    config: dict[str, Any] = field(default_factory=dict)  # its own top-level config sections: name -> pydantic model
+    # its own top-level config sections: name -> their type (a pydantic model, or e.g. list[Model] for [[name]])
+    config: dict[str, Any] = field(default_factory=dict)
+    # checks across sections once a config is whole (a particle inside an obstacle): (config) -> None, raising
+    # ValueError naming the field
+    check: Callable[[Any], None] | None = None
 
 
 def _is_medium(obj: Any) -> bool:

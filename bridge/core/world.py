@@ -58,6 +58,9 @@ class World:
         # what the light sensors read instead of the light field, when a study installs one (an objective with
         # ``lux(x, y)``)
         self.lux_field: Any = None
+        # objects a study puts in the world for robots' parts to sense, by name (food particles for a utility
+        # sensor); the world itself does nothing with them
+        self.objects: dict[str, Any] = {}
 
     # -- scene ------------------------------------------------------------------------------------
     def _box(self, x: float, y: float, size: tuple[float, float, float], yaw: float = 0.0) -> None:

@@ -17,6 +17,7 @@ from bridge.models.sonar import SonarParams
 from bridge.robots.decizebro import radio
 from bridge.robots.decizebro.imu import ImuParams
 from bridge.robots.decizebro.legs import LegsParams
+from bridge.robots.decizebro.utility import UtilityParams
 
 DECIZEBRO = RobotProfile(
     name="decizebro",
@@ -53,6 +54,7 @@ DECIZEBRO = RobotProfile(
             noise_rel=0.01,
             outlier_p=0.02,
         ),
+        UtilityParams(cone_deg=60.0, range_m=3 * 0.268),  # 60 degrees, three body lengths (section 4.2.1)
         ImuParams(),  # the BNO055's fused heading (imu.py)
     ),
 )
