@@ -356,3 +356,19 @@ def test_the_radio_driver_sends_the_imu_heading_broadcasts_and_reads() -> None:
     assert radio.broadcast(b"again")  # the queue drained: room again
     with pytest.raises(ValueError):
         radio.broadcast(bytes(P.MAX_PAYLOAD + 1))
+
+
+def test_a_model_s_own_serial_ports() -> None:
+    """``RobotSpec.ports``: sitl:// knows the installed models' ports; ports belong to a model's own entities."""
+    import serial
+
+    from bridge import sitl as urlhandler
+    from bridge.core.registry import RobotSpec, robot_spec
+    from swarm_logic.plugins import PluginError
+
+    urlhandler.register()
+    for dev in ("uwb_radio", "imu"):  # a known port: only the missing session stops it
+        with pytest.raises(serial.SerialException, match="no SITL robot in this thread"):
+            serial.serial_for_url(f"sitl://{dev}", baudrate=115200)
+    with pytest.raises(PluginError, match="serial ports belong to its own firmware entities"):
+        RobotSpec("portbot", robot_spec("decizebro").profile, ports={"gps": 9600})
