@@ -65,7 +65,8 @@ register_schema("swarm_sitl.UwbRadioTx", {
 
 
 class UwbRadioAir(Medium):
-    """The data radios' TDMA air: frames checked against the slot plan, heard in range, with the error model."""
+    """The UWB data radios' air (a DeciZebro's ``uwb_radio``): frames checked against the TDMA slot plan, heard in
+    range with the DW1000 error model and PDoA bearings, frames per robot per second (Z-H1)."""
 
     name = "uwb_radio"
     order = 41
