@@ -33,7 +33,7 @@ length_m = 12
 profile = "decizebro"
 count = {count}
 behaviour = "tests.support.zebro_radio_probe:Chatter"
-params = {{ burst = {burst} }}
+{params}
 placement = {{ kind = "grid", origin = [2.0, 2.0], spacing_m = 2.0, columns = {columns}, yaw_deg = 0 }}
 {extra}
 """
@@ -42,7 +42,10 @@ placement = {{ kind = "grid", origin = [2.0, 2.0], spacing_m = 2.0, columns = {c
 def run(tmp_path: Path, name: str, *args: str, duration: float = 4, seed: int = 3, count: int = 4, burst: int = 2,
         extra: str = "") -> dict:
     cfg = tmp_path / f"{name}.toml"
-    cfg.write_text(CFG.format(duration=duration, seed=seed, count=count, burst=burst,
+    params = f"params = {{ burst = {burst} }}"
+    if extra.startswith("params"):
+        params, extra = extra, ""
+    cfg.write_text(CFG.format(duration=duration, seed=seed, count=count, params=params,
                               columns=2 if count == 4 else 4, extra=extra))
     out = tmp_path / name
     code, s = session_run(cfg, out, *args, timeout=900)
@@ -57,11 +60,14 @@ def chatter(out: Path, robot: int) -> list[dict]:
 
 
 def test_zebros_exchange_messages_and_see_their_neighbours(tmp_path: Path) -> None:
-    s = run(tmp_path, "realistic")
+    s = run(tmp_path, "realistic", extra="params = { burst = 2, garbage = 1 }\n")
     for r in range(4):
         fw = s["per_robot"][r]["firmware"]
-        assert not any(fw["uwb_radio"][k] for k in ("uart_bad_crc", "uart_truncated", "uart_unknown_type",
-                                                    "uart_bad_length", "uart_bad_param", "uart_junk_bytes"))
+        # the program's junk and broken frame: counted and dropped, and the radio carried on
+        assert {k: fw["uwb_radio"][k] for k in ("uart_bad_crc", "uart_truncated", "uart_unknown_type",
+                                                "uart_bad_length", "uart_bad_param", "uart_junk_bytes")} == {
+            "uart_bad_crc": 1, "uart_truncated": 0, "uart_unknown_type": 0, "uart_bad_length": 0,
+            "uart_bad_param": 0, "uart_junk_bytes": 8}  # "junk", and the broken frame's bytes after its start byte
         assert fw["imu"]["errors"] == 0 and fw["imu"]["reads"] >= 3
         log = chatter(s["_out"], r)
         heard = {src for rec in log for src, _k in rec["got"]}

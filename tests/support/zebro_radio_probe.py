@@ -1,5 +1,6 @@
 """A tiny Zebro behaviour for the radio's session tests: each step it broadcasts its id and a counter over the UWB
-radio (``burst`` frames), then logs what it received, whom it ranges and its IMU heading."""
+radio (``burst`` frames), then logs what it received, whom it ranges and its IMU heading; with ``garbage`` it first
+writes junk and a broken frame to the module."""
 
 from __future__ import annotations
 
@@ -13,8 +14,9 @@ from swarm_logic.controller import Controller
 class Chatter(Controller):
     """Talks over ``robot.device("uwb_radio")`` and logs ``chatter`` records."""
 
-    defaults: ClassVar[dict[str, Any]] = {"burst": 1, "period_s": 0.25, "radio": 1}
-    ranges: ClassVar[dict[str, str]] = {"burst": "[0, 64]", "period_s": "(0, 10]", "radio": "[0, 1]"}
+    defaults: ClassVar[dict[str, Any]] = {"burst": 1, "period_s": 0.25, "radio": 1, "garbage": 0}
+    ranges: ClassVar[dict[str, str]] = {"burst": "[0, 64]", "period_s": "(0, 10]", "radio": "[0, 1]",
+                                        "garbage": "[0, 1]"}
 
     def init(self, robot: Any) -> None:
         super().init(robot)
@@ -23,6 +25,8 @@ class Chatter(Controller):
         self.radio = robot.device("uwb_radio") if self.p["radio"] else None  # 0: its radio is on a pty
         self.imu = robot.device("imu")
         self.k = 0
+        if self.radio is not None and self.p["garbage"]:  # junk, then a frame with a broken CRC
+            self.radio.port.write(b"junk" + bytes((0xA5, 1, 0x01, 0x00, 0x00)))
 
     def step(self) -> None:
         if self.radio is None:
