@@ -14,6 +14,8 @@ import math
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
 from bridge.models.sonar import SonarParams
+from bridge.robots.decizebro import radio
+from bridge.robots.decizebro.imu import ImuParams
 from bridge.robots.decizebro.legs import LegsParams
 from bridge.robots.decizebro.utility import UtilityParams
 
@@ -53,12 +55,15 @@ DECIZEBRO = RobotProfile(
             outlier_p=0.02,
         ),
         UtilityParams(cone_deg=60.0, range_m=3 * 0.268),  # 60 degrees, three body lengths (section 4.2.1)
+        ImuParams(),  # the BNO055's fused heading (imu.py)
     ),
 )
 
 NO_LLC = "a decizebro has no LLC on CAN: its legs are ZebroBus modules on I2C"
 SPEC = RobotSpec(
     "decizebro", DECIZEBRO, title="DeciZebro: hexapod, six ZebroBus leg modules on I2C, DWM1001 UWB radio",
+    roles=lambda rp: radio.RADIO_ROLES, modules=radio.radio_modules, wiring=radio.radio_wiring, hal=radio.radio_hal,
+    ports=radio.RADIO_PORTS, options=radio.RadioOptions, configure=radio.radio_configure,
     refuses={"xbee": "a decizebro has no XBee: its radio is the DWM1001 UWB module, which carries its messages",
              "uwb": "a decizebro always has its DWM1001 UWB radio; the eSwarBot's ranging-only module does not fit",
              "can": NO_LLC, "vehicle": NO_LLC,
