@@ -360,7 +360,9 @@ class RobotGroup(_Model):
         except PluginError:
             return self  # the profile's own error says why
         for name in sorted(set(spec.refuses) & self.model_fields_set):
-            raise ValueError(f"{name}: {spec.refuses[name]}")
+            field = type(self).model_fields[name]
+            if getattr(self, name) != field.get_default(call_default_factory=True):  # a plan's dump has them all
+                raise ValueError(f"{name}: {spec.refuses[name]}")
         extra = self.model_extra or {}
         if extra:
             (spec.options or _NoOptions).model_validate(extra)
@@ -368,7 +370,8 @@ class RobotGroup(_Model):
 
     @model_validator(mode="after")
     def _pty_per_robot(self) -> RobotGroup:
-        for what, link in (("xbee.pty", self.xbee.pty if self.xbee else None), ("can.slcan_pty", self.can.slcan_pty)):
+        for what, link in (("xbee.pty", self.xbee.pty if self.xbee else None), ("can.slcan_pty", self.can.slcan_pty),
+                           *self.model_ptys().items()):
             if link and self.count > 1 and "{id}" not in link:
                 raise ValueError(f"{what}: a group of several robots needs '{{id}}' in the link path")
         if self.logic == "external":
@@ -415,9 +418,14 @@ class RobotGroup(_Model):
                              "(count = 1)")
         return self
 
+    def model_ptys(self) -> dict[str, str]:
+        """The robot model's options that expose one of its modules on a pseudo-terminal (an option named ``*_pty``
+        holds the link path, as ``xbee.pty`` does): option -> path."""
+        return {k: v for k, v in (self.model_extra or {}).items() if k.endswith("_pty") and isinstance(v, str) and v}
+
     def real_ports(self) -> list[str]:
         """The fields that open this group to the outside world (wall time): what makes a session real-time."""
-        return [f for f, on in (("xbee.pty", bool(self.xbee and self.xbee.pty)),
+        return [*self.model_ptys()] + [f for f, on in (("xbee.pty", bool(self.xbee and self.xbee.pty)),
                                 ("xbee.device", bool(self.xbee and self.xbee.device)),
                                 ("can.slcan_pty", bool(self.can.slcan_pty)),
                                 ("can.device", self.can.device is not None), ("vehicle", self.vehicle is not None),

@@ -184,6 +184,11 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
             plan.robots[i] = rp = dataclasses.replace(
                 rp, slcan_pty=str((out / rp.slcan_pty.replace("{id}", str(rp.id))).absolute()))
             ports.append(f"{rp.name} CAN bus (slcan, {cfg.can.bitrate} bit/s): {rp.slcan_pty}")
+        ptys = {k: v for k, v in rp.options.items() if k.endswith("_pty") and isinstance(v, str) and v}
+        if ptys:  # a robot model's own modules on pseudo-terminals (RobotGroup.model_ptys)
+            ptys = {k: str((out / v.replace("{id}", str(rp.id))).absolute()) for k, v in ptys.items()}
+            plan.robots[i] = rp = dataclasses.replace(rp, options={**rp.options, **ptys})
+            ports += [f"{rp.name} {k.removesuffix('_pty')}: {v}" for k, v in ptys.items()]
     plan_path = out / "plan.json"
     plan_path.write_text(json.dumps(plan.to_json(), indent=1))
     session_dir = tempfile.mkdtemp(prefix="swarm-sitl-")

@@ -72,6 +72,9 @@ class RobotSpec:
     refuses: dict[str, str] = field(default_factory=dict)
     # the HAL tables its robot program gets in a session beyond the shared ones: (rp, cfg) -> {table: settings}
     hal: Callable[[Any, Any], dict[str, Any]] | None = None
+    # its own modules that the robot's computer reaches over a serial line (the program opens ``sitl://ROLE``, paced
+    # by the ``uart`` medium as the XBee's line is): role -> the module's UART rate (bit/s)
+    ports: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if (self.board is None) != (self.pins is None):
@@ -80,6 +83,8 @@ class RobotSpec:
             raise PluginError(f"robot {self.name!r}: config options and what they configure go together")
         if (self.roles is None) != (self.modules is None):
             raise PluginError(f"robot {self.name!r}: its firmware entities' roles and their modules go together")
+        if self.ports and self.roles is None:
+            raise PluginError(f"robot {self.name!r}: serial ports belong to its own firmware entities (roles)")
 
     @property
     def has_can(self) -> bool:
@@ -89,6 +94,11 @@ class RobotSpec:
     def own_roles(self, rp: Any) -> tuple[str, ...]:
         """The roles of robot ``rp``'s own firmware entities (none for most robots)."""
         return () if self.roles is None else tuple(self.roles(rp))
+
+    def own_ports(self, rp: Any) -> dict[str, int]:
+        """Robot ``rp``'s own modules on a serial line to its computer, with their rates (role -> bit/s)."""
+        roles = set(self.own_roles(rp))
+        return {role: baud for role, baud in self.ports.items() if role in roles}
 
     def make_modules(self, rp: Any, cfg: Any) -> dict[str, Any]:
         """Robot ``rp``'s own firmware entities, by role, as the firmware host runs them."""

@@ -73,19 +73,21 @@ NETWORK_PORTS = ("mavlink",)  # sitl:// ports that are network links, not lines:
 
 
 class SerialLines(Medium):
-    """Each robot's serial lines from its computer to its modules, paced at the host port's baud rate, and the
-    bytes the modules send back (garbled when the host listens at another rate)."""
+    """Each robot's serial lines from its computer to its modules (the XBee, the UWB module, a robot model's own:
+    ``RobotSpec.ports``), paced at the host port's baud rate, and the bytes the modules send back (garbled when the
+    host listens at another rate)."""
 
     name = "uart"
     order = 20
+    # a module's writes: the shared modules' and a robot model's own (RobotSpec.ports), checked against its lines
     routes = {("uart", "logic"): "host_write", ("baud", "logic"): "host_baud",  # noqa: RUF012
-              **{("uart", m): "module_write" for m in MODULE_PORTS},
-              **{("baud", m): "module_baud" for m in MODULE_PORTS}}
+              ("uart", "*"): "module_write", ("baud", "*"): "module_baud"}
 
     def __init__(self, hub: Hub) -> None:
         super().__init__(hub)
         self.lines: dict[tuple[int, str], SerialLine] = {}  # host -> module, paced at the host's baud
         self.host_baud: dict[tuple[int, str], int] = {}  # what the host's port is set to (last write)
+        self.own: set[tuple[int, str]] = set()  # (robot, role) of a robot model's own modules with a port
         uwb_baud = hub.cfg.uwb.uart_baud
         for r, rp in enumerate(hub.plan.robots):
             if rp.sim_xbee and not rp.xbee.get("pty") and rp.has_logic:
@@ -94,6 +96,12 @@ class SerialLines(Medium):
             if rp.uwb:
                 self.lines[(r, "uwb")] = SerialLine(uwb_baud)
                 self.host_baud[(r, "uwb")] = uwb_baud
+            if rp.gateway is None:  # a robot model's own modules on a serial line
+                for role, baud in hub.robot_spec(r).own_ports(rp).items():
+                    self.own.add((r, role))
+                    if rp.has_logic:
+                        self.lines[(r, role)] = SerialLine(baud)
+                        self.host_baud[(r, role)] = baud
         self.links: dict[str, Callable[[int, bytes], None]] = {}  # NETWORK_PORTS served by another medium
 
     def start_quantum(self, t: int) -> None:
@@ -138,7 +146,7 @@ class SerialLines(Medium):
         hub = self.hub
         role = e[e.index("/") + 1:]
         _, dev, data, baud = item
-        if not isinstance(data, bytes) or dev != role:
+        if not isinstance(data, bytes) or dev != role or (dev not in MODULE_PORTS and (r, dev) not in self.own):
             raise ValueError
         if "logic" not in hub.roles[r]:  # nobody in the session listens on that line
             hub.counts["uart_unrouted_writes"] += 1
@@ -155,7 +163,7 @@ class SerialLines(Medium):
         """``["baud", dev, rate]``: the module's BD setting changed; the line from its host is sampled at it."""
         role = e[e.index("/") + 1:]
         _, dev, baud = item
-        if dev != role or type(baud) is not int or baud <= 0:
+        if dev != role or type(baud) is not int or baud <= 0 or (dev not in MODULE_PORTS and (r, dev) not in self.own):
             raise ValueError
         if (r, dev) in self.lines:
             self.lines[(r, dev)].baud = baud

@@ -102,6 +102,17 @@ class UwbCfg(BaseModel):
         "extra first-path attenuation per wall (APS006 Part 2: NLOS gives > 10 dB)"))
     fp_gap_sigma_db: float = Field(2.0, ge=0, description="scatter of RX - first-path power")
 
+    # the data radio's angle of arrival (bridge.media.uwb_radio)
+    pdoa_fov_deg: float = Field(60.0, gt=0, le=90, description=(
+        "data radio: bearings within this angle of the antenna axis are flagged valid (two-antenna PDoA; Dotlic et "
+        "al. 2017; assumption for the field of view)"))
+    pdoa_sigma_deg: float = Field(5.0, ge=0, le=45, description=(
+        "data radio: angle-of-arrival noise at boresight, growing as 1 / cos towards broadside (assumption, of the "
+        "order of the DW1000 PDoA demonstrations in Dotlic et al. 2017)"))
+    pdoa_nlos_sigma_deg: float = Field(15.0, ge=0, le=45, description=(
+        "data radio: extra angle-of-arrival noise through walls (assumption)"))
+    radio_queue_frames: int = Field(16, ge=1, le=255, description="data radio: transmit queue of the module, frames")
+
     def budget(self, n_robots: int) -> dict[str, float]:
         """Ranging rates for ``n_robots`` sharing this budget (see ``firmware_sim.modules.uwb.tdma_budget``)."""
         return tdma_budget(self.frames_per_s, self.frames_per_exchange, n_robots, self.update_rate_hz)
@@ -155,6 +166,34 @@ class UwbMedium:
             self._links[key] = link
         return link
 
+    def p_ok(self, d: float, walls: int) -> float:
+        """Probability that an exchange (or a frame) over ``d`` metres and ``walls`` walls gets through."""
+        cfg = self.cfg
+        return (1 - cfg.dropout_los) * (1 - cfg.dropout_per_wall) ** walls * (
+            1 - min(1.0, d / cfg.max_range_m) ** cfg.dropout_range_exp)
+
+    def measure(self, t_ns: int, i: int, j: int, d: float, walls: int) -> tuple[float, float, float, float]:
+        """One exchange's draws on the link between ``i`` and ``j`` (a fixed number, whatever comes of them):
+        ``(u, measured range, RX level, first-path level)``; it got through if ``u < p_ok(d, walls)``."""
+        cfg = self.cfg
+        link = self._link(i, j, t_ns)
+        # fixed draws per exchange: bias step, noise, exponential tail, dropout, rx level, fp gap
+        z_b, z_n, z_rx, z_fp = link.rng.standard_normal(4)
+        e_tail = float(link.rng.exponential(1.0))
+        u_drop = float(link.rng.random())
+        dt = max(0, t_ns - link.t_ns) / 1e9
+        a = math.exp(-dt / cfg.bias_tau_s)
+        link.bias = a * link.bias + cfg.bias_sigma_m * math.sqrt(max(0.0, 1.0 - a * a)) * float(z_b)
+        link.t_ns = max(link.t_ns, t_ns)
+        if walls > 0:
+            err = walls * cfg.nlos_bias_m + cfg.nlos_exp_scale_m * e_tail + cfg.nlos_sigma_m * float(z_n)
+        else:
+            err = cfg.sigma_los_m * float(z_n)
+        rx = (cfg.rx_1m_dbm - 10 * cfg.path_loss_exp * math.log10(max(d, 0.1)) - walls * cfg.wall_loss_db
+              + cfg.rx_sigma_db * float(z_rx))
+        gap = max(0.0, cfg.fp_gap_los_db + walls * cfg.fp_gap_per_wall_db + cfg.fp_gap_sigma_db * float(z_fp))
+        return u_drop, d + link.bias + err, rx, rx - gap
+
     def exchange(self, t_ns: int, i: int, j: int) -> list[tuple[int, int, dict[str, Any]]]:
         """Module ``i`` ranges module ``j`` starting at ``t_ns``: result events (t_done_ns, robot, event)."""
         cfg = self.cfg
@@ -165,16 +204,7 @@ class UwbMedium:
         pos = np.asarray(self.geometry.positions(), dtype=float)
         d = float(math.hypot(*(pos[i] - pos[j])))
         walls = int(np.asarray(self.geometry.walls(i, np.array([j])))[0])
-        link = self._link(i, j, t_ns)
-        # fixed draws per exchange: bias step, noise, exponential tail, dropout, rx level, fp gap
-        z_b, z_n, z_rx, z_fp = link.rng.standard_normal(4)
-        e_tail = float(link.rng.exponential(1.0))
-        u_drop = float(link.rng.random())
-        dt = max(0, t_ns - link.t_ns) / 1e9
-        a = math.exp(-dt / cfg.bias_tau_s)
-        link.bias = a * link.bias + cfg.bias_sigma_m * math.sqrt(max(0.0, 1.0 - a * a)) * float(z_b)
-        link.t_ns = max(link.t_ns, t_ns)
-
+        u_drop, meas, rx, fp = self.measure(t_ns, i, j, d, walls)
         nlos = walls > 0
         c = self._count[i]
         c["exchanges"] += 1
@@ -187,24 +217,13 @@ class UwbMedium:
         elif d > cfg.max_range_m:
             cause = "out_of_range"
         else:
-            p_ok = (1 - cfg.dropout_los) * (1 - cfg.dropout_per_wall) ** walls * (
-                1 - min(1.0, d / cfg.max_range_m) ** cfg.dropout_range_exp)
-            cause = "ok" if u_drop < p_ok else "dropout"
+            cause = "ok" if u_drop < self.p_ok(d, walls) else "dropout"
         if cause != "ok":
             c[cause] += 1
             ev = {**base, "peer": j, "ok": False, "range_m": 0.0, "rx_dbm": 0.0, "fp_dbm": 0.0, "t_ns": t_init,
                   "responder": False, "cause": cause}
             return [(t_init, i, ev)]
 
-        if nlos:
-            err = walls * cfg.nlos_bias_m + cfg.nlos_exp_scale_m * e_tail + cfg.nlos_sigma_m * float(z_n)
-        else:
-            err = cfg.sigma_los_m * float(z_n)
-        meas = d + link.bias + err
-        rx = (cfg.rx_1m_dbm - 10 * cfg.path_loss_exp * math.log10(max(d, 0.1)) - walls * cfg.wall_loss_db
-              + cfg.rx_sigma_db * float(z_rx))
-        gap = max(0.0, cfg.fp_gap_los_db + walls * cfg.fp_gap_per_wall_db + cfg.fp_gap_sigma_db * float(z_fp))
-        fp = rx - gap
         c["ok"] += 1
         self._count[j]["responded"] += 1
         acc = self._err[i]["nlos" if nlos else "los"]

@@ -1,4 +1,5 @@
-"""``sitl://DEVICE``: a robot's simulated serial line to one of its modules (``sitl://xbee``, ``sitl://uwb``), or
+"""``sitl://DEVICE``: a robot's simulated serial line to one of its modules (``sitl://xbee``, ``sitl://uwb``, a robot
+model's own: ``RobotSpec.ports``), or
 its MAVLink link to the ground stations (``sitl://mavlink``: the robot's face writes there; it is a network link,
 so it has no baud rate: bytes leave at the end of the quantum).
 
@@ -24,9 +25,17 @@ from collections import deque
 import serial
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
+from bridge.core.registry import ROBOTS
 from bridge.hosts import sim_context
 
 DEVICES = ("xbee", "uwb", "mavlink")
+
+
+def model_ports() -> tuple[str, ...]:
+    """The serial ports installed robot models give their own modules (``RobotSpec.ports``: a Zebro's
+    ``uwb_radio``)."""
+    return tuple(sorted({p for _, spec in ROBOTS.items() for p in spec.ports} - set(DEVICES)))
+
 POLL_NS = 10_000_000  # how often a read waiting on a real device looks at it, in simulated time
 
 
@@ -89,9 +98,10 @@ class Serial(SerialBase):
         device = parts.netloc or parts.path.lstrip("/")
         query = urllib.parse.parse_qs(parts.query, strict_parsing=False) if parts.query else {}
         real = query.get("device", [None])[0]
-        if (parts.scheme != "sitl" or device not in DEVICES or set(query) - {"device"}
+        known = (*DEVICES, *model_ports())
+        if (parts.scheme != "sitl" or device not in known or set(query) - {"device"}
                 or (real is not None and device == "mavlink")):
-            raise SerialException(f"expected sitl://DEVICE with DEVICE one of {', '.join(DEVICES)} (optionally "
+            raise SerialException(f"expected sitl://DEVICE with DEVICE one of {', '.join(known)} (optionally "
                                   f"?device=PATH for a real module), got {url!r}")
         return device, real
 

@@ -138,6 +138,76 @@ def tlv(typ: int, value: bytes = b"") -> bytes:
     return bytes((typ & 0xFF, len(value))) + bytes(value)
 
 
+class TdmaSlots:
+    """One module's turns in a TDMA frame shared by ``n_slots`` modules: the air carries ``frames_per_s`` frames a
+    second, a slot lasts ``frames_per_slot`` frames, and module ``slot`` owns slots ``k * n_slots + slot`` (turn k).
+    Integer arithmetic only, so every module agrees on every slot edge."""
+
+    def __init__(self, frames_per_s: int, frames_per_slot: int, slot: int, n_slots: int) -> None:
+        if not 0 <= slot < n_slots:
+            raise ValueError(f"slot {slot} outside 0..{n_slots - 1}")
+        self.fps = frames_per_s
+        self.fpt = frames_per_slot
+        self.slot = slot
+        self.n_slots = n_slots
+
+    def slot_time(self, m: int) -> int:
+        """Start of slot ``m`` of the swarm's frame (ns)."""
+        return (m * self.fpt * 1_000_000_000) // self.fps
+
+    def turn_time(self, k: int) -> int:
+        """Start of this module's turn ``k`` (ns)."""
+        return self.slot_time(k * self.n_slots + self.slot)
+
+    def first_turn_at_or_after(self, t: int) -> int:
+        """Smallest turn index k >= 0 whose start is at or after ``t``."""
+        den = self.fpt * 1_000_000_000
+        m = -((-t * self.fps) // den)  # ceil(t * fps / den): first slot starting at or after t
+        k = max(0, -((-(m - self.slot)) // self.n_slots))
+        while k > 0 and self.turn_time(k - 1) >= t:
+            k -= 1
+        while self.turn_time(k) < t:
+            k += 1
+        return k
+
+
+class PacedTx:
+    """A module's UART transmitter: bytes queued at a time leave one every 10 bit times (8N1) after the line is
+    free; ``clock_out(t)`` returns those whose last bit has left by ``t``."""
+
+    def __init__(self, baud: int) -> None:
+        self.byte_ns = (10 * 1_000_000_000) // int(baud)
+        self._tx = bytearray()
+        self._next_ns = 0  # completion time of the first queued byte
+        self._line_free_ns = 0  # completion time of the last byte queued
+
+    def send(self, t: int, data: bytes) -> None:
+        if not data:
+            return
+        if not self._tx:
+            self._next_ns = max(t, self._line_free_ns) + self.byte_ns
+        self._tx += data
+        self._line_free_ns = max(t, self._line_free_ns) + len(data) * self.byte_ns
+
+    def clock_out(self, t: int) -> bytes:
+        if not self._tx or self._next_ns > t:
+            return b""
+        n = min(len(self._tx), (t - self._next_ns) // self.byte_ns + 1)
+        out = bytes(self._tx[:n])
+        del self._tx[:n]
+        self._next_ns += n * self.byte_ns
+        return out
+
+    @property
+    def pending(self) -> int:
+        """Bytes queued that have not left yet."""
+        return len(self._tx)
+
+    def next_wake(self) -> int | None:
+        """When the next queued byte has left (None: nothing queued)."""
+        return self._next_ns if self._tx else None
+
+
 @dataclass
 class UwbOutput:
     uart_tx: bytes = b""
@@ -174,9 +244,8 @@ class UwbModule:
         self.n_slots = n_slots
         self.rng = rng  # kept for interface symmetry; the module itself draws nothing
         self.cfg = cfg
-        self._fps = int(cfg.frames_per_s)
-        self._fpe = int(cfg.frames_per_exchange)
-        self._byte_ns = (10 * 1_000_000_000) // int(cfg.uart_baud)
+        self.tdma = TdmaSlots(int(cfg.frames_per_s), int(cfg.frames_per_exchange), slot, n_slots)
+        self.tx = PacedTx(int(cfg.uart_baud))
         self._gap_ns = int(cfg.uart_gap_ns)
         self.counters: dict[str, int] = {k: 0 for k in (
             "uart_rx_bytes", "uart_tx_bytes", "uart_frames", "uart_broken_frames", "uart_unknown_cmd",
@@ -185,9 +254,6 @@ class UwbModule:
         self._reset_state()
         self._rx = bytearray()
         self._rx_deadline: int | None = None
-        self._tx = bytearray()
-        self._tx_next_ns = 0  # completion time of the first queued byte
-        self._tx_line_free_ns = 0  # completion time of the last byte queued
         self._booted = False
 
     # -- schedule --------------------------------------------------------------------------------------
@@ -199,22 +265,11 @@ class UwbModule:
         self._k: int | None = None  # next turn index
         self._pending: dict[int, _Range] = {}
 
-    def _slot_time(self, m: int) -> int:
-        return (m * self._fpe * 1_000_000_000) // self._fps
-
     def _turn_time(self, k: int) -> int:
-        return self._slot_time(k * self.n_slots + self.slot)
+        return self.tdma.turn_time(k)
 
     def _first_turn_at_or_after(self, t: int) -> int:
-        """Smallest turn index k >= 0 whose start is at or after ``t`` (integer arithmetic only)."""
-        den = self._fpe * 1_000_000_000
-        m = -((-t * self._fps) // den)  # ceil(t * fps / den): first slot starting at or after t
-        k = max(0, -((-(m - self.slot)) // self.n_slots))
-        while k > 0 and self._turn_time(k - 1) >= t:
-            k -= 1
-        while self._turn_time(k) < t:
-            k += 1
-        return k
+        return self.tdma.first_turn_at_or_after(t)
 
     def _next_due(self) -> int | None:
         if not self.peers:
@@ -280,22 +335,11 @@ class UwbModule:
 
     # -- UART ---------------------------------------------------------------------------------------
     def _send(self, t: int, data: bytes) -> None:
-        if not data:
-            return
-        if not self._tx:
-            self._tx_next_ns = max(t, self._tx_line_free_ns) + self._byte_ns
-        self._tx += data
-        self._tx_line_free_ns = max(t, self._tx_line_free_ns) + len(data) * self._byte_ns
         self.counters["uart_tx_bytes"] += len(data)
+        self.tx.send(t, data)
 
     def _clock_out(self, t: int) -> bytes:
-        if not self._tx or self._tx_next_ns > t:
-            return b""
-        n = min(len(self._tx), (t - self._tx_next_ns) // self._byte_ns + 1)
-        out = bytes(self._tx[:n])
-        del self._tx[:n]
-        self._tx_next_ns += n * self._byte_ns
-        return out
+        return self.tx.clock_out(t)
 
     def _answer(self, t: int, req: bytes) -> bytes:
         """The full response to one buffered request (its bytes as they arrived between two quiet gaps)."""
@@ -398,8 +442,8 @@ class UwbModule:
         cands = []
         if self._rx_deadline is not None:
             cands.append(self._rx_deadline)
-        if self._tx:
-            cands.append(self._tx_next_ns)
+        if (w := self.tx.next_wake()) is not None:
+            cands.append(w)
         if self._k is not None:
             due = self._next_due()
             if due is not None:

@@ -134,7 +134,8 @@ def test_session_writes_summary_recording_and_plot(tmp_path: Path) -> None:
     assert all(r["distance_m"] > 0.1 for r in s["per_robot"])  # every robot moved
 
 
-def _check_messages_match_their_schemas(path: Path) -> None:
+def _check_messages_match_their_schemas(path: Path, expect: frozenset[str] = frozenset(
+        {"swarm_sitl.CanFrame", "swarm_sitl.LlcPins", "swarm_sitl.Poses"})) -> None:
     """Every recorded message is a JSON object whose fields are declared in its embedded schema, with the
     declared JSON types (what Foxglove relies on to show them)."""
     types = {"integer": int, "number": (int, float), "string": str, "boolean": bool, "array": list,
@@ -156,7 +157,7 @@ def _check_messages_match_their_schemas(path: Path) -> None:
                     continue
                 kinds = spec["type"] if isinstance(spec["type"], list) else [spec["type"]]
                 assert any(isinstance(v, types[t]) for t in kinds), (channel.topic, k, v)
-    assert {"swarm_sitl.CanFrame", "swarm_sitl.LlcPins", "swarm_sitl.Poses"} <= seen
+    assert expect <= seen
 
 
 def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path) -> None:

@@ -10,10 +10,13 @@ length. The body is a box; walking emerges from the legs' phases (``legs.py``).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
 from bridge.models.sonar import SonarParams
+from bridge.robots.decizebro import radio, utility
+from bridge.robots.decizebro.imu import ImuParams
 from bridge.robots.decizebro.legs import LegsParams
 from bridge.robots.decizebro.utility import UtilityParams
 
@@ -53,12 +56,32 @@ DECIZEBRO = RobotProfile(
             outlier_p=0.02,
         ),
         UtilityParams(cone_deg=60.0, range_m=3 * 0.268),  # 60 degrees, three body lengths (section 4.2.1)
+        ImuParams(),  # the BNO055's fused heading (imu.py)
     ),
 )
 
 NO_LLC = "a decizebro has no LLC on CAN: its legs are ZebroBus modules on I2C"
+def _roles(rp: Any) -> tuple[str, ...]:
+    """Its firmware entities besides the legs': the UWB radio, the IMU, the utility sensor board."""
+    return (*radio.RADIO_ROLES, utility.UTILITY)
+
+
+def _modules(rp: Any, cfg: Any) -> dict[str, Any]:
+    return {**radio.radio_modules(rp, cfg), utility.UTILITY: utility.UtilityEntity(rp, cfg)}
+
+
+def _wiring(role: str) -> Any:
+    return utility.UtilityWiring() if role == utility.UTILITY else radio.radio_wiring(role)
+
+
+def _hal(rp: Any, cfg: Any) -> dict[str, Any]:
+    return {**radio.radio_hal(rp, cfg), **utility.utility_hal(rp, cfg)}
+
+
 SPEC = RobotSpec(
     "decizebro", DECIZEBRO, title="DeciZebro: hexapod, six ZebroBus leg modules on I2C, DWM1001 UWB radio",
+    roles=_roles, modules=_modules, wiring=_wiring, hal=_hal,
+    ports={**radio.RADIO_PORTS, **utility.UTILITY_PORTS}, options=radio.RadioOptions, configure=radio.radio_configure,
     refuses={"xbee": "a decizebro has no XBee: its radio is the DWM1001 UWB module, which carries its messages",
              "uwb": "a decizebro always has its DWM1001 UWB radio; the eSwarBot's ranging-only module does not fit",
              "can": NO_LLC, "vehicle": NO_LLC,

@@ -1,7 +1,11 @@
 """Thesis 002 (Agrawal 2019, TU Delft: collective decisions of Zebro hexapods): its sessions' food particles and
-decision figures (loop functions), its experiments and numerical model.
+decision figures (loop functions), its experiments and its numerical model.
 
-Sessions in ``hil_configs/zebro/``; the robot is ``bridge/robots/decizebro``.
+Sessions in ``hil_configs/zebro/``; the robot is ``bridge/robots/decizebro``. The swarm logic is
+``swarm_logic.families.zebro``, the robot's device protocols ``swarm_logic.robots.decizebro.interfaces``; the
+numerical model of the thesis' NetLogo ticks is ``numerical``, the statistical reproduction ``experiments``; the
+algorithms, their readings and the calibration are in ``docs/zebro-algorithms.md``, the reports in
+``docs/results/zebro-decisions/`` and ``docs/results/zebro-sensitivity/``.
 """
 
 from __future__ import annotations
@@ -12,5 +16,6 @@ from bridge.studies.zebro.particles import ParticleCfg, check
 
 STUDY = Study(
     "zebro", "Agrawal 2019: silent, immature and mature collective decisions of DeciZebro hexapods",
+    experiments=("bridge.studies.zebro.experiments",),
     loop_functions=ZebroLoopFunctions, configs="hil_configs/zebro", sections=("particles",),
     config={"particles": list[ParticleCfg]}, check=check)

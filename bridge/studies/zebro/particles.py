@@ -62,16 +62,27 @@ class Particles:
         self.utility = np.array([p.utility for p in cfgs], dtype=int)
         self.reach = np.array([p.reach_m for p in cfgs], dtype=float)
         self.left = np.ones(len(cfgs), dtype=bool)
+        self.eaten: dict[int, list[int]] = {}  # robot -> the utilities of the particles it ate, in order
 
     def in_cone(self, x: float, y: float, heading: float, half_angle: float, range_m: float) -> int:
         """The sum of the utilities of the particles left within ``range_m`` and ``half_angle`` of ``heading``."""
+        return self.cone(x, y, heading, half_angle, range_m)[0]
+
+    def cone(self, x: float, y: float, heading: float, half_angle: float,
+             range_m: float) -> tuple[int, float | None]:
+        """The cone's sum, and the direction of what it sees relative to ``heading`` (rad, + = left; weighted by
+        each particle's utility's size; None when it sees nothing)."""
         if not self.left.any():
-            return 0
+            return 0, None
         d = self.xy - (x, y)
         dist = np.hypot(d[:, 0], d[:, 1])
-        off = np.abs(np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - heading))))
-        seen = self.left & (dist <= range_m) & (off <= half_angle)
-        return int(self.utility[seen].sum())
+        rel = np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - heading)))
+        seen = self.left & (dist <= range_m) & (np.abs(rel) <= half_angle)
+        if not seen.any():
+            return 0, None
+        w = np.abs(self.utility[seen]).astype(float)
+        bearing = float(np.average(rel[seen], weights=w)) if w.sum() > 0 else float(rel[seen].mean())
+        return int(self.utility[seen].sum()), bearing
 
     def reached(self, pos: np.ndarray, alive: np.ndarray) -> list[tuple[int, int]]:
         """(particle, robot) for every particle left that a live robot has reached, the nearest robot consuming it;
@@ -83,5 +94,6 @@ class Particles:
             r = int(np.argmin(d)) if len(d) else -1
             if r >= 0 and d[r] <= self.reach[k]:
                 self.left[k] = False
+                self.eaten.setdefault(r, []).append(int(self.utility[k]))
                 out.append((k, r))
         return out
