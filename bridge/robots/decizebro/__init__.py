@@ -15,10 +15,11 @@ from typing import Any
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import RobotSpec
 from bridge.models.sonar import SonarParams
-from bridge.robots.decizebro import radio, utility
+from bridge.robots.decizebro import firmware, radio, utility
 from bridge.robots.decizebro.imu import ImuParams
 from bridge.robots.decizebro.legs import LegsParams
 from bridge.robots.decizebro.utility import UtilityParams
+from bridge.robots.decizebro.wiring import LEG_WIRING
 
 DECIZEBRO = RobotProfile(
     name="decizebro",
@@ -62,20 +63,23 @@ DECIZEBRO = RobotProfile(
 
 NO_LLC = "a decizebro has no LLC on CAN: its legs are ZebroBus modules on I2C"
 def _roles(rp: Any) -> tuple[str, ...]:
-    """Its firmware entities besides the legs': the UWB radio, the IMU, the utility sensor board."""
-    return (*radio.RADIO_ROLES, utility.UTILITY)
+    """Its firmware entities: the six leg modules on the I2C bus, the UWB radio, the IMU, the utility sensor board."""
+    return (*firmware.roles(rp), *radio.RADIO_ROLES, utility.UTILITY)
 
 
 def _modules(rp: Any, cfg: Any) -> dict[str, Any]:
-    return {**radio.radio_modules(rp, cfg), utility.UTILITY: utility.UtilityEntity(rp, cfg)}
+    return {**firmware.modules(rp, cfg), **radio.radio_modules(rp, cfg),
+            utility.UTILITY: utility.UtilityEntity(rp, cfg)}
 
 
 def _wiring(role: str) -> Any:
-    return utility.UtilityWiring() if role == utility.UTILITY else radio.radio_wiring(role)
+    if role == utility.UTILITY:
+        return utility.UtilityWiring()
+    return LEG_WIRING(role) or radio.radio_wiring(role)
 
 
 def _hal(rp: Any, cfg: Any) -> dict[str, Any]:
-    return {**radio.radio_hal(rp, cfg), **utility.utility_hal(rp, cfg)}
+    return {**firmware.hal(rp, cfg), **radio.radio_hal(rp, cfg), **utility.utility_hal(rp, cfg)}
 
 
 SPEC = RobotSpec(
