@@ -12,13 +12,10 @@ from pathlib import Path
 import pytest
 
 from bridge.core.recorder import iter_messages
-from bridge.core.registry import robot_spec
 from firmware_sim.robots.decizebro import zebrobus as zb
 from tests.conftest import ROOT
 
-pytestmark = [pytest.mark.session,
-              pytest.mark.skipif(robot_spec("decizebro").roles is None,
-                                 reason="the DeciZebro plugin does not bring its leg modules yet (RobotSpec.roles)")]
+pytestmark = pytest.mark.session
 
 CONFIG = """
 [session]
