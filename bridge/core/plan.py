@@ -47,7 +47,7 @@ class RobotPlan:
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
         modules it carries, the slcan adapter on its CAN bus when it is exposed, and its robot model's own (a
-        Zebro's leg modules: ``RobotSpec.roles``)."""
+        legged robot's leg modules: ``RobotSpec.roles``)."""
         llc = () if self.llc_role is None else (self.llc_role,)
         own = () if self.gateway is not None else robot_spec(self.profile).own_roles(self)
         return (llc + (("xbee",) if self.sim_xbee else ()) + (("uwb",) if self.uwb else ())

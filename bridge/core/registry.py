@@ -59,7 +59,7 @@ class RobotSpec:
     configure: Callable[[RobotProfile, Any], RobotProfile] | None = None
     default: bool = False  # the model a robot group without ``profile`` gets (one installed robot says so)
     # its own firmware entities beyond the LLC and the shared modules (XBee, UWB, slcan adapter): ``roles(rp)``
-    # names them for robot ``rp`` (a Zebro's six leg modules), ``modules(rp, cfg)`` builds them in the firmware host
+    # names them for robot ``rp`` (a hexapod's six leg modules), ``modules(rp, cfg)`` builds them in the firmware host
     # (role -> an object whose ``run(t_ns, inputs)`` answers a tick as a board's does; ``counters`` and ``close()``
     # when it has them)
     roles: Callable[[Any], tuple[str, ...]] | None = None

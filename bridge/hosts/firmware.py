@@ -1,6 +1,6 @@
 """Hosts the firmware of one or more robots: per robot its LLC board (as its robot plugin builds it:
 ``RobotSpec.make_board``), the radio modules it carries (an XBee, a UWB module) and its robot model's own firmware
-entities (``RobotSpec.modules``: a Zebro's leg modules), each an entity with its own schedule.
+entities (``RobotSpec.modules``: a hexapod's leg modules), each an entity with its own schedule.
 
 Per tick the host hands a due board the world's physical values and the CAN frames the bus delivered, and returns
 what the board answers (the frames it transmitted, its pin outputs when they changed, its next loop time). A module

@@ -1,5 +1,5 @@
 """Parts many robots share, as the world simulates them: a differential drive, sonars, a light sensor.
 
 A robot plugin lists the ones it has in its profile (``RobotProfile.parts``); a part only one robot has lives in that
-robot's folder (a conveyor in ``bridge/robots/traxbot/``). See ``bridge.core.parts`` for the hooks.
+robot's folder (a conveyor, say). See ``bridge.core.parts`` for the hooks.
 """

@@ -32,7 +32,7 @@ DEVICES = ("xbee", "uwb", "mavlink")
 
 
 def model_ports() -> tuple[str, ...]:
-    """The serial ports installed robot models give their own modules (``RobotSpec.ports``: a Zebro's
+    """The serial ports installed robot models give their own modules (``RobotSpec.ports``: a hexapod's
     ``uwb_radio``)."""
     return tuple(sorted({p for _, spec in ROBOTS.items() for p in spec.ports} - set(DEVICES)))
 
