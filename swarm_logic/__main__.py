@@ -12,6 +12,9 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import can
+import serial
+
 from swarm_logic.behaviours import load_behaviour
 from swarm_logic.clock import Clock, RealtimeClock, WallClock
 from swarm_logic.devices import BUILT_IN, NOT_DEVICES
@@ -61,7 +64,11 @@ def main(argv: list[str] | None = None, clock: Clock | None = None) -> int:
     behaviour = a.behaviour or hal.get("behaviour", "random_walk")
     seed = a.seed if a.seed is not None else int(hal.get("seed", robot_id))
     cls = load_behaviour(behaviour)
-    robot = Robot.open(robot_id, hal, clock or CLOCKS[hal.get("clock", "monotonic")](), seed, hal.get("params", {}))
+    try:
+        robot = Robot.open(robot_id, hal, clock or CLOCKS[hal.get("clock", "monotonic")](), seed,
+                           hal.get("params", {}))
+    except (OSError, ValueError, LookupError, serial.SerialException, can.CanError) as e:
+        raise SystemExit(f"{a.hal}: cannot open the robot's devices: {e}") from None
     try:
         run_controller(cls(), robot, a.duration)
     except KeyboardInterrupt:

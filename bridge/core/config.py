@@ -720,10 +720,14 @@ HAL_KEYS = ("llc_can", "llc_mavlink")
 
 def _refuse_hal_config(p: Path, raw: dict[str, Any]) -> None:
     """A HAL config is TOML too, and would fail validation field by field; say what it is instead."""
-    if "robots" in raw or "session" in raw or not any(k in raw for k in HAL_KEYS):
+    from swarm_logic.devices import DEVICES
+
+    own = [k for k in DEVICES.names() if isinstance(raw.get(k), dict)]  # a robot model's own devices (its legs)
+    if "robots" in raw or "session" in raw or not (any(k in raw for k in HAL_KEYS) or own):
         return
     raise ConfigError(f"{p}: a HAL config for a real robot (it names one robot's devices: "
-                      f"{', '.join(k for k in HAL_KEYS if k in raw)}), not a session config. Run it on that "
+                      f"{', '.join([*(k for k in HAL_KEYS if k in raw), *own])}), not a session config. Run it on "
+                      "that "
                       f"robot's companion computer: python -m swarm_logic --hal {p}; a session needs a session "
                       "config ([session], [[robots]]), e.g. hil_configs/demos/random_walk.toml")
 

@@ -106,3 +106,20 @@ def test_an_unknown_clock_is_refused(tmp_path: Path) -> None:
     bad.write_text("clock = 'sundial'\n[llc_can]\ninterface = 'virtual'\n")
     with pytest.raises(SystemExit, match=r"clock: 'sundial' is not one of monotonic, realtime"):
         load_hal(str(bad))
+
+
+def test_shipped_zebro_robot_config_is_valid_and_a_missing_bus_is_named() -> None:
+    """A real DeciZebro's HAL: its legs on I2C bus 1 and its modules on serial ports; where they are missing (as on
+    this machine) the program says which and exits, no traceback."""
+    from swarm_logic.families.zebro.mature import ZebroMature
+    from swarm_logic.robots.decizebro.interfaces import DEVICE_NAMES
+
+    p = Path(__file__).resolve().parents[2] / "hil_configs" / "robots" / "decizebro_real.toml"
+    hal = load_hal(str(p))
+    assert set(DEVICE_NAMES) <= set(hal) and hal["legs"]["bus"] == 1 and "llc_can" not in hal
+    assert list(hal).index("imu") < list(hal).index("uwb_radio")  # the radio's driver sends the IMU's heading
+    ZebroMature.with_defaults(hal["params"])
+    if Path("/dev/i2c-1").exists():
+        pytest.skip("this machine has an I2C bus 1")
+    with pytest.raises(SystemExit, match=r"decizebro_real\.toml: cannot open the robot's devices: .*i2c-1"):
+        main(["--hal", str(p), "--duration", "1"])
