@@ -175,6 +175,8 @@ class ZebroWorld:
 class PointRadio:
     """``ZebroRadio``: exact ranging of the robots within the radius, at-once delivery."""
 
+    max_payload = 3 + 255 * 3  # the thesis' model has no frame size: a link list of 255 links fits
+
     def __init__(self, world: ZebroWorld, i: int) -> None:
         self.w, self.i = world, i
 

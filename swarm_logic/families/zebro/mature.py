@@ -127,8 +127,9 @@ class ZebroMature(ZebroController):
         if self.p["graph"]:
             out = self.graph.outgoing()
             if out is not None:
-                for i in range(0, max(1, len(out)), 255):
-                    self.send(msg.links(self.robot.id, out[i:i + 255]))
+                per = max(1, min(255, (self.radio.max_payload - 3) // 3))  # links per frame the radio carries
+                for i in range(0, max(1, len(out)), per):
+                    self.send(msg.links(self.robot.id, out[i:i + per]))
         eaten = self.sensor.consumed()
         if eaten:
             self.robot.log("zebro_consumed", utility=eaten, state=self.state, seq=self.seq)

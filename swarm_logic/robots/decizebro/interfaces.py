@@ -54,6 +54,8 @@ class Message:
 
 @runtime_checkable
 class ZebroRadio(Protocol):
+    max_payload: int  # the most bytes one broadcast carries (a longer message goes in several)
+
     def neighbours(self) -> list[Neighbour]:
         """The robots within the communication radius, as of the latest ranging."""
         ...

@@ -31,6 +31,8 @@ class UwbRadioError(Exception):
 class ZebroUwbRadio:
     """The module on ``port``; ``robot`` (optional) gives it the robot's IMU."""
 
+    max_payload = P.MAX_PAYLOAD
+
     def __init__(self, port: Any, clock: Clock, robot: Any = None, *, timeout: float = 0.5) -> None:
         self.port = port
         self.clock = clock
