@@ -57,7 +57,7 @@ class UtilityWiring:
     schema = "swarm_sitl.UtilityPins"
 
     def sense(self, world: Any, r: int, media: dict[str, Any], ideal_pose: bool) -> tuple[dict, dict]:
-        s = world.sensors(r)
+        s = world.model("utility").sense(r)  # its own part only: not every part the robot has
         reading = {"utility": s["utility"], "bearing_rad": s["utility_bearing"], "eaten": s["eaten"],
                    "eaten_sum": s["eaten_sum"]}
         return reading, reading
