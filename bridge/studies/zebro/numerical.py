@@ -186,6 +186,9 @@ class PointRadio:
     def broadcast(self, data: bytes) -> bool:
         return self.w.broadcast(self.i, data)
 
+    def wait_neighbourhood(self, timeout: float | None = None) -> None:
+        """The model's ranging is exact and immediate: nothing to wait for."""
+
     def receive(self) -> list[Message]:
         box = self.w.inbox[self.i]
         self.w.inbox[self.i] = []

@@ -48,6 +48,9 @@ class ZebroController(Controller):
         "align_mean": "circular",  # A-1: circular | arithmetic (literal)
         "cohere_mode": "bearing",  # A-2: bearing | heading (literal)
         "separate_mode": "turn_away",  # A-2: turn_away | plus90 (literal)
+        # before the first tick, wait until the radio has heard the neighbourhood once (the thesis' swarm is a formed
+        # flock at launch; a real one forms its UWB network first)
+        "wait_radio": True,
     }
     ranges: ClassVar[dict[str, str]] = {
         "period_s": "(0, 60]", "d_min_m": "[0, inf)", "d_max_m": "[0, inf)", "align_turn_deg": TURN,
@@ -57,7 +60,7 @@ class ZebroController(Controller):
         "align_mean": ("circular", "arithmetic"), "cohere_mode": ("bearing", "heading"),
         "separate_mode": ("turn_away", "plus90"),
     }
-    static_params = frozenset({"period_s"})
+    static_params = frozenset({"period_s", "wait_radio"})
 
     radio: ZebroRadio
     sensor: UtilitySensor
@@ -88,6 +91,8 @@ class ZebroController(Controller):
         self.sensor = robot.device(UTILITY)
         self.imu = robot.device(IMU)
         self.legs = robot.device(LEGS)
+        if self.p["wait_radio"]:
+            self.radio.wait_neighbourhood()
         self.rules = self._rules()
         self.sent: Counter[str] = Counter()  # frames broadcast, by type (logged as zebro_tx when it stops)
         self.refused = 0  # broadcasts the radio's budget refused

@@ -21,6 +21,11 @@ Readings of the ambiguities (``docs/zebro-algorithms.md``):
 - A-11 ``leader_pace``: ``fast`` (3x) or ``duty`` (the leader at 1x, followers walking one tick in three);
 - A-12 ``new_contenders``: ``serialise`` (contenders are who sensed when the election reached them; nothing new
   until ERASE) or ``join`` (a robot in the election that starts sensing may still contend).
+
+Beyond the thesis, which assumes error-free delivery: ``resend_ticks`` (0, the thesis: never) repeats a robot's part
+of the election every that many ticks while it lasts (STOP, its best tag as n3, its n4 once sent; the-leader its EOE
+while it leads), so one lost frame no longer stalls the election on a lossy radio. Every handler is idempotent, so a
+repeat changes nothing where nothing was lost.
 """
 
 from __future__ import annotations
@@ -52,8 +57,10 @@ class ZebroMature(ZebroController):
         "new_contenders": "serialise",  # A-12: serialise | join
         "beacon": True,  # n1 every tick (the neighbour list N1)
         "graph": True,  # Algorithm 11's link-list gossip
+        "resend_ticks": 0,  # repeat the election's frames every that many ticks (0: never, as the thesis)
     }
-    ranges: ClassVar[dict[str, str]] = {**ZebroController.ranges, "realign_turn_deg": TURN, "lead_turn_deg": TURN}
+    ranges: ClassVar[dict[str, str]] = {**ZebroController.ranges, "realign_turn_deg": TURN, "lead_turn_deg": TURN,
+                                        "resend_ticks": "[0, 1000]"}
     choices: ClassVar[dict[str, tuple[str, ...]]] = {
         **ZebroController.choices, "follow_mode": ("bearing", "heading"), "ack_symbols": ("swapped", "as_defined"),
         "election_tags": ("origin", "utility"), "leader_rule": ("echo", "count"), "leader_pace": ("fast", "duty"),
@@ -80,6 +87,8 @@ class ZebroMature(ZebroController):
         self.acks: set[int] = set()
         self.acked = False  # n4 sent (or EOE, for the-leader)
         self.told: set[int] = set()  # the neighbours in range when this robot last announced its best tag
+        self._since_resend = 0  # ticks since this robot last sent (or repeated) its election frames
+        self._n4: bytes | None = None  # the n4 it sent its parent
 
     @property
     def literal_tags(self) -> bool:
@@ -122,6 +131,11 @@ class ZebroMature(ZebroController):
             self._announce(msg.N3)
         if self.state == ELECTION:
             self._check_done(ids)
+        every = int(self.p["resend_ticks"])
+        if every and self.state in (ELECTION, LEAD):
+            self._since_resend += 1
+            if self._since_resend >= every:
+                self._resend()
         if self.p["beacon"]:
             self.send(msg.n1(self.robot.id))
         if self.p["graph"]:
@@ -170,6 +184,22 @@ class ZebroMature(ZebroController):
             self.flooded = {k for k in self.flooded if k[1] >= seq - 1}  # forget elections long over
             self.flooded.add(key)
             self.send(data)
+
+    def _resend(self) -> None:
+        """``resend_ticks``: repeat this robot's part of the election, for neighbours that lost a frame of it."""
+        self._since_resend = 0
+        me = self.robot.id
+        if self.state == LEAD:
+            if self.best is not None:
+                self.send(msg.eoe(me, self.seq, me, self.best[0]))
+            return
+        self.send(msg.stop(me, self.seq))
+        if self.best is not None:
+            x, origin = self.best
+            self.send(msg.n2(me, x, kind=msg.N3) if self.literal_tags else
+                      msg.n2(me, x, origin, self.parent, kind=msg.N3))
+        if self._n4 is not None:
+            self.send(self._n4)
 
     def _newer(self, seq: int, than: int) -> bool:
         """Sequence numbers are one byte: ``seq`` is newer within half the circle."""
@@ -220,6 +250,7 @@ class ZebroMature(ZebroController):
         self.sensed = tag[0]
         self.best, self.parent = tag, None
         self.children, self.siblings, self.acks, self.acked = set(), set(), set(), False
+        self._n4 = None
         self.robot.log("zebro_contender", utility=self.sensed, seq=self.seq)
         self._announce(msg.N2)
 
@@ -245,6 +276,7 @@ class ZebroMature(ZebroController):
                 self.robot.log("zebro_withdraw", seq=self.seq)
             self.best, self.parent = tag, f.src
             self.children, self.siblings, self.acks, self.acked = set(), set(), set(), False
+            self._n4 = None
             self._announce(msg.N2)
         elif tag == self.best:
             if not literal and f.parent == me:
@@ -272,7 +304,8 @@ class ZebroMature(ZebroController):
         me = self.robot.id
         if send_ack:
             self.acked = True
-            self.send(msg.n4(me, parent, x) if self.literal_tags else msg.n4(me, parent, x, origin))
+            self._n4 = msg.n4(me, parent, x) if self.literal_tags else msg.n4(me, parent, x, origin)
+            self.send(self._n4)
         elif lead:
             self.acked = True
             self.the_leader = me

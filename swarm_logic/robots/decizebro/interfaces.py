@@ -68,6 +68,11 @@ class ZebroRadio(Protocol):
         """The frames received since the last call, oldest first."""
         ...
 
+    def wait_neighbourhood(self, timeout: float | None = None) -> None:
+        """Block until the radio has heard its neighbourhood for one whole update period (every neighbour in range
+        has been ranged once): what a program waits for before its first decision."""
+        ...
+
 
 @runtime_checkable
 class UtilitySensor(Protocol):

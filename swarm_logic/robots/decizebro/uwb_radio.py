@@ -52,6 +52,7 @@ class ZebroUwbRadio:
             ("frames", "bad_frames", "junk_bytes", "nacks", "refused", "sent", "received", "reports",
              "unknown_frames"), 0)
         self.nacks: dict[str, int] = {}
+        self.report_t: float | None = None  # clock time of the latest complete neighbour report
         self._identify(timeout)
 
     # -- transport ---------------------------------------------------------------------------------------------
@@ -108,6 +109,7 @@ class ZebroUwbRadio:
         if len(self._parts) == parts:
             self.table = [nb for p in sorted(self._parts) for nb in self._parts[p]]
             self.counters["reports"] += 1
+            self.report_t = self.clock.now()
 
     def poll(self) -> None:
         """Take what the module sent; send it the heading when a second has passed."""
@@ -130,11 +132,24 @@ class ZebroUwbRadio:
     def _identify(self, timeout: float) -> None:
         """Ask the module who it is and how deep its queue is (blocking, in clock time)."""
         self.port.write(P.frame(P.INFO_GET))
+        self._read_until(lambda: bool(self.info), timeout, "no answer from the UWB radio (INFO)")
+        self.queue_free = self.info["queue"]
+
+    def wait_neighbourhood(self, timeout: float | None = None) -> None:
+        """Block (in clock time) until the module has reported a neighbourhood it ranged for one whole update period
+        since now: every neighbour in range has beaconed once. A program calls it before it acts on its neighbours
+        (the Zebro controllers do at start)."""
+        period = self.info["period_ms"] / 1000.0
+        since = self.clock.now() + period
+        self._read_until(lambda: self.report_t is not None and self.report_t >= since,
+                         2 * period + 0.5 if timeout is None else timeout, "no neighbour report from the UWB radio")
+
+    def _read_until(self, done: Any, timeout: float, what: str) -> None:
         deadline = self.clock.now() + timeout
-        while not self.info:
+        while not done():
             left = deadline - self.clock.now()
             if left <= 0:
-                raise UwbRadioError("no answer from the UWB radio (INFO)")
+                raise UwbRadioError(what)
             self.port.timeout = left
             first = self.port.read(1)
             self.port.timeout = 0
@@ -142,7 +157,8 @@ class ZebroUwbRadio:
                 self.parser.buf += first
             for typ, body in self._take():
                 self._handle(typ, body)
-        self.queue_free = self.info["queue"]
+            if self.info:
+                self._send_heading()
 
     # -- ZebroRadio ----------------------------------------------------------------------------------------
     def neighbours(self) -> list[Neighbour]:

@@ -160,3 +160,39 @@ def test_elections_follow_one_another_past_the_sequence_byte() -> None:
     elect(s)
     assert all(c.seq == 256 for c in s.ctls) and len(s.topic("zebro_elected")) == 1
     assert all((0x10, 256) in c.flooded and (0x10, 255) in c.flooded for c in s.ctls)
+
+
+def lose_first(s: Swarm, kind: int, count: int = 1) -> list[int]:
+    """Make the swarm's radio lose the first ``count`` frames of type ``kind`` (to every receiver); the senders."""
+    lost: list[int] = []
+    send = s.world.broadcast
+
+    def lossy(i: int, data: bytes) -> bool:
+        if data and data[0] == kind and len(lost) < count:
+            lost.append(i)
+            return True  # the module took it; the air lost it
+        return send(i, data)
+
+    s.world.broadcast = lossy  # type: ignore[method-assign]
+    return lost
+
+
+@pytest.mark.parametrize("kind", [0x14, 0x12, 0x10])  # n4, n2, STOP
+def test_a_lost_frame_stalls_the_thesis_election_and_resending_repairs_it(kind: int) -> None:
+    """The thesis' election has no timeout: one lost n4 (or n2, or STOP) halts the swarm for good. With
+    ``resend_ticks`` the same loss only delays it, and the election still ends with the one right leader."""
+    sc = line(8, {1: 15, 6: 95})
+    s = swarm(ZebroMature, sc, frozen=True)
+    lost = lose_first(s, kind)
+    with pytest.raises(AssertionError, match="no end of election"):
+        elect(s, limit=60)
+    assert lost
+
+    clean = swarm(ZebroMature, line(8, {1: 15, 6: 95}), frozen=True, params={"resend_ticks": 3})
+    t_clean = elect(clean)
+    r = swarm(ZebroMature, line(8, {1: 15, 6: 95}), frozen=True, params={"resend_ticks": 3})
+    lost = lose_first(r, kind)
+    t = elect(r, limit=60)
+    assert lost
+    assert check_unique(r) == 6 == check_unique(clean)
+    assert t >= t_clean
