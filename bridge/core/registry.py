@@ -124,7 +124,7 @@ class RobotSpec:
 @dataclass(frozen=True)
 class Study:
     """A study's simulation side: its experiments (modules that register them when imported), the loop functions its
-    sessions run, and where its session configs are."""
+    sessions run, where its session configs are, and its benchmark."""
 
     name: str
     title: str
@@ -137,6 +137,9 @@ class Study:
     # checks across sections once a config is whole (a particle inside an obstacle): (config) -> None, raising
     # ValueError naming the field
     check: Callable[[Any], None] | None = None
+    # its speed figures for ``swarm-sitl bench --study NAME``: "module:function", called as
+    # function(quick=bool, duration=float | None, out_dir=str) -> exit code (imported only when asked for)
+    bench: str = ""
 
 
 def _is_medium(obj: Any) -> bool:

@@ -1,6 +1,5 @@
-"""``swarm-sitl bench``: the demo behaviour at several robot counts and process packings; with ``--rdpso``, the
-RDPSO figures: one E9 cell in the numerical runner (100 robots, 500 iterations, one core) and the
-co-simulation's real-time factor with the 12-robot arena.
+"""``swarm-sitl bench``: the demo behaviour at several robot counts and process packings; with ``--study NAME``, that
+study's own figures (its ``Study.bench``).
 
 Prints, per case: robots, processes, real-time factor, per-tick barrier latency (median and p99: from
 sending a quantum's ticks to the last answer, physics overlapped), CPU per robot (all processes,
@@ -35,38 +34,22 @@ QUICK = [(10, 1)]
 TARGETS = {(10, 1): 5.0, (50, 10): 1.0, (50, 25): 1.0}
 
 
-def numerical_cell(iterations: int = 500, n: int = 100, seed: int = 1) -> tuple[float, float, float]:
-    """One E9 cell (peaks, S1, 300 x 300 m with obstacles) in the numerical runner, in this process: wall and CPU
-    seconds, and the final best solution."""
-    from bridge.experiments.runner import Trial
-    from bridge.studies.rdpso.experiments import E9Static
+def run_study_bench(name: str, quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
+    """The benchmark study ``name`` declares (``Study.bench``)."""
+    import importlib
 
-    exp = E9Static()
-    trial = Trial(exp.name, {"fn": "peaks", "n": n, "set": "S1"}, 0, seed, smoke=False, workdir=".")
-    w0, c0 = time.perf_counter(), time.process_time()
-    res = exp.run(trial, iterations)
-    return time.perf_counter() - w0, time.process_time() - c0, float(res.metrics["final"])
+    from bridge.core.registry import STUDIES
+    from swarm_logic.plugins import PluginError
 
-
-def run_rdpso_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
-    """The RDPSO figures of the issue: numerical E9 cell wall time (< 10 s target) and the arena's RTF."""
-    iterations = 100 if quick else 500
-    walls = []
-    for seed in (1,) if quick else (1, 2, 3):
-        wall, cpu, final = numerical_cell(iterations, seed=seed)
-        walls.append(wall)
-        print(f"numerical runner, E9 cell (peaks, S1, 100 robots, {iterations} iterations), seed {seed}: "
-              f"{wall:.2f} s wall, {cpu:.2f} s CPU, final best {final:.4f}", file=sys.stderr)
-    dur = duration or (20.0 if quick else 60.0)
-    res = run_session(str(ROOT / "hil_configs" / "rdpso" / "rdpso_arena.toml"), {"session.duration_s": dur},
-                      str(Path(out_dir) / "rdpso_arena"), progress=None, plot=False)
-    s = res.summary
-    print(f"\nswarm-sitl bench --rdpso ({os.cpu_count()} cores)")
-    print(f"  numerical E9 cell, {iterations} iterations: median {sorted(walls)[len(walls) // 2]:.2f} s wall "
-          f"(target for 500 iterations: < 10 s)")
-    print(f"  co-simulation, rdpso_arena.toml, 12 robots, {dur:g} s: rtf {s['rtf']}x, {s['processes']} processes, "
-          f"start-up {s['startup_s']} s (exit {res.code})")
-    return res.code
+    try:
+        study = STUDIES.get(name)
+    except PluginError as e:
+        raise SystemExit(f"swarm-sitl bench --study: {e}") from None
+    if not study.bench:
+        have = ", ".join(n for n, st in STUDIES.items() if st.bench) or "none"
+        raise SystemExit(f"swarm-sitl bench: study {name!r} has no benchmark (studies with one: {have})")
+    module, _, fn = study.bench.partition(":")
+    return int(getattr(importlib.import_module(module), fn)(quick=quick, duration=duration, out_dir=out_dir))
 
 
 def run_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench",

@@ -120,10 +120,11 @@ def cmd_plot(a: argparse.Namespace) -> int:
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
-    from bridge.tools.bench import run_bench, run_rdpso_bench
+    from bridge.tools.bench import run_bench, run_study_bench
 
-    if a.rdpso:
-        return run_rdpso_bench(quick=a.quick, duration=a.duration, out_dir=a.out)
+    study = "rdpso" if a.rdpso else a.study
+    if study:
+        return run_study_bench(study, quick=a.quick, duration=a.duration, out_dir=a.out)
 
     return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
                      config=a.config)
@@ -284,8 +285,10 @@ def _parser_bench(sub: Any) -> None:
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
     p.add_argument("--config", help="session config to benchmark (default: the demo)")
-    p.add_argument("--rdpso", action="store_true", help="the RDPSO figures: a numerical E9 cell's wall time and "
-                                                         "the 12-robot arena's real-time factor")
+    p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time and the 12-robot "
+                                   "arena's real-time factor; zebro: 20 Zebros' real-time factor by packing and body "
+                                   "model, and the numerical 360-run table's wall time)")
+    p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
     p.set_defaults(fn=cmd_bench)
 
 

@@ -15,4 +15,4 @@ STUDY = Study(
     experiments=("bridge.studies.rdpso.experiments", "bridge.studies.rdpso.field_experiments",
                  "bridge.studies.rdpso.benchmark_experiments", "bridge.studies.rdpso.comm_experiments"),
     loop_functions=RdpsoLoopFunctions, configs="hil_configs/rdpso", sections=("deployment", "comm", "mapping"),
-    config={"objective": ObjectiveCfg})
+    config={"objective": ObjectiveCfg}, bench="bridge.studies.rdpso.bench:bench")
