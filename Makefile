@@ -30,11 +30,13 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/swarm-sitl bench
-	$(BIN)/swarm-sitl bench --rdpso
+	$(BIN)/swarm-sitl bench --study rdpso
+	$(BIN)/swarm-sitl bench --study zebro
 
 bench-smoke: $(STAMP)
 	$(BIN)/swarm-sitl bench --quick
-	$(BIN)/swarm-sitl bench --rdpso --quick
+	$(BIN)/swarm-sitl bench --study rdpso --quick
+	$(BIN)/swarm-sitl bench --study zebro --quick
 
 survey: $(STAMP)
 	$(BIN)/swarm-sitl radio-survey hil_configs/demo.toml --out runs/radio-survey

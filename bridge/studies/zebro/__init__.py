@@ -19,4 +19,5 @@ STUDY = Study(
     "zebro", "Agrawal 2019: silent, immature and mature collective decisions of DeciZebro hexapods",
     experiments=("bridge.studies.zebro.experiments", "bridge.studies.zebro.cosim_experiments"),
     loop_functions=ZebroLoopFunctions, configs="hil_configs/zebro", sections=("particles", "decision"),
-    config={"particles": list[ParticleCfg], "decision": DecisionCfg}, check=check)
+    config={"particles": list[ParticleCfg], "decision": DecisionCfg}, check=check,
+    bench="bridge.studies.zebro.bench:bench")
