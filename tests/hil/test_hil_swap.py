@@ -322,7 +322,7 @@ def test_every_session_config_in_hil_configs_loads_and_plans() -> None:
     """The worked examples stay valid as the config grows (HAL configs for robot programs are another schema)."""
     import tomllib
 
-    for path in sorted((ROOT / "hil_configs").glob("*.toml")):
+    for path in sorted((ROOT / "hil_configs").rglob("*.toml")):
         if "robots" not in tomllib.loads(path.read_text()):
             continue
         cfg = load_config(path)
