@@ -3,7 +3,7 @@ contact-level body model; ``legs.py`` is the cheaper gait-level one).
 
 Each robot is one pybullet multibody: its box body (the profile's size) with six revolute hips, three a side (front,
 middle, back), each turning a C-leg: a half circle of ``leg_radius_m`` from the hip (one end) to the toe (the other),
-its convex side forward when the leg points down, as a chain of ``leg_segments`` capsules along the arc. Each hip is
+its convex side backward when the leg points down, as a chain of ``leg_segments`` capsules along the arc. Each hip is
 driven by its leg module's DC gearmotor: the motor's torque ``stall_torque_nm * (duty * V / nominal_v - omega /
 max_rad_s)`` (V the battery voltage), limited to the stall torque at that voltage, is applied as a joint torque every
 physics step from the leg's speed after the previous one; the motor's rotor, seen through the gearbox, adds to the
@@ -60,9 +60,10 @@ class ContactLegsParams(Part):
 
     def arc(self) -> list[tuple[float, float]]:
         """The leg's half circle as ``leg_segments + 1`` points (x forward, z up) in the hip's frame, the leg
-        pointing down: the hip at (0, 0), the toe at (0, -2 r), the convex side forward."""
+        pointing down: the hip at (0, 0), the toe at (0, -2 r), the convex side backward (it comes down in front on its
+        convex side, rolls over it and pushes off with its toe behind)."""
         r = self.leg_radius_m
-        return [(r * math.sin(a), -r + r * math.cos(a))
+        return [(-r * math.sin(a), -r + r * math.cos(a))
                 for a in np.linspace(0.0, math.pi, self.leg_segments + 1).tolist()]
 
     def hips(self) -> list[tuple[float, float, float]]:
