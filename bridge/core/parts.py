@@ -5,6 +5,10 @@ that names the world model simulating it. The world builds one model per kind of
 one, vectorised across them (as ARGoS's sensors and actuators are plugins the core only calls), and calls it at
 fixed points of a quantum; the core knows no part by name.
 
+Most robots are one rigid box or cylinder of their profile's size that the world makes; a part may make its robot's
+body itself instead (``WorldModel.build_body``: a multibody with jointed legs), and may ask for a finer physics step
+than the session's (``Part.physics_hz``).
+
 A quantum, as the world runs it::
 
     start_quantum            (commands of the last tick are in: set the targets)
@@ -41,6 +45,12 @@ class Part(BaseModel):
         """Robots this part carries on board (a conveyor's slots; most parts carry none)."""
         return 0
 
+    @property
+    def physics_hz(self) -> float:
+        """The physics rate the part needs at least (Hz; 0: the session's ``world.physics_hz`` is fine): a session
+        with this part steps at the higher of the two."""
+        return 0.0
+
 
 class WorldModel:
     """One kind of part for every robot that has it. ``robots`` are their ids in robot order, ``parts`` their
@@ -54,6 +64,13 @@ class WorldModel:
         self.ids = np.array(robots, dtype=int)
         self.parts = parts
         self.local = {r: k for k, r in enumerate(robots)}
+
+    @classmethod
+    def build_body(cls, world: World, part: Any, profile: Any, pose: tuple[float, float, float]) -> int | None:
+        """Make the robot's body at ``pose`` (x, y, yaw) and return its pybullet id, for a part that is more than
+        the profile's rigid box or cylinder (jointed legs); None, as most parts do: the world makes that body. Called
+        before any model exists, in robot order."""
+        return None
 
     def start_quantum(self, t_ns: int, q_ns: int) -> None: ...
 

@@ -34,7 +34,9 @@ class World:
     def __init__(self, cfg: Config, robots: list[RobotPlan]) -> None:
         self.cfg = cfg
         self.seed = cfg.session.seed
-        self.hz = cfg.world.physics_hz
+        self.profiles: list[RobotProfile] = [robot_profile(r.profile, r.options) for r in robots]
+        # the session's physics rate, or a finer one that a robot's part asks for (a body on jointed legs)
+        self.hz = max([cfg.world.physics_hz, *(p.physics_hz for prof in self.profiles for p in prof.parts)])
         self.dt = 1.0 / self.hz
         self.steps_done = 0
         self.cid = pb.connect(pb.DIRECT)
@@ -110,7 +112,6 @@ class World:
     def _build_robots(self, robots: list[RobotPlan]) -> None:
         n = len(robots)
         self.n = n
-        self.profiles: list[RobotProfile] = [robot_profile(r.profile, r.options) for r in robots]
         self._spawn_bodies(robots)
         self._batteries()
         self.pos = np.array([[r.pose[0], r.pose[1]] for r in robots], dtype=float).reshape(n, 2)
@@ -123,8 +124,8 @@ class World:
         self._models()
 
     def _spawn_bodies(self, robots: list[RobotPlan]) -> None:
-        """One rigid cylinder per robot (a gateway's antenna: a point nothing touches), the stated motions, and the
-        robots that start on board another."""
+        """One rigid cylinder or box per robot (a gateway's antenna: a point nothing touches; a body a part makes
+        itself: ``WorldModel.build_body``), the stated motions, and the robots that start on board another."""
         self.bodies: list[int] = []
         shapes: dict[str, int] = {}
         for r, prof in zip(robots, self.profiles, strict=True):
@@ -139,6 +140,10 @@ class World:
             if r.gateway is not None:  # a radio's antenna, not a body: nothing collides with it or sees it
                 self.bodies.append(pb.createMultiBody(0, -1, basePosition=[x, y, prof.height_m / 2 + 1e-3],
                                                       physicsClientId=self.cid))
+                continue
+            own = self._part_body(prof, (x, y, yaw))
+            if own is not None:
+                self.bodies.append(own)
                 continue
             body = pb.createMultiBody(
                 prof.mass_kg, shapes[prof.name], basePosition=[x, y, prof.height_m / 2 + 1e-3],
@@ -159,6 +164,14 @@ class World:
         self.released: list[dict] = []  # drop-offs since the hub last took them (t_ns, robot, carrier, slot, pose)
         for i in self.carried:  # on board nothing touches them and they touch nothing
             pb.setCollisionFilterGroupMask(self.bodies[i], -1, 0, 0, physicsClientId=self.cid)
+
+    def _part_body(self, prof: RobotProfile, pose: tuple[float, float, float]) -> int | None:
+        """The body one of the robot's parts makes itself, None if none does."""
+        for part in prof.parts:
+            body = type(part).world_model.build_body(self, part, prof, pose)
+            if body is not None:
+                return body
+        return None
 
     def _batteries(self) -> None:
         p = self.profiles

@@ -4,7 +4,9 @@ UWB radio that ranges and carries messages.
 
 Figures (``docs/zebro.md``): 268 x 210 x 160 mm, 1.8 kg, leg radius 50 mm, six 170 rpm 12 V motors, walking 1-2 km/h
 (0.28-0.56 m/s) forward, battery 14.4 V 4000 mAh for about 3 h of walking, a front ultrasound of about one body
-length. The body is a box; walking emerges from the legs' phases (``legs.py``).
+length. The body is a box; walking emerges from the legs' phases, in one of two body models a robot group chooses
+(``body``): the gait-level one imposes the body's motion from the legs in stance (``legs.py``, the default), the
+contact-level one puts the box on six jointed C-legs whose motors push it along the floor (``contact_legs.py``).
 """
 
 from __future__ import annotations

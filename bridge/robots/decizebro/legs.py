@@ -10,7 +10,8 @@ contacts with walls, obstacles and other robots. Walking therefore emerges from 
 keeps a stance leg on each side, a gait with no stance leg on a side turns the robot, legs turned backwards walk it
 backwards (the locomotion layer on the robot never asks for that).
 
-Legs are numbered 0-5: 0-2 left, front to back; 3-5 right, front to back.
+Legs are numbered 0-5: 0-2 left, front to back; 3-5 right, front to back. The contact-level model, slower to
+simulate, is ``contact_legs.py`` (the robot option ``body = "contact"``).
 """
 
 from __future__ import annotations

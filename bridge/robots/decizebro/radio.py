@@ -16,7 +16,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import robot_spec
+from bridge.robots.decizebro.contact_legs import CONTACT_LEGS
 from bridge.robots.decizebro.imu import ImuParams, ImuWiring
+from bridge.robots.decizebro.legs import LegsParams
 from firmware_sim.robots.decizebro.imu import Bno055
 from firmware_sim.robots.decizebro.uwb_radio import UwbRadio
 
@@ -37,6 +39,10 @@ class RadioOptions(BaseModel):
         "realistic", description="realistic: the UWB medium's range errors and losses, PDoA bearing noise and "
                                  "front-back folding, the IMU's heading bias and noise; faithful: error-free ranges, "
                                  "bearings (all round), delivery and heading, as the thesis assumes (section 3.1)")
+    body: Literal["gait", "contact"] = Field(
+        "gait", description="the body model in the world: gait, a box whose motion the legs in stance impose "
+                            "(legs.py); contact, a box on six jointed C-legs that walk by pushing on the floor "
+                            "(contact_legs.py: slower to simulate)")
     uwb_radio_pty: str | None = Field(
         None, description="expose the UWB radio's UART on a pseudo-terminal linked at this path (relative to the "
                           "session's output directory; '{id}' is replaced by the robot id); the robot's own program "
@@ -44,7 +50,11 @@ class RadioOptions(BaseModel):
 
 
 def radio_configure(profile: RobotProfile, options: RadioOptions) -> RobotProfile:
-    """The faithful mode's IMU reads the true heading."""
+    """The faithful mode's IMU reads the true heading; the contact body walks on jointed legs instead of the
+    gait-level model's."""
+    if options.body == "contact":
+        parts = tuple(CONTACT_LEGS if isinstance(p, LegsParams) else p for p in profile.parts)
+        profile = profile.model_copy(update={"parts": parts})
     if options.sensing != "faithful":
         return profile
     parts = tuple(p.model_copy(update={"heading_bias_deg": 0.0, "heading_noise_deg": 0.0})

@@ -1,7 +1,7 @@
 """What a DeciZebro leg module's pins meet in the world: its leg's angle sensor and speed, the battery at its ADC, and
-its motor's H-bridge (signed duty), as the legs' world model (``legs.py``) has them. The hub asks the robot's plugin
-(``RobotSpec.wiring``) for each leg module's wiring, senses and actuates through it and records its pins on
-``/rNNN/legN/pins``."""
+its motor's H-bridge (signed duty), as the legs' world model (``legs.py`` or ``contact_legs.py``) has them. The hub
+asks the robot's plugin (``RobotSpec.wiring``) for each leg module's wiring, senses and actuates through it and
+records its pins on ``/rNNN/legN/pins``."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ class LegWiring:
         self.leg = leg
 
     def sense(self, world: Any, r: int, media: dict[str, Any], ideal_pose: bool) -> tuple[dict, dict]:
-        legs = world.model("legs")
+        legs = legs_of(world, r)
         reading = {"angle": legs.angle(r, self.leg), "omega": legs.omega(r, self.leg),
                    "battery_v": float(world.battery_v[r])}
         return reading, reading
@@ -44,7 +44,14 @@ class LegWiring:
         return isinstance(d, int | float) and not isinstance(d, bool) and math.isfinite(d) and -1.0 <= d <= 1.0
 
     def actuate(self, world: Any, r: int, pins: dict[str, Any]) -> None:
-        world.model("legs").set_duty(r, self.leg, pins["duty"])
+        legs_of(world, r).set_duty(r, self.leg, pins["duty"])
+
+
+def legs_of(world: Any, r: int) -> Any:
+    """The world model of robot ``r``'s legs: the gait-level one (``legs``) or the contact-level one
+    (``contact_legs``), as its group's ``body`` option chose; a session may have both."""
+    legs = world.model("legs")
+    return legs if legs is not None and r in legs.local else world.model("contact_legs")
 
 
 @cache
