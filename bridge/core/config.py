@@ -335,8 +335,9 @@ class RobotGroup(_Model):
     logic: Literal["session", "external", "remote"] = Field(
         "session", description="session: the session runs the robot's swarm logic (in simulated time); external: "
                                "a program outside the session (a real robot's companion computer, a test) runs it in "
-                               "wall time and reaches the robot's devices only through their ports (xbee.pty, "
-                               "can.slcan_pty); remote: the session's own logic process for the robot runs on "
+                               "wall time and reaches the robot's devices only through their ports (xbee.pty, and "
+                               "those its robot model names: an eSwarBot's can.slcan_pty); remote: the session's own "
+                               "logic process for the robot runs on "
                                "another computer, joining over zenoh (session.listen, swarm-sitl join), still in "
                                "simulated time")
     can: RobotCanCfg = RobotCanCfg()
@@ -375,9 +376,9 @@ class RobotGroup(_Model):
             if link and self.count > 1 and "{id}" not in link:
                 raise ValueError(f"{what}: a group of several robots needs '{{id}}' in the link path")
         if self.logic == "external":
-            if not self.can.slcan_pty:
-                raise ValueError("can.slcan_pty: an external logic reaches the robot's LLC through its CAN bus: "
-                                 "expose it, e.g. can = { slcan_pty = \"r{id}-can\" }")
+            for what, how in self._external_ports().items():  # the robot model says which ports its program needs
+                if not self._field(what):
+                    raise ValueError(f"{what}: {how}")
             if self.xbee is not None and not (self.xbee.pty or self.xbee.device):
                 raise ValueError("xbee.pty: an external logic reaches the robot's XBee through a pseudo-terminal: give "
                                  "it one, e.g. xbee = { pty = \"r{id}-xbee\" }")
@@ -417,6 +418,20 @@ class RobotGroup(_Model):
             raise ValueError("motion: scripted waypoints are one body's path: give the robot a group of its own "
                              "(count = 1)")
         return self
+
+    def _external_ports(self) -> dict[str, str]:
+        try:
+            return robot_spec(self.profile).external_ports
+        except PluginError:
+            return {}  # the profile's own error says why
+
+    def _field(self, dotted: str) -> Any:
+        """A group field by its dotted config name (``can.slcan_pty``), a robot model's option included."""
+        head, _, rest = dotted.partition(".")
+        value = getattr(self, head) if head in type(self).model_fields else (self.model_extra or {}).get(head)
+        for part in rest.split(".") if rest else ():
+            value = value.get(part) if isinstance(value, dict) else getattr(value, part, None)
+        return value
 
     def model_ptys(self) -> dict[str, str]:
         """The robot model's options that expose one of its modules on a pseudo-terminal (an option named ``*_pty``

@@ -75,6 +75,10 @@ class RobotSpec:
     # its own modules that the robot's computer reaches over a serial line (the program opens ``sitl://ROLE``, paced
     # by the ``uart`` medium as the XBee's line is): role -> the module's UART rate (bit/s)
     ports: dict[str, int] = field(default_factory=dict)
+    # what a program outside the session needs to be the robot's logic (``logic = "external"``): the group fields that
+    # put the robot's devices on ports it can open (dotted as a config names them: ``can.slcan_pty``, a model option
+    # ``i2c_pty``) -> why and how to set it; a group with an external logic that leaves one unset is refused naming it
+    external_ports: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if (self.board is None) != (self.pins is None):

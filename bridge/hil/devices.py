@@ -250,7 +250,7 @@ class SessionDevice:
     device it uses (``real``: it must answer before the session starts)."""
 
     field: str  # the config field, e.g. "robots[1].xbee.device (r005)"
-    kind: str  # "xbee", "can", "mavlink"
+    kind: str  # "xbee", "can", "mavlink", "pty" (a robot model's own port), "logic"
     target: str  # a path, a device or an endpoint
     real: bool
     note: str
@@ -281,6 +281,11 @@ def session_devices(cfg: Any, out_dir: str = "runs/<config name>") -> list[Sessi
                     f"robots[{i}].xbee.device ({who})", "xbee", x.device, True,
                     f"real XBee, expected Series {x.series}, API {x.api_mode}, {x.baud} baud",
                     lambda x=x: probe_xbee(x.device, x.baud, x.api_mode)))
+            for opt, link in g.model_ptys().items():  # the robot model's own modules (a Zebro's bus, radio, ...)
+                found.append(SessionDevice(f"robots[{i}].{opt} ({who})", "pty",
+                                           f"{out_dir}/{link.replace('{id}', str(rid))}", False,
+                                           f"the robot's {opt.removesuffix('_pty')} on a pseudo-terminal, for a "
+                                           "program outside the session"))
             if g.can.slcan_pty:
                 found.append(SessionDevice(f"robots[{i}].can.slcan_pty ({who})", "can",
                                            f"{out_dir}/{g.can.slcan_pty.replace('{id}', str(rid))}", False,

@@ -26,7 +26,8 @@ Items: the master sends ``["i2c", seq, [[addr, read, data_or_length], ...], scl_
 data_or_length], ...]]`` (its own messages and the general calls, in order, then the STOP) and answers reads with
 ``["i2c", txn, [bytes, ...]]``. Every transaction is recorded on ``/rNNN/i2c`` at its end, and counted in the
 summary (``per_robot[].i2c``). Any master can use a robot's bus through :meth:`I2cBuses.submit`: the robot program
-does through its items, a program outside the session could through an endpoint that calls it.
+does through its items, and so does a USB-to-I2C adapter on the bus (a firmware entity of role ``i2c_adapter``, e.g.
+``bridge.hil.usb_iss``: a program outside the session drives the bus through it), which gets the same answers.
 """
 
 from __future__ import annotations
@@ -36,7 +37,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from bridge.core.entities import entity
 from bridge.core.medium import Medium
 from bridge.core.recorder import register_schema
 
@@ -55,6 +55,7 @@ MIN_HZ, MAX_HZ = 1_000, 3_400_000
 MAX_MSG_BYTES = 8192  # Linux's I2C_RDWR message limit
 MAX_MSGS = 42  # I2C_RDWR_IOCTL_MAX_MSGS
 SIM_URL = "sitl://i2c"  # what a HAL table names as its bus to be on the simulated one
+ADAPTER = "i2c_adapter"  # the role of a firmware entity that is a master of its robot's bus (a USB-to-I2C adapter)
 
 SCHEMA = "swarm_sitl.I2c"
 register_schema(SCHEMA, {
@@ -117,12 +118,14 @@ class I2cBuses(Medium):
 
     name = "i2c"
     order = 25
-    routes = {("i2c", "logic"): "master", ("i2c", "*"): "slave", ("i2c_attach", "*"): "attach"}  # noqa: RUF012
+    routes = {("i2c", "logic"): "master", ("i2c", ADAPTER): "master", ("i2c", "*"): "slave",  # noqa: RUF012
+              ("i2c_attach", "*"): "attach"}
 
     @classmethod
     def wanted(cls, hub: Hub) -> bool:
-        """Some robot's program is given the simulated bus (its robot model's HAL tables name ``sitl://i2c``)."""
-        return any(uses_i2c(_hal(hub, r, rp)) for r, rp in enumerate(hub.plan.robots))
+        """Some robot's program is given the simulated bus (its robot model's HAL tables name ``sitl://i2c``), or an
+        adapter on it is."""
+        return any(uses_i2c(_hal(hub, r, rp)) or ADAPTER in rp.modules() for r, rp in enumerate(hub.plan.robots))
 
     def __init__(self, hub: Hub) -> None:
         super().__init__(hub)
@@ -147,11 +150,12 @@ class I2cBuses(Medium):
             bus.general_call.add(e)
 
     def master(self, e: str, r: int, t: int, item: list) -> None:
-        """``["i2c", seq, msgs, scl_hz]`` from a robot's program: a transaction; its result goes to the program."""
+        """``["i2c", seq, msgs, scl_hz]`` from a robot's program or an adapter on its bus: a transaction; its result
+        goes back to that master."""
         seq = item[1] if len(item) > 1 else None
         if type(seq) is not int:
             raise ValueError
-        done = self._to_program(r)
+        done = self._to_master(e)
         try:
             _, _, msgs, hz = item
             checked = check_transaction(msgs, hz)
@@ -296,11 +300,9 @@ class I2cBuses(Medium):
     def _dead(self, ent: str) -> bool:
         return int(ent[1:ent.index("/")]) in self.hub.dead
 
-    def _to_program(self, r: int) -> Done:
-        logic = entity(r, "logic")
-
+    def _to_master(self, master: str) -> Done:
         def done(t: int, result: list) -> None:
-            self.hub.to_inbox(t, logic, ["i2c", result])
+            self.hub.to_inbox(t, master, ["i2c", result])
         return done
 
     # -- the summary --------------------------------------------------------------------------------------------

@@ -212,7 +212,8 @@ def test_unreadable_files_are_config_errors(tmp_path: Path) -> None:
         assert str(e.value).startswith(f"{p}: ") and expected in str(e.value), str(e.value)
 
 
-@pytest.mark.parametrize("hal", ["eswarbot_real.toml", "eswarbot_rdpso_real.toml", "decizebro_real.toml"])
+@pytest.mark.parametrize("hal", ["eswarbot_real.toml", "eswarbot_rdpso_real.toml", "eswarbot_sitl_ports.toml",
+                                 "decizebro_real.toml", "decizebro_sitl_ports.toml"])
 def test_a_hal_config_is_named_as_one(hal: str) -> None:
     p = Path(__file__).resolve().parents[2] / "hil_configs" / "robots" / hal
     with pytest.raises(ConfigError) as e:

@@ -3,6 +3,7 @@ run in a whole session with no file of swarm-sitl edited; and the in-process reg
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -12,8 +13,17 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.config import ConfigError, load_config
 from bridge.core.recorder import iter_messages
-from bridge.core.registry import MEDIA, ROBOTS, STUDIES, RobotSpec, register_robot, robot_profile
+from bridge.core.registry import (
+    MEDIA,
+    ROBOTS,
+    STUDIES,
+    RobotSpec,
+    register_robot,
+    robot_profile,
+    robot_spec,
+)
 from swarm_logic.behaviours import BEHAVIOURS, load_behaviour, register_behaviour
 from swarm_logic.controller import Controller
 from swarm_logic.plugins import PluginError
@@ -246,3 +256,21 @@ def test_the_registry_calls(monkeypatch: pytest.MonkeyPatch) -> None:
         BEHAVIOURS.unregister("still")
     assert "still" not in BEHAVIOURS.names()
     assert {"can", "uart", "radio", "uwb", "mavlink"} <= set(MEDIA.names()) and "rdpso" in STUDIES.names()
+
+
+def test_a_robot_model_names_the_ports_an_external_logic_needs(tmp_path: Path) -> None:
+    """``RobotSpec.external_ports``: the core demands the ports the robot model names, no other."""
+    base = robot_spec("decizebro")
+    spec = dataclasses.replace(base, name="portbot", external_ports={
+        "uwb_radio_pty": "its program reaches the radio through its UART: expose it"})
+    p = tmp_path / "external.toml"
+    try:
+        register_robot(spec)
+        p.write_text('[session]\nspeed = 1\n[[robots]]\nprofile = "portbot"\nlogic = "external"\n')
+        with pytest.raises(ConfigError, match=r"robots\[0\]: uwb_radio_pty: its program reaches the radio through"):
+            load_config(p)
+        p.write_text('[session]\nspeed = 1\n[[robots]]\nprofile = "portbot"\nlogic = "external"\n'
+                     'uwb_radio_pty = "r{id}-uwb"\n')
+        assert load_config(p).robots[0].logic == "external"  # no CAN bus asked of a robot that has none
+    finally:
+        ROBOTS.unregister("portbot")

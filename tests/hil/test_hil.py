@@ -33,6 +33,9 @@ def test_external_logic_needs_ports_and_real_time(tmp_path: Path) -> None:
     p.write_text('[session]\nspeed = 1\n[[robots]]\nlogic = "external"\n')
     with pytest.raises(ConfigError, match=r"robots\[0\]: can.slcan_pty: an external logic reaches the robot's LLC"):
         load_config(p)
+    p.write_text('[session]\nspeed = 1\n[[robots]]\nprofile = "traxbot"\nlogic = "external"\n')
+    with pytest.raises(ConfigError, match=r"robots\[0\]: can.slcan_pty: an external logic reaches the robot's LLC"):
+        load_config(p)
     p.write_text('[session]\nspeed = 1\n[[robots]]\nlogic = "external"\ncan = { slcan_pty = "c" }\nxbee = {}\n')
     with pytest.raises(ConfigError, match=r"xbee.pty: an external logic reaches the robot's XBee"):
         load_config(p)

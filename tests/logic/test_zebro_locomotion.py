@@ -6,6 +6,7 @@ when the sync stops."""
 from __future__ import annotations
 
 import ctypes
+import errno
 import math
 from typing import Any
 
@@ -262,3 +263,22 @@ def test_the_legs_stop_within_two_seconds_of_the_last_sync_and_walk_again_after(
     assert all(m.counters["estops"] == 1 for m in b.modules.values())
     assert got["legs"].counters["estops_cleared"] == 6  # the check after the sync came back
     assert all(abs(w - TWO_PI) < 0.5 for w in b.omega)  # walking again at 10 s
+
+
+def test_an_adapter_that_cannot_combine_the_legs_gets_them_one_by_one() -> None:
+    """A USB-ISS refuses six motion blocks in one transaction (EOPNOTSUPP, as Linux for an adapter's limits): not a
+    bus error; the layer writes each leg on its own from then on."""
+
+    class Narrow(Bus):
+        def i2c_rdwr(self, *msgs: Any) -> None:
+            if sum(not m.flags & 1 for m in msgs) > 5 and all(not m.flags & 1 for m in msgs):
+                raise OSError(errno.EOPNOTSUPP, "Operation not supported")
+            super().i2c_rdwr(*msgs)
+
+    clock, bus = Clock(), Narrow()
+    legs = ZebroLegs(bus, clock)
+    legs.walk(0.0)
+    assert sorted(bus.motions()) == list(range(0x10, 0x16)) and legs.counters["bus_errors"] == 0
+    assert not legs.combine and bus.transactions == 0
+    legs.walk(0.5)  # a turn changes both sides: written leg by leg at once, without trying the combined write again
+    assert legs.counters["bus_errors"] == 0 and bus.transactions == 0

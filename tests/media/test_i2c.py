@@ -229,12 +229,16 @@ def test_the_medium_is_built_for_robots_whose_hal_names_the_bus_and_found_by_url
     assert uses_i2c({"legs": {"bus": "sitl://i2c"}}) and not uses_i2c({"legs": {"bus": 1}, "uwb": {}})
     specs = {"plain": SimpleNamespace(hal=None), "legged": SimpleNamespace(hal=firmware.hal)}
 
-    def hub(*kinds: str) -> Any:
-        robots = [SimpleNamespace(profile=k, gateway=None) for k in kinds]
+    def hub(*kinds: str, options: dict | None = None) -> Any:
+        roles = ("i2c_adapter",) if options else ()
+        robots = [SimpleNamespace(profile=k, gateway=None, options=options or {}, modules=lambda: roles)
+                  for k in kinds]
         return SimpleNamespace(plan=SimpleNamespace(robots=robots), cfg=None,
                                robot_spec=lambda r: specs[robots[r].profile])
 
     assert I2cBuses.wanted(hub("plain", "legged")) and not I2cBuses.wanted(hub("plain"))
+    exposed = hub("legged", options={"i2c_pty": "r{id}-i2c"})  # the program outside has the bus, not the HAL
+    assert not uses_i2c(firmware.hal(exposed.plan.robots[0], None)) and I2cBuses.wanted(exposed)
     assert MEDIA.get("i2c") is I2cBuses
     others = [key for name, cls in MEDIA.items() if name != "i2c" for key in cls.routes]
     assert not set(I2cBuses.routes) & set(others)  # no other medium carries its items

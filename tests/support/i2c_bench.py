@@ -1,6 +1,7 @@
 """A one-robot lock-step bench for the I2C medium, without processes: the medium under a stand-in hub, DeciZebro leg
 modules run as the firmware host runs them (on their wake times and on bus traffic), each on a first-order leg motor
-as the world's legs model has it, and a robot program in a ``RobotRuntime`` thread as the logic host runs it. One
+as the world's legs model has it, a robot program in a ``RobotRuntime`` thread as the logic host runs it, and
+optionally an adapter entity that is another master of the bus (a USB-ISS on a pseudo-terminal). One
 ``step()`` is one quantum, in the hub's order: deliveries, the entities that are due, their outputs to the medium
 (sorted by entity), the medium's ``end_outputs`` and ``advance``."""
 
@@ -18,11 +19,12 @@ from firmware_sim.robots.decizebro.leg_module import LegModule
 
 Q = 10_000_000
 LOGIC = "r000/logic"
+ADAPTER = "r000/i2c_adapter"
 
 
 class I2cBench:
     def __init__(self, program: Callable[[RobotRuntime, SessionClock], None] | None = None, legs: int = 6,
-                 boot_ns: int = 0, q_ns: int = Q) -> None:
+                 boot_ns: int = 0, q_ns: int = Q, adapter: Any = None) -> None:
         self.q_ns, self.n = q_ns, 1
         self.plan = SimpleNamespace(robots=[None])
         self.dead: set[int] = set()
@@ -39,6 +41,7 @@ class I2cBench:
         self.duty_log: list[tuple[int, list[float]]] = []
         self.k = 0
         self.rt: RobotRuntime | None = None
+        self.adapter = adapter  # a master entity on the bus (a USB-ISS: bridge.hil.usb_iss), run every quantum
         if program is not None:
             rt = RobotRuntime(0)
             clock = SessionClock(rt)
@@ -90,9 +93,12 @@ class I2cBench:
                 raise AssertionError(rt.error)
             outputs += [(LOGIC, item) for item in rt.outbox]
             rt.outbox = []
+        if self.adapter is not None:
+            res = self.adapter.run(t, {"in": self.inbox.pop(ADAPTER, [])})
+            outputs += [(ADAPTER, item) for item in res["out"]]
         for e, item in outputs:
             kind = item[0]
-            if e == LOGIC:
+            if e in (LOGIC, ADAPTER):
                 self.medium.master(e, 0, t, item)
             elif kind == "i2c":
                 self.medium.slave(e, 0, t, item)

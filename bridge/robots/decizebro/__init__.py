@@ -84,6 +84,18 @@ def _hal(rp: Any, cfg: Any) -> dict[str, Any]:
     return {**firmware.hal(rp, cfg), **radio.radio_hal(rp, cfg), **utility.utility_hal(rp, cfg)}
 
 
+# a program outside the session is the robot's logic through these (hil_configs/robots/decizebro_sitl_ports.toml)
+EXTERNAL_PORTS = {
+    "i2c_pty": "an external logic walks the robot through its leg modules on the I2C bus: expose it, e.g. "
+               "i2c_pty = \"r{id}-i2c\" (a USB-ISS adapter: usb-iss://PATH)",
+    "uwb_radio_pty": "an external logic reaches the robot's UWB radio through its UART: expose it, e.g. "
+                     "uwb_radio_pty = \"r{id}-uwb\"",
+    "imu_pty": "an external logic reads the robot's heading from its IMU's UART: expose it, e.g. "
+               "imu_pty = \"r{id}-imu\"",
+    "utility_pty": "an external logic reads the utility sensor board's serial line: expose it, e.g. "
+                   "utility_pty = \"r{id}-utility\"",
+}
+
 SPEC = RobotSpec(
     "decizebro", DECIZEBRO, title="DeciZebro: hexapod, six ZebroBus leg modules on I2C, DWM1001 UWB radio",
     roles=_roles, modules=_modules, wiring=_wiring, hal=_hal,
@@ -91,4 +103,5 @@ SPEC = RobotSpec(
     refuses={"xbee": "a decizebro has no XBee: its radio is the DWM1001 UWB module, which carries its messages",
              "uwb": "a decizebro always has its DWM1001 UWB radio; the eSwarBot's ranging-only module does not fit",
              "can": NO_LLC, "vehicle": NO_LLC,
-             "pose_source": "a decizebro has no LLC to report a pose (no odometry on legs, thesis section 1.1)"})
+             "pose_source": "a decizebro has no LLC to report a pose (no odometry on legs, thesis section 1.1)"},
+    external_ports=EXTERNAL_PORTS)

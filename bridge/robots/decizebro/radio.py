@@ -5,7 +5,9 @@
 
 The pieces combine with the leg modules' in the robot's ``RobotSpec``: ``RADIO_ROLES`` its roles, ``radio_modules``
 its entities, ``RADIO_PORTS`` its serial lines, ``radio_hal`` its HAL tables, ``radio_wiring`` the IMU's wiring, and
-``RadioOptions`` / ``radio_configure`` the robot group options (``sensing``, ``uwb_radio_pty``).
+``RadioOptions`` / ``radio_configure`` the robot group options (``sensing``, and the pseudo-terminals for a program
+outside the session: ``uwb_radio_pty``, ``imu_pty``, the I2C bus's ``i2c_pty`` and the utility board's
+``utility_pty``).
 """
 
 from __future__ import annotations
@@ -47,6 +49,17 @@ class RadioOptions(BaseModel):
         None, description="expose the UWB radio's UART on a pseudo-terminal linked at this path (relative to the "
                           "session's output directory; '{id}' is replaced by the robot id); the robot's own program "
                           "then does not open it")
+    i2c_pty: str | None = Field(
+        None, description="expose the robot's I2C bus (its six leg modules) on a pseudo-terminal as a Devantech "
+                          "USB-ISS USB-to-I2C adapter, linked at this path (relative to the session's output "
+                          "directory; '{id}' is replaced by the robot id): swarm_logic's usb-iss:// bus opens it; the "
+                          "robot's own program then does not open its bus")
+    imu_pty: str | None = Field(
+        None, description="expose the BNO055 IMU's UART on a pseudo-terminal linked at this path (as uwb_radio_pty); "
+                          "the robot's own program then does not open it")
+    utility_pty: str | None = Field(
+        None, description="expose the utility sensor board's serial line on a pseudo-terminal linked at this path (as "
+                          "uwb_radio_pty); the robot's own program then does not open it")
 
 
 def radio_configure(profile: RobotProfile, options: RadioOptions) -> RobotProfile:
@@ -114,18 +127,37 @@ class RadioEntity:
 
 
 class ImuEntity:
-    """The BNO055 as the firmware host runs it: it answers the host's requests with the heading its pins sense."""
+    """The BNO055 as the firmware host runs it: it answers the host's requests (from its serial line, or from its
+    pseudo-terminal) with the heading its pins sense."""
 
     def __init__(self, rp: Any, cfg: Any) -> None:
         self.chip = Bno055(IMU_BAUD)
         self.counters = self.chip.counters
+        self.link: Any = None
+        if pty := RadioOptions.model_validate(rp.options).imu_pty:
+            from bridge.hosts.firmware import PtyLink
+
+            self.link = PtyLink(pty, "imu_pty")
 
     def run(self, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
+        if self.link is not None:
+            uart += self.link.read()
         heading = (inputs.get("sens") or {}).get("heading_rad")
         tx = self.chip.step(t_ns, uart, heading)
-        out: list[list] = [["uart", IMU, tx, IMU_BAUD]] if tx else []
-        return {"out": out, "wake": self.chip.next_wake(), "wom": ["uart"]}
+        out: list[list] = []
+        if tx and self.link is not None:
+            self.link.write(tx)
+        elif tx:
+            out.append(["uart", IMU, tx, IMU_BAUD])
+        wake = self.chip.next_wake()
+        if self.link is not None:  # poll the pseudo-terminal every quantum
+            wake = t_ns + 1 if wake is None else min(wake, t_ns + 1)
+        return {"out": out, "wake": wake, "wom": ["uart"]}
+
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
 
 
 def radio_modules(rp: Any, cfg: Any) -> dict[str, Any]:
@@ -140,8 +172,9 @@ def radio_wiring(role: str) -> Any:
 
 def radio_hal(rp: Any, cfg: Any) -> dict[str, Any]:
     """The HAL tables of the robot program: the IMU first (the radio's driver sends its heading to the module), then
-    the radio, unless its UART is on a pseudo-terminal for a program outside the session."""
-    hal: dict[str, Any] = {IMU: {"port": "sitl://imu", "baudrate": IMU_BAUD}}
-    if not RadioOptions.model_validate(rp.options).uwb_radio_pty:
+    the radio, each unless its UART is on a pseudo-terminal for a program outside the session."""
+    opts = RadioOptions.model_validate(rp.options)
+    hal: dict[str, Any] = {} if opts.imu_pty else {IMU: {"port": "sitl://imu", "baudrate": IMU_BAUD}}
+    if not opts.uwb_radio_pty:
         hal[RADIO] = {"port": "sitl://uwb_radio", "baudrate": RADIO_BAUD}
     return hal

@@ -75,12 +75,36 @@ class UtilityEntity:
     def __init__(self, rp: Any, cfg: Any) -> None:
         self.board = UtilityBoard()
         self.counters = self.board.counters
+        self.link: Any = None
+        if pty := _pty(rp):
+            from bridge.hosts.firmware import PtyLink
+
+            self.link = PtyLink(pty, "utility_pty")
 
     def run(self, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
+        if self.link is not None:
+            uart += self.link.read()
         tx = self.board.step(t_ns, inputs.get("sens"), uart)
-        out: list[list] = [["uart", UTILITY, tx, BAUD]] if tx else []
-        return {"out": out, "wake": self.board.next_wake(t_ns), "wom": False}
+        out: list[list] = []
+        if tx and self.link is not None:
+            self.link.write(tx)
+        elif tx:
+            out.append(["uart", UTILITY, tx, BAUD])
+        wake = self.board.next_wake(t_ns)
+        if self.link is not None:  # poll the pseudo-terminal every quantum
+            wake = t_ns + 1 if wake is None else min(wake, t_ns + 1)
+        return {"out": out, "wake": wake, "wom": False}
+
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+
+
+def _pty(rp: Any) -> str | None:
+    """The group's ``utility_pty`` (a ``RadioOptions`` field), if it exposes the board."""
+    pty = (rp.options or {}).get("utility_pty")
+    return pty if isinstance(pty, str) and pty else None
 
 
 UTILITY = "utility"
@@ -88,4 +112,5 @@ UTILITY_PORTS = {UTILITY: BAUD}
 
 
 def utility_hal(rp: Any, cfg: Any) -> dict[str, Any]:
-    return {UTILITY: {"port": "sitl://utility", "baudrate": BAUD}}
+    """The board's HAL table, unless its line is on a pseudo-terminal for a program outside the session."""
+    return {} if _pty(rp) else {UTILITY: {"port": "sitl://utility", "baudrate": BAUD}}

@@ -55,5 +55,10 @@ ESWARBOT = RobotProfile(
     ),
 )
 
+# a program outside the session reaches the LLC through the robot's CAN bus, as the companion computer does
+EXTERNAL_PORTS = {"can.slcan_pty": "an external logic reaches the robot's LLC through its CAN bus: expose it, e.g. "
+                                   "can = { slcan_pty = \"r{id}-can\" }"}
+
 SPEC = RobotSpec("eswarbot", ESWARBOT, eswarbot_llc_db, "eSwarBot: differential drive, Arduino LLC on CAN, XBee, UWB",
-                 LlcBoard, LLC_PINS, default=True)  # a group without a profile is eSwarBots
+                 LlcBoard, LLC_PINS, default=True,  # a group without a profile is eSwarBots
+                 external_ports=EXTERNAL_PORTS)

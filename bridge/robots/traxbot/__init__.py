@@ -10,6 +10,7 @@ from bridge.core.registry import RobotSpec
 from bridge.models.differential_drive import DriveParams
 from bridge.models.light import LightParams
 from bridge.models.sonar import SonarParams
+from bridge.robots.eswarbot import EXTERNAL_PORTS
 from bridge.robots.eswarbot.board import LlcBoard
 from bridge.robots.eswarbot.pins import LLC_PINS
 from bridge.robots.traxbot.conveyor import ConveyorParams
@@ -80,4 +81,4 @@ def configure(profile: RobotProfile, options: TraxbotOptions) -> RobotProfile:
 
 SPEC = RobotSpec("traxbot", TRAXBOT, eswarbot_llc_db, "TraxBot: tracked ranger, three sonars, conveyor of five scouts",
                  LlcBoard, LLC_PINS,  # the eSwarBot's LLC sketch, with its side sonars and conveyor
-                 options=TraxbotOptions, configure=configure)
+                 options=TraxbotOptions, configure=configure, external_ports=EXTERNAL_PORTS)

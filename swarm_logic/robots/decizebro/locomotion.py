@@ -28,6 +28,7 @@ that does not answer) is counted (``counters``) and retried at the next poll; it
 
 from __future__ import annotations
 
+import errno
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -120,6 +121,8 @@ class ZebroLegs:
         self.halted_sent = False
         self.counters = {"sync_writes": 0, "late_syncs": 0, "motion_writes": 0, "bus_errors": 0, "estops_cleared": 0}
         self.last_error = ""
+        self.combine = True  # the bus carries the legs' motion blocks in one transaction (a USB-ISS cannot: six
+        # blocks overflow its 60-byte command frame, refused as Linux refuses what an adapter cannot do: EOPNOTSUPP)
         self.poll()
 
     # -- what the algorithms use -----------------------------------------------------------------------------
@@ -265,14 +268,17 @@ class ZebroLegs:
     def _write_legs(self, blocks: list[tuple[int, list[int]]]) -> list[bool]:
         """Motion blocks to several legs in one transaction (a message to each, repeated STARTs between them, one
         STOP), so they start together; if that fails (a leg does not answer: Linux does not tell which), one
-        transaction each."""
-        if len(blocks) > 1 and hasattr(self.bus, "i2c_rdwr"):
+        transaction each, and from then on if the adapter cannot carry them in one."""
+        if len(blocks) > 1 and self.combine and hasattr(self.bus, "i2c_rdwr"):
             try:
                 self.bus.i2c_rdwr(*(i2c_msg.write(LEG_ADDRESS_BASE + i, [MOTION_MODE, *b]) for i, b in blocks))
                 return [True] * len(blocks)
             except OSError as e:
-                self.counters["bus_errors"] += 1
-                self.last_error = f"motion blocks to {len(blocks)} legs: {e}"
+                if e.errno == errno.EOPNOTSUPP:  # not a bus error: this adapter writes them one leg at a time
+                    self.combine = False
+                else:
+                    self.counters["bus_errors"] += 1
+                    self.last_error = f"motion blocks to {len(blocks)} legs: {e}"
         return [self._write(LEG_ADDRESS_BASE + i, MOTION_MODE, b) for i, b in blocks]
 
 
