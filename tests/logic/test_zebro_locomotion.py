@@ -146,6 +146,21 @@ def test_fast_is_three_times_capped_by_the_motor() -> None:
     assert {tuple(d[1:4:2]) for d in bus2.motions().values()} == {(17, 0)}  # 180 rpm asked, 170 the motor's
 
 
+def test_at_the_motors_cap_the_turn_is_kept() -> None:
+    """The fast leader still steers: the outer side at the cap, the inner side slower by the turn's difference."""
+    clock, bus = Clock(), Bus()
+    legs = ZebroLegs(bus, clock)
+    legs.walk(0.5, fast=True)  # left: the right legs at 170 rpm, the left ones slower
+    rpm = {a: rpm_of(d) for a, d in bus.motions().items()}
+    dv_rpm = 0.5 * 0.21 / 2 / (0.05 * TWO_PI / 60)
+    assert all(abs(rpm[0x10 + i] - 170) < 0.06 for i in loco.RIGHT)
+    assert all(abs(rpm[0x10 + i] - (170 - 2 * dv_rpm)) < 0.06 for i in loco.LEFT)
+    legs.walk(-0.5, fast=True)
+    rpm = {a: rpm_of(d) for a, d in bus.motions().items()}
+    assert all(abs(rpm[0x10 + i] - 170) < 0.06 for i in loco.LEFT)
+    assert all(rpm[0x10 + i] < 170 - 2 * dv_rpm + 0.06 for i in loco.RIGHT)
+
+
 def test_a_speed_change_keeps_each_legs_target_continuous() -> None:
     clock, bus = Clock(), Bus()
     legs = ZebroLegs(bus, clock)

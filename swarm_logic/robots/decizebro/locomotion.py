@@ -2,10 +2,11 @@
 
 What the swarm algorithms get (``robot.device("legs")``, the ``Locomotion`` interface): ``walk(turn_rate_rps,
 fast=False)`` walks forward at the walking speed (``fast``: three times it, for the mature algorithm's leader, capped
-by the motors' 170 rpm) turning at ``turn_rate_rps`` (positive: left) by a speed difference between the left and
-right legs; ``halt()`` stands still; ``speed_mps`` is the walking speed. There is no way to walk backwards: a side's
-legs never turn backwards (a turn sharper than the walking speed allows stops the inner side's legs, which bounds the
-turn rate at ``2 * speed / track``), as the thesis' Zebro software walks forward only.
+by the motors' 170 rpm, the turn kept: at the cap the inner side slows) turning at ``turn_rate_rps`` (positive:
+left) by a speed difference between the left and right legs; ``halt()`` stands still; ``speed_mps`` is the walking
+speed. There is no way to walk backwards: a side's legs never turn backwards (a turn sharper than the walking speed
+allows stops the inner side's legs, which bounds the turn rate at ``2 * speed / track``), as the thesis' Zebro
+software walks forward only.
 
 Underneath, the legs walk a gait (the tripod by default: legs 0, 2, 4 and 1, 3, 5 half a turn apart), each leg in
 ZebroBus walk mode, phase-locked to the synchronised time: the layer writes the sync counter to every leg at once
@@ -138,8 +139,11 @@ class ZebroLegs:
         v = self.speed_mps * (3.0 if fast else 1.0)
         dv = turn_rate_rps * self.track_m / 2
         rim = rpm_to_rad_s(1.0) * self.leg_radius_m  # m/s per rpm
-        left, right = (min(MAX_RPM, max(0.0, (v + s * dv) / rim)) for s in (-1, 1))  # forward only, capped
-        self.target_rpm = (left, right)
+        left, right = ((v + s * dv) / rim for s in (-1, 1))
+        over = max(left, right) - MAX_RPM  # the motors' cap: slow both sides, so that the turn is kept
+        if over > 0:
+            left, right = left - over, right - over
+        self.target_rpm = (max(0.0, left), max(0.0, right))  # forward only
         self._apply()
 
     def halt(self) -> None:
