@@ -93,6 +93,8 @@ class UwbRadioAir(Medium):
         self.count: dict[int, dict[str, int]] = {r: dict.fromkeys(keys, 0) for r in self.team}
         self.received: dict[int, dict[str, int]] = defaultdict(lambda: {"beacons": 0, "data": 0})
         self.per_second: dict[int, dict[int, int]] = {r: {} for r in self.team}  # frames sent in each whole second
+        # data frames and their payload bytes by the payload's first byte (a protocol's frame type, if it has one)
+        self.first_bytes: dict[int, list[int]] = defaultdict(lambda: [0, 0])
 
     def _stream(self, what: str, rx: int, tx: int) -> np.random.Generator:
         key = (what, rx, tx)
@@ -137,6 +139,10 @@ class UwbRadioAir(Medium):
             return
         self.last_slot[r] = m
         c["beacons" if kind == "beacon" else "data"] += 1
+        if kind == "data" and data:
+            fb = self.first_bytes[data[0]]
+            fb[0] += 1
+            fb[1] += len(data)
         sec = self.per_second[r]
         sec[t_ns // 1_000_000_000] = sec.get(t_ns // 1_000_000_000, 0) + 1
         q = hub.q_ns
@@ -218,6 +224,8 @@ class UwbRadioAir(Medium):
                                                     default=0),
             **tot,
             "modes": sorted({"faithful" if self.ideal[r] else "realistic" for r in self.team}),
+            # data frames sent, by their payload's first byte: [frames, payload bytes]
+            "data_by_first_byte": {f"0x{b:02x}": v for b, v in sorted(self.first_bytes.items())},
         }
         for r, c in self.count.items():
             out["per_robot"].setdefault(r, {})["uwb_radio"] = {**c, "frames_per_s": round(rates[r], 3),

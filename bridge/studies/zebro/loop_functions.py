@@ -1,6 +1,6 @@
 """The Zebro study's loop functions (Agrawal 2019): the food particles in a session's world, who consumed which and
 when (``/world/consumptions``), and the thesis' decision figures (``summary.json``'s ``particles`` and ``decision``):
-the first sensing, the-leader, the communication graph's components (``/world/components``)
+the first sensing, the-leader, the frames by type, the communication graph's components (``/world/components``)
 and A-13's split."""
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from bridge.core.loop_functions import LoopFunctions
 from bridge.core.recorder import register_schema
 from bridge.studies.zebro.decision import SplitWatch, components
 from bridge.studies.zebro.particles import Particles
+from swarm_logic.families.zebro.messages import NAMES
 
 if TYPE_CHECKING:
     from bridge.core.config import Config
@@ -113,8 +114,7 @@ class ZebroLoopFunctions(LoopFunctions):
 
     def summary(self) -> dict[str, Any]:
         """Which particles were consumed, by whom and when; whether the first was the best (A-17's best decision);
-        the decision's timing, its leaders and A-13's split (the frames by type are in the recording's
-        ``/rNNN/uwb_radio/tx``)."""
+        the decision's timing, its leaders, A-13's split and the frames on the air by type."""
         positive = [int(u) for u in self.particles.utility if u > 0]
         first = self.consumed[0] if self.consumed else None
         best = None if first is None or len(positive) < 2 else first["utility"] == max(positive)
@@ -130,5 +130,16 @@ class ZebroLoopFunctions(LoopFunctions):
                 "leaders": self.leaders,
                 "radius_m": self.radius,
                 **self.split.report(),
+                "frames_by_type": self._frames_by_type(),
             },
         }
+
+    def _frames_by_type(self) -> dict[str, dict[str, int]]:
+        """The data frames the UWB radios sent, by the family's frame type (its payload's first byte)."""
+        air = self.hub.media.get("uwb_radio")
+        if air is None:
+            return {}
+        out: dict[str, dict[str, int]] = {}
+        for b, (frames, size) in sorted(air.first_bytes.items()):
+            out[NAMES.get(b, f"0x{b:02x}")] = {"frames": frames, "bytes": size}
+        return out

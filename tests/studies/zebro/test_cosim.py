@@ -103,6 +103,10 @@ def test_a_zebro_session_records_its_decision_the_same_at_any_packing_and_speed(
     # the mature election ended with one leader before the meal, the swarm stayed whole (a 60 m radio)
     assert len(d["leaders"]) >= 1 and d["leaders"][0]["t_s"] < d["first_meal"]["t_s"]
     assert d["components_max"] == 1 and not d["split"]
+    # the frames on the air by type: the STOP flood, the wave, the acks, EOE, the beacons and the link lists
+    byt = d["frames_by_type"]
+    assert {"stop", "n2", "n4", "eoe", "n1", "links"} <= set(byt)
+    assert all(v["bytes"] >= v["frames"] > 0 for v in byt.values())
     # the session ended 10 s after the first meal
     assert s["sim_time_s"] == pytest.approx(min(14.0, d["first_meal"]["t_s"] + 10.0), abs=0.011)
     counted = [t for topic, t, _ in iter_messages(tmp_path / "one" / "session.mcap") if topic == "/world/components"]
