@@ -108,8 +108,14 @@ def test_a_zebro_is_driven_from_outside_through_its_bus_and_radio(tmp_path: Path
                 turned += (now - last) % 36000  # forward only: the legs never turn back
                 last = now
             assert turned >= 72000, turned
-            speed = int.from_bytes(bytes(bus.read_i2c_block_data(0x13, zb.LEG_SPEED, 2)), "big", signed=True)
-            assert 300 < speed < 1700  # 0.1 rpm: leg 3 turns forward too (60 rpm, as its PI tracks its phase)
+            # leg 3 turns forward too (0.1 rpm: 60 rpm, as its PI tracks its phase); read until it is seen at speed
+            # (a poll late by over 2 s on a starved machine would let the legs' emergency stop halt it for a while)
+            speed, t0 = 0, clock.now()
+            while not 300 < speed < 1700 and clock.now() - t0 < GUARD_S:
+                legs.poll()
+                speed = int.from_bytes(bytes(bus.read_i2c_block_data(0x13, zb.LEG_SPEED, 2)), "big", signed=True)
+                clock.sleep(0.05)
+            assert 300 < speed < 1700, speed
             legs.halt()
             assert legs.counters["bus_errors"] == 0 and legs.counters["motion_writes"] >= 6
         finally:
