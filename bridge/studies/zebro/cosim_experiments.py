@@ -86,7 +86,6 @@ def cosim_trial(setup: str, algorithm: str, sensing: str, seed: int, workdir: Pa
         "leaders": len(d["leaders"]),
         "radius_m": d["radius_m"],
         "sim_s": round(sim_s, 2),
-        "rtf": summary.get("rtf"),
         "frames_per_robot_s_mean": round(sum(per_robot.values()) / n / max(sim_s, 1e-9), 2),
         # the most frames a robot sent within one whole second (the medium's count): the budget share bounds it
         "frames_in_a_second_max": radio.get("max_frames_per_robot_in_a_second"),
@@ -111,12 +110,14 @@ def _f(v: float) -> str:
 @register
 class ZebroCosim(Experiment):
     name = "zebro-cosim"
-    title = "Zebro collective decisions in co-simulation: E1-E6 x silent / immature / mature x faithful / realistic"
+    title = ("Zebro collective decisions in co-simulation: E1-E6 x silent / immature / mature (and mature with "
+             "repeats) x faithful / realistic")
     description = (
         "The thesis' six setups (Table 4.1, digest 4.1) as sessions of emulated DeciZebros: each robot's six ZebroBus "
         "leg modules on its I2C bus, its DWM1001 UWB radio with data, its BNO055 IMU and utility sensor board, and its "
         "controller unchanged (zebro_silent, zebro_immature, zebro_mature, every reading of A-1 ... A-19 the repaired "
-        "default). Scenarios from the numerical study's generator (robots uniform in a square of side 2 sqrt(n) body "
+        "default; mature_resend: zebro_mature repeating its election frames every 2 ticks, resend_ticks = 2). "
+        "Scenarios from the numerical study's generator (robots uniform in a square of side 2 sqrt(n) body "
         "lengths u = 0.268 m, at least 1.5 u apart so bodies do not overlap, headings within +-20 deg; particles in "
         "different finders' cones 1-2.85 u ahead, utilities 95 and 15), laid out in the middle of a 40 x 40 m arena; "
         "the communication radius (SRC: the MST's longest edge + 1 %; LRC: the diameter + 1 %) is the radios' range "
