@@ -323,6 +323,27 @@ def test_the_imu_driver_reads_the_heading_counter_clockwise_from_east() -> None:
     assert line.read(2) == b"\xee\x04" and chip.counters["errors"] == 1
 
 
+def test_the_imu_reads_its_accelerometer_the_linear_part_and_gravity() -> None:
+    """ACC_DATA (gravity's reaction included), LIA_DATA (less gravity) and GRV_DATA in m/s^2, 100 LSB each; in CONFIG
+    mode the fusion's registers read zero; a malformed vector from the world is ignored."""
+    chip, clock = Bno055(), Clock()
+    state: dict = {"acc": [0.52, -0.13, 9.93], "grv": [0.0, 0.3, 9.8]}
+    line = Line(clock, lambda t, data: chip.step(t, data, 0.0, state["acc"], state["grv"]))
+    imu = Bno055Imu(line, clock)
+    assert imu.acceleration() == pytest.approx((0.52, -0.13, 9.93), abs=0.006)
+    assert imu.gravity() == pytest.approx((0.0, 0.3, 9.8), abs=0.006)
+    assert imu.linear_acceleration() == pytest.approx((0.52, -0.43, 0.13), abs=0.011)
+    state["acc"] = [float("nan"), 0.0, 0.0]  # not finite: the chip keeps what it had
+    assert imu.acceleration() == pytest.approx((0.52, -0.13, 9.93), abs=0.006)
+    state["acc"] = "junk"
+    assert imu.acceleration() == pytest.approx((0.52, -0.13, 9.93), abs=0.006)
+    imu._write(0x3D, b"\x00")  # CONFIG: no fusion, no sensor data
+    assert imu.acceleration() == imu.gravity() == (0.0, 0.0, 0.0)
+    state["acc"] = [400.0, 0.0, 0.0]  # beyond the int16 range: clipped
+    imu._write(0x3D, b"\x0c")
+    assert imu.acceleration()[0] == pytest.approx(327.67)
+
+
 def test_the_radio_driver_sends_the_imu_heading_broadcasts_and_reads() -> None:
     clock = Clock()
     s = Swarm([(0.0, 0.0), (4.0, 0.0)], ideal=True)

@@ -70,7 +70,8 @@ def radio_configure(profile: RobotProfile, options: RadioOptions) -> RobotProfil
         profile = profile.model_copy(update={"parts": parts})
     if options.sensing != "faithful":
         return profile
-    parts = tuple(p.model_copy(update={"heading_bias_deg": 0.0, "heading_noise_deg": 0.0})
+    parts = tuple(p.model_copy(update={"heading_bias_deg": 0.0, "heading_noise_deg": 0.0,
+                                                          "accel_bias_mps2": 0.0, "accel_noise_mps2": 0.0})
                   if isinstance(p, ImuParams) else p for p in profile.parts)
     return profile.model_copy(update={"parts": parts})
 
@@ -128,7 +129,7 @@ class RadioEntity:
 
 class ImuEntity:
     """The BNO055 as the firmware host runs it: it answers the host's requests (from its serial line, or from its
-    pseudo-terminal) with the heading its pins sense."""
+    pseudo-terminal) with the heading and accelerations its pins sense."""
 
     def __init__(self, rp: Any, cfg: Any) -> None:
         self.chip = Bno055(IMU_BAUD)
@@ -143,8 +144,8 @@ class ImuEntity:
         uart = b"".join(item[1] for item in inputs["in"] if item[0] == "uart")
         if self.link is not None:
             uart += self.link.read()
-        heading = (inputs.get("sens") or {}).get("heading_rad")
-        tx = self.chip.step(t_ns, uart, heading)
+        sens = inputs.get("sens") or {}
+        tx = self.chip.step(t_ns, uart, sens.get("heading_rad"), sens.get("accel_mps2"), sens.get("gravity_mps2"))
         out: list[list] = []
         if tx and self.link is not None:
             self.link.write(tx)

@@ -4,7 +4,9 @@
 
 ``open`` puts the chip in NDOF fusion mode (absolute heading from the magnetometer); ``heading()`` reads the Euler
 heading (1/16 degree, clockwise from north) and returns it counter-clockwise from east in radians, as the swarm
-layer wants it. A read that times out or fails returns the last heading read (counted).
+layer wants it; ``acceleration()``, ``linear_acceleration()`` and ``gravity()`` read the accelerometer, its part
+beyond gravity and gravity (m/s^2, the chip's axes: x forward, y left, z up on the Zebro). A read that times out or
+fails returns the last value read (counted).
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from swarm_logic.clock import Clock
 from swarm_logic.devices import open_port
 
 CHIP_ID, EUL_HEADING, OPR_MODE, NDOF = 0x00, 0x1A, 0x3D, 0x0C
+ACC_DATA, LIA_DATA, GRV_DATA = 0x08, 0x28, 0x2E
+LSB_PER_MPS2 = 100.0  # UNIT_SEL's power-on m/s^2
 
 
 class Bno055Error(Exception):
@@ -31,6 +35,7 @@ class Bno055Imu:
         self.clock = clock
         self.timeout = timeout
         self.last = 0.0
+        self.last_vectors: dict[str, tuple[float, float, float]] = {}
         self.counters = {"reads": 0, "failed": 0}
         if self._read(CHIP_ID, 1) != b"\xa0":
             raise Bno055Error("the device on the IMU port is not a BNO055 (chip id)")
@@ -74,6 +79,30 @@ class Bno055Imu:
         self.counters["reads"] += 1
         self.last = math.remainder(math.radians(90.0 - h16 / 16.0), math.tau)
         return self.last
+
+    def _vector(self, reg: int, which: str) -> tuple[float, float, float]:
+        try:
+            raw = struct.unpack("<hhh", self._read(reg, 6))
+        except Bno055Error:
+            self.counters["failed"] += 1
+            return self.last_vectors.get(which, (0.0, 0.0, 0.0))
+        self.counters["reads"] += 1
+        v = (raw[0] / LSB_PER_MPS2, raw[1] / LSB_PER_MPS2, raw[2] / LSB_PER_MPS2)
+        self.last_vectors[which] = v
+        return v
+
+    def acceleration(self) -> tuple[float, float, float]:
+        """The accelerometer (m/s^2): the body's acceleration plus the reaction to gravity (about +9.81 on z at
+        rest)."""
+        return self._vector(ACC_DATA, "acc")
+
+    def linear_acceleration(self) -> tuple[float, float, float]:
+        """The fusion's linear acceleration (m/s^2): the accelerometer less gravity."""
+        return self._vector(LIA_DATA, "lia")
+
+    def gravity(self) -> tuple[float, float, float]:
+        """The fusion's gravity vector in the chip's axes (m/s^2): how the body is tilted."""
+        return self._vector(GRV_DATA, "grv")
 
     def close(self) -> None:
         self.port.close()
