@@ -398,9 +398,9 @@ class RobotGroup(_Model):
                                      "cannot check it before the start; run that robot's logic in the session")
         simulated_llc = self.can.device is None and self.vehicle is None
         if simulated_llc and self.motion.kind != "simulated":
-            raise ValueError(f"motion.kind = {self.motion.kind!r}: the session drives this robot's wheels through its "
-                             "simulated LLC; a stated motion is for a robot whose LLC is real (can.device) or that "
-                             "is a MAVLink vehicle (vehicle)")
+            raise ValueError(f"motion.kind = {self.motion.kind!r}: the session drives this robot's body through its "
+                             "simulated boards (wheels, legs); a stated motion is for a robot whose LLC is real "
+                             "(can.device) or that is a MAVLink vehicle (vehicle)")
         if not simulated_llc:
             what = "can.device" if self.vehicle is None else "vehicle"
             if self.motion.kind == "simulated":

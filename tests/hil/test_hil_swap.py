@@ -83,7 +83,7 @@ def test_stated_motion_is_required_and_checked(tmp_path: Path) -> None:
     cases = {
         f"can = {{ device = {dev} }}": "motion: with can.device the robot moves in the real world",
         'vehicle = { url = "udpin:127.0.0.1:14551" }': "motion: with vehicle the robot moves",
-        'motion = { kind = "fixed" }': "the session drives this robot's wheels",
+        'motion = { kind = "fixed" }': "the session drives this robot's body",
         f'can = {{ device = {dev} }}\nmotion = {{ kind = "scripted", waypoints = [[0, 1, 1, 0], [2, 9, 1, 0]] }}':
             r"robots\[0\].motion.waypoints\[1\]: \(9.0, 1.0\) is outside the arena",
         f'count = 2\ncan = {{ device = {dev} }}\nmotion = {{ kind = "scripted", waypoints = [[0, 1, 1, 0]] }}':

@@ -21,6 +21,8 @@ count = 2
     ('can = { slcan_pty = "r{id}-can" }\n', r"robots\[0\]: can: a decizebro has no LLC on CAN"),
     ('pose_source = "ground_truth"\n', r"robots\[0\]: pose_source: a decizebro has no LLC to report a pose"),
     ("conveyor_slots = 3\n", r"robots\[0\].conveyor_slots: Extra inputs are not permitted"),
+    ('motion = { kind = "fixed" }\n', r"robots\[0\]: motion.kind = 'fixed': the session drives this robot's body "
+                                      r"through its simulated boards \(wheels, legs\)"),
 ])
 def test_options_a_decizebro_does_not_have_are_refused(tmp_path: Path, extra: str, match: str) -> None:
     p = tmp_path / "zebros.toml"
