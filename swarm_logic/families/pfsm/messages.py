@@ -9,6 +9,7 @@ board's 10 bytes.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 SEARCHER = 1
 TARGET = 2
@@ -35,8 +36,10 @@ def encode(p: Payload) -> bytes:
     return bytes((TARGET, p.state)) + p.target_id.to_bytes(2, "little")
 
 
+@lru_cache(maxsize=1024)
 def decode(data: bytes) -> Payload | None:
-    """The payload ``data`` carries; None for anything else (an empty or foreign message)."""
+    """The payload ``data`` carries; None for anything else (an empty or foreign message). Cached: a swarm sends
+    few distinct payloads, and every neighbour decodes each."""
     if len(data) >= 5 and data[0] == SEARCHER:
         return Payload(SEARCHER, data[1], bool(data[2]), int.from_bytes(data[3:5], "little"))
     if len(data) >= 4 and data[0] == TARGET:

@@ -31,7 +31,7 @@ class PfsmTarget(FootbotController):
         if self.state == msg.WAITING:
             for r in self.rab.readings():
                 m = msg.decode(r.data)
-                if m is not None and m.kind == msg.SEARCHER and m.found and m.target_id == self.robot.id:
+                if m is not None and m.found and m.kind == msg.SEARCHER and m.target_id == self.robot.id:
                     self.enter(msg.HOMING)
                     break
             else:
