@@ -53,7 +53,7 @@ class PfsmSearcher(FootbotController):
         "lj_delta_m": 0.75,  # the target distance: ARGoS flocking's 75 cm (digest 2.9)
         "lj_gain": 0.1,  # G, m^2/s: ARGoS flocking's 1000 in cm and cm/s
         "lj_exponent": 6.0,  # k: 6 gives eq. 1's 12-6 shape (K-3); ARGoS flocking's 2 is the alternative
-        "lj_epsilon": 0.1 / 48,  # classic: eps = G/48 and sigma = delta / 2^(1/6) give the generalised k = 6 force
+        "lj_epsilon": 0.1 / 12,  # classic: eps = G/12 and sigma = delta / 2^(1/6) give the generalised k = 6 force
         "lj_sigma_m": 0.75 / 2 ** (1 / 6),
         "lj_cutoff": 1.8,  # neighbours within cutoff x delta (classic: x 2^(1/6) sigma): ARGoS flocking
         "lj_peers": "searching",  # searchers in the LJ sum: searching (the document's "neighbouring searchers") | all
