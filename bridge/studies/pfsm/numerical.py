@@ -226,29 +226,35 @@ class FootbotWorld:
         return out
 
     def proximity(self, i: int) -> list[RingReading] | tuple[RingReading, ...]:
-        """Each obstacle within ``PROXIMITY_RANGE_M`` of the body's surface (another body, a wall) lights the ring
-        sensor nearest its direction, 1 - gap / range (an assumption: ARGoS's foot-bot sensors fall off with
-        distance too, their curve is not modelled)."""
+        """Each sensor is a ray from the body's surface along its angle, reading 1 - distance / range to the first
+        wall or body it meets within ``PROXIMITY_RANGE_M`` (0 beyond): a wall ahead lights a fan of sensors, as
+        ARGoS's ray-cast sensors do (the linear fall-off is an assumption; ARGoS's curve is not modelled)."""
         a = self.arena
         x, y, h = float(self.pos[i, 0]), float(self.pos[i, 1]), float(self.h[i])
-        hits: list[tuple[float, float]] = []  # (world bearing, gap)
         reach = BODY_RADIUS_M + PROXIMITY_RANGE_M
-        for wall_gap, bearing in ((x, math.pi), (a.side_m - x, 0.0), (y, -math.pi / 2), (a.side_m - y, math.pi / 2)):
-            if wall_gap < reach:
-                hits.append((bearing, wall_gap - BODY_RADIUS_M))
-        near = np.nonzero(self.d[i] < 2 * BODY_RADIUS_M + PROXIMITY_RANGE_M)[0]
-        for j in near.tolist():
-            if j != i:
-                gap = float(self.d[i, j]) - 2 * BODY_RADIUS_M
-                hits.append((math.atan2(float(self.dy[i, j]), float(self.dx[i, j])), gap))
-        if not hits:
+        walls = [(gap, normal) for gap, normal in ((x, math.pi), (a.side_m - x, 0.0), (y, -math.pi / 2),
+                                                  (a.side_m - y, math.pi / 2)) if gap < reach]
+        near = [j for j in np.nonzero(self.d[i] < 2 * BODY_RADIUS_M + PROXIMITY_RANGE_M)[0].tolist() if j != i]
+        if not walls and not near:
             return NO_PROXIMITY
-        values = [0.0] * PROXIMITY_COUNT
-        step = 2 * math.pi / PROXIMITY_COUNT
-        for bearing, gap in hits:
-            k = round(((bearing - h) % (2 * math.pi)) / step) % PROXIMITY_COUNT
-            values[k] = max(values[k], min(1.0, max(0.0, 1.0 - gap / PROXIMITY_RANGE_M)))
-        return [RingReading(v, ang) for v, ang in zip(values, PROX_ANGLES, strict=True)]
+        bodies = [(float(self.dx[i, j]), float(self.dy[i, j])) for j in near]
+        out = []
+        r2 = BODY_RADIUS_M * BODY_RADIUS_M
+        for ang in PROX_ANGLES:
+            wa = h + ang
+            c, s = math.cos(wa), math.sin(wa)
+            best = PROXIMITY_RANGE_M
+            for gap, normal in walls:  # the ray from the surface point to the wall's plane
+                cn = math.cos(wa - normal)
+                if cn > 1e-9:
+                    best = min(best, (gap - BODY_RADIUS_M * cn) / cn)
+            for bx, by in bodies:  # the ray from the centre meets the other body's circle
+                t = bx * c + by * s
+                q = bx * bx + by * by - t * t
+                if t > 0 and q < r2:
+                    best = min(best, t - math.sqrt(r2 - q) - BODY_RADIUS_M)
+            out.append(RingReading(min(1.0, max(0.0, 1.0 - best / PROXIMITY_RANGE_M)), ang))
+        return out
 
     def light(self, i: int) -> list[RingReading]:
         """The light above the base: each sensor reads (I / distance)^2 x cos of its angle off the light's direction

@@ -117,3 +117,12 @@ def test_the_grid_is_27_scenarios_of_10_seeds() -> None:
     assert len(grid) == 27 and e.trials == 10
     assert {(c["side"], c["searchers"], c["targets"]) for c in grid} == {
         (s, n, t) for s in (5.0, 7.5, 10.0) for n in (10, 20, 30) for t in (10, 20, 30)}
+
+
+def test_a_wall_dead_ahead_lights_a_fan_of_sensors_and_turns_the_searcher() -> None:
+    """Head-on, one lit sensor would leave ARGoS's diffusion vector pointing ahead and short (go straight, into the
+    wall); the ray model lights several, and the searcher avoids."""
+    sw = Swarm(Arena(5.0), fixed([(4.9, 2.5)], [0.0]), seed=1)
+    lit = [r.value for r in sw.world.proximity(0) if r.value > 0]
+    assert len(lit) >= 5
+    assert sw.ctls[0].avoidance() is not None
