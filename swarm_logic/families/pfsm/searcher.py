@@ -44,6 +44,11 @@ class PfsmSearcher(FootbotController):
         "pfsm_mode": "literal",  # K-1: literal (guards compare probabilities, as printed) | sampled (ARGoS foraging)
         "p_init": "uniform",  # K-1: P_ij ~ U(0, 1) i.i.d. (literal, digest 2.9) | fixed (ARGoS foraging's 0.1 each)
         "p_fixed": 0.1,  # the fixed reading's P_ij (ARGoS foraging explore/rest probabilities)
+        # K-1 (with line 25): P_T redrawn on entering TIMEOUT too (the document's section 3.1: TIMEOUT "does a
+        # clean-up of the transition probabilities"; "regenerated in TIMEOUT") | staying (line 25 alone: a robot in
+        # the base with P_RS <= P_SR <= P_TS then passes SEARCH -> RETURN -> TIMEOUT -> SEARCH within every step,
+        # never redrawing: trapped for good unless its neighbours' finds move P_SR)
+        "timeout_redraw": "entry",
         "social": "foraging",  # K-2: foraging (Delta updates, digest 5.3) | none (the document gives no rule)
         "social_delta": 0.01,  # ARGoS foraging social_rule_*_delta_prob (digest 2.9)
         "max_search_s": 60.0,  # MaxTime_SEARCH,RETURN: ARGoS foraging minimum_unsuccessful_explore_time, 600 ticks
@@ -69,7 +74,8 @@ class PfsmSearcher(FootbotController):
         "near_target_m": "[0, inf)",
     }
     choices: ClassVar[dict[str, tuple[str, ...]]] = {
-        "pfsm_mode": ("literal", "sampled"), "p_init": ("uniform", "fixed"), "social": ("foraging", "none"),
+        "pfsm_mode": ("literal", "sampled"), "timeout_redraw": ("entry", "staying"), "p_init": ("uniform", "fixed"),
+        "social": ("foraging", "none"),
         "lj_form": ("generalised", "classic"), "lj_peers": ("searching", "all"), "search_vector": ("zero", "diffusion"),
     }
 
@@ -175,8 +181,8 @@ class PfsmSearcher(FootbotController):
         if self.state == msg.RETURN:
             if self.in_base():
                 self.enter(msg.TIMEOUT, now)
-                if not literal:
-                    self.draw()  # sampled: a clean P_T on entering the rest
+                if not literal or p["timeout_redraw"] == "entry":
+                    self.draw()  # a clean P_T on entering the rest
             else:
                 lx, ly = self.to_light()
                 vmax = float(p["max_speed_mps"])

@@ -64,7 +64,7 @@ def test_search_ends_at_its_time_bound() -> None:
 
 
 def test_timeout_stops_the_wheels_and_redraws_p_t_every_step() -> None:
-    c, dev, clock = started(PfsmSearcher, {"social": "none", "max_timeout_s": 100.0})
+    c, dev, clock = started(PfsmSearcher, {"social": "none", "max_timeout_s": 100.0, "timeout_redraw": "staying"})
     pin(c, 0.9, 0.1, 0.5)
     dev.grey = True  # in the base: RETURN -> TIMEOUT at once
     tick(c, clock)
@@ -81,7 +81,7 @@ def test_timeout_stops_the_wheels_and_redraws_p_t_every_step() -> None:
 
 
 def test_return_heads_for_the_light_and_rests_in_the_base() -> None:
-    c, dev, clock = started(PfsmSearcher, {"social": "none"})
+    c, dev, clock = started(PfsmSearcher, {"social": "none", "timeout_redraw": "staying"})
     pin(c, 0.9, 0.1, 0.5)
     tick(c, clock)
     assert c.state == msg.RETURN
@@ -215,3 +215,19 @@ def test_numeric_ranges_and_thresholds_are_validated() -> None:
         PfsmSearcher.resolve({"near_target_m": -1.0})
     with pytest.raises(ValueError, match="turning thresholds"):
         PfsmSearcher.resolve({"soft_turn_deg": 95.0})
+
+
+def test_line_25_alone_traps_a_robot_in_the_base_and_the_entry_redraw_frees_it() -> None:
+    """With P_RS <= P_SR <= P_TS in the base, SEARCH -> RETURN -> TIMEOUT -> SEARCH happens within every step and
+    line 25 never runs; redrawing on entering TIMEOUT (the document's "clean-up") breaks the loop."""
+    c, dev, clock = started(PfsmSearcher, {"social": "none", "timeout_redraw": "staying"})
+    dev.grey = True
+    pin(c, 0.5, 0.2, 0.8)
+    for _ in range(50):
+        tick(c, clock)
+        assert c.state == msg.SEARCH and (c.p_sr, c.p_rs, c.p_ts) == (0.5, 0.2, 0.8)
+    c, dev, clock = started(PfsmSearcher, {"social": "none"})
+    dev.grey = True
+    pin(c, 0.5, 0.2, 0.8)
+    tick(c, clock)
+    assert (c.p_sr, c.p_rs, c.p_ts) != (0.5, 0.2, 0.8)
