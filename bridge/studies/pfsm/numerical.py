@@ -10,8 +10,8 @@ energy per tick (one unit per searcher not resting, K-7), each target's discover
 The range-and-bearing model (``RabModel``): every robot hears every other robot within ``range_m`` (3 m, ARGoS's
 foot-bot default) whose line of sight no third body crosses (ARGoS checks occlusions by embodied entities), once per
 tick (the board's update is the control step), the payload the sender set by the end of the previous tick; range and
-bearing are exact and nothing is lost by default (ARGoS's noise and packet-drop defaults are 0), and both are
-parameters.
+bearing are exact and nothing is lost by default (ARGoS's noise and packet-drop defaults are 0); noise, loss and the
+update period are parameters.
 """
 
 from __future__ import annotations
@@ -67,6 +67,11 @@ class RabModel:
     range_noise_m: float = 0.0  # std of a Gaussian error on the range (ARGoS default 0)
     bearing_noise_rad: float = 0.0  # std of a Gaussian error on the bearing (ARGoS default 0)
     loss: float = 0.0  # probability a reading is dropped (ARGoS packet_drop_prob default 0)
+    period_ticks: int = 1  # the board's update: every control step (ARGoS); k > 1 holds the readings k ticks
+
+    def __post_init__(self) -> None:
+        if self.period_ticks < 1 or not 0.0 <= self.loss <= 1.0 or self.range_m <= 0:
+            raise ValueError(f"range-and-bearing model: range > 0, loss in [0, 1], period_ticks >= 1; got {self}")
 
 
 @dataclass(frozen=True)
@@ -164,14 +169,18 @@ class FootbotWorld:
         self.sense()
 
     def sense(self) -> None:
-        """The snapshot this tick's readings come from: positions and last tick's payloads."""
-        self.sent = list(self.payload)
+        """The snapshot this tick's readings come from: positions, and on the board's update ticks what it hears
+        (last tick's payloads, ranges and bearings), held until its next update."""
         x, y = self.pos[:, 0], self.pos[:, 1]
         self.dx = x[None, :] - x[:, None]
         self.dy = y[None, :] - y[:, None]
         self.d = np.hypot(self.dx, self.dy)
+        if self.tick % self.rab_model.period_ticks:
+            return
+        self.sent = list(self.payload)
         b = np.arctan2(self.dy, self.dx) - self.h[:, None]
-        self.b = np.arctan2(np.sin(b), np.cos(b))  # bearing of j from i, in i's frame
+        self.rab_d = self.d
+        self.rab_b = np.arctan2(np.sin(b), np.cos(b))  # bearing of j from i, in i's frame
         self.hear = self.links()
         self._rab = [None] * self.n
 
@@ -209,7 +218,7 @@ class FootbotWorld:
             return cached
         m = self.rab_model
         js = np.nonzero(self.hear[i])[0]
-        rs, bs, sent = self.d[i, js].tolist(), self.b[i, js].tolist(), self.sent
+        rs, bs, sent = self.rab_d[i, js].tolist(), self.rab_b[i, js].tolist(), self.sent
         noisy = m.range_noise_m > 0 or m.bearing_noise_rad > 0
         out = []
         for j, r, b in zip(js.tolist(), rs, bs, strict=True):

@@ -126,3 +126,17 @@ def test_a_wall_dead_ahead_lights_a_fan_of_sensors_and_turns_the_searcher() -> N
     lit = [r.value for r in sw.world.proximity(0) if r.value > 0]
     assert len(lit) >= 5
     assert sw.ctls[0].avoidance() is not None
+
+
+def test_a_slower_board_holds_its_readings_between_updates() -> None:
+    dep = fixed([(2.0, 2.0), (2.5, 2.0)], [0.0, 0.0])
+    sw = Swarm(Arena(5.0), dep, seed=1, rab=RabModel(period_ticks=5),
+               params={"search_vector": "diffusion", "pfsm_mode": "sampled", "max_search_s": 1e6})
+    heard = []
+    for _ in range(6):
+        sw.tick()
+        heard.append(len(sw.world.rab_readings(0)))
+    # the first payloads are sent in tick 1's steps; the board carries them from its next update, tick 5
+    assert heard == [0, 0, 0, 0, 1, 1]
+    with pytest.raises(ValueError, match="period_ticks"):
+        RabModel(period_ticks=0)
