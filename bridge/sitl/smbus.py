@@ -13,7 +13,6 @@ block reads (a count byte first) and PEC are not offered, as that adapter does n
 
 from __future__ import annotations
 
-import ctypes
 import itertools
 import os
 import threading
@@ -23,15 +22,13 @@ from collections.abc import Iterator
 from typing import Any
 
 from smbus2 import I2cFunc, i2c_msg
-from smbus2 import SMBus as _SMBus
 
 from bridge.hosts import sim_context
 from bridge.media.i2c import EINVAL, EREMOTEIO, ETIMEDOUT, SIM_URL, check_transaction
+from swarm_logic.drivers.i2c import Message, PlainI2cSMBus
 
-BLOCK_MAX = 32  # I2C_SMBUS_BLOCK_MAX
 ADAPTER_TIMEOUT_NS = 1_000_000_000  # i2c-bcm2835 gives up on a transaction after 1 s
-EBADF, EOPNOTSUPP = 9, 95
-I2C_M_RD, I2C_M_TEN = 0x0001, 0x0010
+EBADF = 9
 FUNCS = I2cFunc.I2C | (I2cFunc.SMBUS_EMUL & ~I2cFunc.SMBUS_PEC)  # what i2c-bcm2835 offers, less PEC
 
 # per robot: how many SMBus objects have its bus open, and its transactions' numbers (each robot counts its own, so
@@ -44,7 +41,7 @@ def _error(code: int) -> OSError:
     return OSError(code, os.strerror(code))
 
 
-class SMBus(_SMBus):
+class SMBus(PlainI2cSMBus):
     """``SMBus("sitl://i2c", scl_hz=100_000)``: the robot's simulated bus (``scl_hz`` stands for the Pi's
     ``i2c_arm_baudrate`` boot setting: 100 kHz by default, 400 kHz fast mode)."""
 
@@ -86,15 +83,8 @@ class SMBus(_SMBus):
         self.address = None
         self._force_last = None
 
-    def enable_pec(self, enable: bool = True) -> None:
-        raise OSError("SMBUS_PEC is not a feature")
-
-    def _set_address(self, address: int, force: bool | None = None) -> None:
-        self.address = address
-        self._force_last = force if force is not None else self.force
-
     # -- one transaction ---------------------------------------------------------------------------------------
-    def _transfer(self, msgs: list[list]) -> list[bytes]:
+    def _transfer(self, msgs: list[Message]) -> list[bytes]:
         """Send one transaction and wait in simulated time for its end; the bytes its reads got."""
         rt, rx = self._rt, self._rx
         if rt is None or rx is None:
@@ -106,7 +96,7 @@ class SMBus(_SMBus):
         except (ValueError, TypeError):
             raise _error(EINVAL) from None
         seq = next(_seqs.setdefault(rt, itertools.count(1)))
-        rt.outbox.append(["i2c", seq, msgs, self.scl_hz])
+        rt.outbox.append(["i2c", seq, [list(m) for m in msgs], self.scl_hz])
         deadline = rt.t_ns + ADAPTER_TIMEOUT_NS
         while True:
             while rx:
@@ -120,88 +110,6 @@ class SMBus(_SMBus):
             if rt.t_ns >= deadline:
                 raise _error(ETIMEDOUT)
             rt.block(deadline, "i2c")
-
-    def _write(self, addr: int, data: bytes) -> None:
-        self._transfer([[addr, False, bytes(data)]])
-
-    def _write_read(self, addr: int, data: bytes, n: int) -> bytes:
-        return self._transfer([[addr, False, bytes(data)], [addr, True, n]])[0]
-
-    # -- the SMBus calls, as the kernel emulates them on a plain I2C adapter ---------------------------------------
-    def write_quick(self, i2c_addr: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, b"")
-
-    def read_byte(self, i2c_addr: int, force: bool | None = None) -> int:
-        self._set_address(i2c_addr, force)
-        return self._transfer([[i2c_addr, True, 1]])[0][0]
-
-    def write_byte(self, i2c_addr: int, value: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([value & 0xFF]))
-
-    def read_byte_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
-        self._set_address(i2c_addr, force)
-        return self._write_read(i2c_addr, bytes([register & 0xFF]), 1)[0]
-
-    def write_byte_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF, value & 0xFF]))
-
-    def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
-        """SMBus words are little-endian (low byte first)."""
-        self._set_address(i2c_addr, force)
-        return int.from_bytes(self._write_read(i2c_addr, bytes([register & 0xFF]), 2), "little")
-
-    def write_word_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF]) + (value & 0xFFFF).to_bytes(2, "little"))
-
-    def process_call(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> int:
-        self._set_address(i2c_addr, force)
-        out = bytes([register & 0xFF]) + (value & 0xFFFF).to_bytes(2, "little")
-        return int.from_bytes(self._write_read(i2c_addr, out, 2), "little")
-
-    def read_block_data(self, i2c_addr: int, register: int, force: bool | None = None) -> list[int]:
-        raise _error(EOPNOTSUPP)  # needs I2C_M_RECV_LEN, which i2c-bcm2835 does not offer
-
-    def block_process_call(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> list[int]:
-        raise _error(EOPNOTSUPP)
-
-    def write_block_data(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> None:
-        """SMBus block write: the register, a count byte, the data."""
-        data = bytes(data)
-        if len(data) > BLOCK_MAX:
-            raise ValueError(f"Data length cannot exceed {BLOCK_MAX} bytes")
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF, len(data)]) + data)
-
-    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int, force: bool | None = None) -> list[int]:
-        if length > BLOCK_MAX:
-            raise ValueError(f"Desired block length over {BLOCK_MAX} bytes")
-        self._set_address(i2c_addr, force)
-        return list(self._write_read(i2c_addr, bytes([register & 0xFF]), length))
-
-    def write_i2c_block_data(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> None:
-        data = bytes(data)
-        if len(data) > BLOCK_MAX:
-            raise ValueError(f"Data length cannot exceed {BLOCK_MAX} bytes")
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF]) + data)
-
-    def i2c_rdwr(self, *i2c_msgs: i2c_msg) -> None:
-        """One combined transaction (repeated STARTs, one STOP); read messages' buffers are filled in place."""
-        msgs: list[list] = []
-        for m in i2c_msgs:
-            if m.flags & I2C_M_TEN:
-                raise _error(EINVAL)  # no 10-bit addresses on this adapter
-            read = bool(m.flags & I2C_M_RD)
-            msgs.append([int(m.addr), read, int(m.len) if read else bytes(m)])
-        reads = iter(self._transfer(msgs))
-        for m in i2c_msgs:
-            if m.flags & I2C_M_RD:
-                data = next(reads)
-                ctypes.memmove(m.buf, data, min(len(data), m.len))
 
 
 __all__ = ["EREMOTEIO", "ETIMEDOUT", "SMBus", "i2c_msg"]

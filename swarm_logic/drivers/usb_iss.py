@@ -22,14 +22,14 @@ project is MIT; ``pyusbiss`` drives only SPI. This client needs only pyserial.
 
 from __future__ import annotations
 
-import ctypes
 import errno as errno_
 import os
 from typing import Any
 
 import serial
 from smbus2 import I2cFunc, i2c_msg
-from smbus2 import SMBus as _SMBus
+
+from swarm_logic.drivers.i2c import Message, PlainI2cSMBus
 
 SCHEME = "usb-iss://"
 ISS_CMD, ISS_VERSION, ISS_MODE = 0x5A, 0x01, 0x02
@@ -41,8 +41,6 @@ IO_INPUTS = 0x0A  # I/O1 and I/O2 as digital inputs: nothing else is driven
 MODES = {20_000: 0x20, 50_000: 0x30, 100_000: 0x60, 400_000: 0x70, 1_000_000: 0x80}  # hardware I2C where it can
 MAX_FRAME = 59  # "limit the frame to < 60 bytes"
 MAX_READ = 64  # the module's buffer
-BLOCK_MAX = 32  # I2C_SMBUS_BLOCK_MAX
-I2C_M_RD, I2C_M_TEN = 0x0001, 0x0010
 FUNCS = I2cFunc.I2C | (I2cFunc.SMBUS_EMUL & ~I2cFunc.SMBUS_PEC & ~I2cFunc.SMBUS_READ_BLOCK_DATA
                        & ~I2cFunc.SMBUS_BLOCK_PROC_CALL)
 
@@ -51,7 +49,7 @@ def _error(code: int, what: str = "") -> OSError:
     return OSError(code, os.strerror(code) + (f": {what}" if what else ""))
 
 
-def direct_frame(msgs: list[tuple[int, bool, bytes | int]]) -> bytes:
+def direct_frame(msgs: list[Message]) -> bytes:
     """One I2C transaction as an I2C_DIRECT command: START, each message (its address byte, then its data in WRITEs
     of at most 16 bytes, or READs of at most 16), a repeated START between messages, STOP. ``EOPNOTSUPP`` if it does
     not fit the adapter's frame."""
@@ -79,7 +77,7 @@ def direct_frame(msgs: list[tuple[int, bool, bytes | int]]) -> bytes:
     return bytes(out)
 
 
-class UsbIssSMBus(_SMBus):
+class UsbIssSMBus(PlainI2cSMBus):
     """``UsbIssSMBus("usb-iss:///dev/ttyACM0", scl_hz=100_000)``: the bus behind a USB-ISS, at that SCL rate (20,
     50, 100, 400 kHz or 1 MHz; the module's hardware I2C where it offers the rate)."""
 
@@ -123,13 +121,6 @@ class UsbIssSMBus(_SMBus):
         self.address = None
         self._force_last = None
 
-    def enable_pec(self, enable: bool = True) -> None:
-        raise OSError("SMBUS_PEC is not a feature")
-
-    def _set_address(self, address: int, force: bool | None = None) -> None:
-        self.address = address
-        self._force_last = force if force is not None else self.force
-
     # -- one command --------------------------------------------------------------------------------------------
     def _command(self, frame: bytes, n: int) -> bytes:
         """Send a command, wait for its ``n``-byte answer."""
@@ -147,7 +138,7 @@ class UsbIssSMBus(_SMBus):
             raise _error(errno_.ETIMEDOUT, f"the USB-ISS answered {len(got)} of {n} bytes")
         return got
 
-    def _transfer(self, msgs: list[tuple[int, bool, bytes | int]]) -> list[bytes]:
+    def _transfer(self, msgs: list[Message]) -> list[bytes]:
         """One transaction; the bytes each read message got."""
         frame = direct_frame(msgs)
         status = self._command(frame, 2)
@@ -165,88 +156,6 @@ class UsbIssSMBus(_SMBus):
                 out.append(data[pos:pos + int(n)])  # type: ignore[arg-type]
                 pos += int(n)  # type: ignore[arg-type]
         return out
-
-    def _write(self, addr: int, data: bytes) -> None:
-        self._transfer([(addr, False, bytes(data))])
-
-    def _write_read(self, addr: int, data: bytes, n: int) -> bytes:
-        return self._transfer([(addr, False, bytes(data)), (addr, True, n)])[0]
-
-    # -- the SMBus calls, as the kernel emulates them on a plain I2C adapter ---------------------------------------
-    def write_quick(self, i2c_addr: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, b"")
-
-    def read_byte(self, i2c_addr: int, force: bool | None = None) -> int:
-        self._set_address(i2c_addr, force)
-        return self._transfer([(i2c_addr, True, 1)])[0][0]
-
-    def write_byte(self, i2c_addr: int, value: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([value & 0xFF]))
-
-    def read_byte_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
-        self._set_address(i2c_addr, force)
-        return self._write_read(i2c_addr, bytes([register & 0xFF]), 1)[0]
-
-    def write_byte_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF, value & 0xFF]))
-
-    def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
-        """SMBus words are little-endian (low byte first)."""
-        self._set_address(i2c_addr, force)
-        return int.from_bytes(self._write_read(i2c_addr, bytes([register & 0xFF]), 2), "little")
-
-    def write_word_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF]) + (value & 0xFFFF).to_bytes(2, "little"))
-
-    def process_call(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> int:
-        self._set_address(i2c_addr, force)
-        out = bytes([register & 0xFF]) + (value & 0xFFFF).to_bytes(2, "little")
-        return int.from_bytes(self._write_read(i2c_addr, out, 2), "little")
-
-    def read_block_data(self, i2c_addr: int, register: int, force: bool | None = None) -> list[int]:
-        raise _error(errno_.EOPNOTSUPP)  # the length comes in the read: the adapter is told it beforehand
-
-    def block_process_call(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> list[int]:
-        raise _error(errno_.EOPNOTSUPP)
-
-    def write_block_data(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> None:
-        """SMBus block write: the register, a count byte, the data."""
-        data = bytes(data)
-        if len(data) > BLOCK_MAX:
-            raise ValueError(f"Data length cannot exceed {BLOCK_MAX} bytes")
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF, len(data)]) + data)
-
-    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int, force: bool | None = None) -> list[int]:
-        if length > BLOCK_MAX:
-            raise ValueError(f"Desired block length over {BLOCK_MAX} bytes")
-        self._set_address(i2c_addr, force)
-        return list(self._write_read(i2c_addr, bytes([register & 0xFF]), length))
-
-    def write_i2c_block_data(self, i2c_addr: int, register: int, data: Any, force: bool | None = None) -> None:
-        data = bytes(data)
-        if len(data) > BLOCK_MAX:
-            raise ValueError(f"Data length cannot exceed {BLOCK_MAX} bytes")
-        self._set_address(i2c_addr, force)
-        self._write(i2c_addr, bytes([register & 0xFF]) + data)
-
-    def i2c_rdwr(self, *i2c_msgs: i2c_msg) -> None:
-        """One combined transaction (repeated STARTs, one STOP); read messages' buffers are filled in place."""
-        msgs: list[tuple[int, bool, bytes | int]] = []
-        for m in i2c_msgs:
-            if m.flags & I2C_M_TEN:
-                raise _error(errno_.EINVAL)  # the USB-ISS has 7-bit addresses only
-            read = bool(m.flags & I2C_M_RD)
-            msgs.append((int(m.addr), read, int(m.len) if read else bytes(m)))
-        reads = iter(self._transfer(msgs))
-        for m in i2c_msgs:
-            if m.flags & I2C_M_RD:
-                data = next(reads)
-                ctypes.memmove(m.buf, data, min(len(data), m.len))
 
 
 __all__ = ["UsbIssSMBus", "direct_frame", "i2c_msg"]
