@@ -6,11 +6,12 @@ the simulator. The runner calls ``step()`` every ``period_s`` of the robot's clo
 Two hooks serve a ground station (``swarm_logic.mavlink.face``): ``set_param`` changes a parameter while the robot
 runs, ``telemetry`` names a few numbers of the behaviour's state.
 
-Parameters are declared once, on the class: ``defaults`` (name -> default; an int default makes an integer
-parameter) and ``ranges`` (name -> the interval its values must lie in, e.g. ``"(0, 2]"``). ``param_error`` checks
-a value against both, and everything that takes a parameter uses it: ``with_defaults`` (so a controller's
-``init`` and ``resolve``), ``set_param``, a session config's validation (``bridge.core.config``) and the MAVLink face's
-PARAM_SET. A controller's ``resolve`` checks only what one range cannot say (one parameter against another).
+Parameters are declared once, on the class: ``defaults`` (name -> default; an int default makes an integer parameter),
+``ranges`` (name -> the interval its values must lie in, e.g. ``"(0, 2]"``) and ``choices`` (name -> the readings a
+string parameter may take). ``param_error`` checks a value against them, and everything that takes a parameter uses
+it: ``with_defaults`` (so a controller's ``init`` and ``resolve``), ``set_param``, a session config's validation
+(``bridge.core.config``) and the MAVLink face's PARAM_SET. A controller's ``resolve`` checks only what one range
+cannot say (one parameter against another).
 """
 
 from __future__ import annotations
@@ -79,6 +80,8 @@ class Controller(ABC):
     iteration_log: ClassVar[str | None] = None
     # the numeric parameters' ranges, in interval notation ("(0, 2]"); made ``Range``s when the class is defined
     ranges: ClassVar[Mapping[str, str | Range]] = {}
+    # the string parameters' allowed values (a thesis' readings of an ambiguity: "literal", "repaired", ...)
+    choices: ClassVar[Mapping[str, tuple[str, ...]]] = {}
     # parameters read only by ``init``: ``set_param`` stores them for the next start (a reboot) and no sooner
     static_params: ClassVar[frozenset[str]] = frozenset()
 
@@ -93,6 +96,12 @@ class Controller(ABC):
             error = cls.param_error(name, cls.defaults[name])
             if error is not None:
                 raise TypeError(f"{cls.__name__}.defaults: {name} = {cls.defaults[name]!r}: {error}")
+        for name in cls.choices:
+            if name not in cls.defaults:
+                raise TypeError(f"{cls.__name__}.choices: {name!r} is not one of its parameters")
+            error = cls.param_error(name, cls.defaults[name])
+            if error is not None:
+                raise TypeError(f"{cls.__name__}.defaults: {name} = {cls.defaults[name]!r}: {error}")
 
     def init(self, robot: Robot) -> None:
         self.robot = robot
@@ -100,7 +109,11 @@ class Controller(ABC):
     @classmethod
     def param_error(cls, name: str, value: Any) -> str | None:
         """Why ``value`` cannot be numeric parameter ``name``: not a number, not an integer where the default is one,
-        outside the parameter's declared range; None when it can (and for names that are not numeric parameters)."""
+        outside the parameter's declared range, not one of its ``choices``; None when it can (and for names that are
+        neither)."""
+        allowed = cls.choices.get(name)
+        if allowed is not None:
+            return None if value in allowed else f"expected one of {', '.join(allowed)}, got {value!r}"
         default = cls.defaults.get(name)
         if isinstance(default, bool) or not isinstance(default, int | float):
             return None  # flags, strings, lists: the controller's own checks
@@ -125,6 +138,12 @@ class Controller(ABC):
             if error is not None:
                 raise ValueError(f"{name}: {error}")
         return {**cls.defaults, **params}
+
+    @classmethod
+    def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
+        """The parameters a controller runs with: ``with_defaults``; a controller overrides it to check what one range
+        or choice cannot say (one parameter against another)."""
+        return cls.with_defaults(params)
 
     @abstractmethod
     def step(self) -> None: ...

@@ -48,7 +48,6 @@ class FootbotController(Controller):
         "hard_turn_deg": ANGLE, "avoid_angle_deg": ANGLE, "avoid_delta": "[0, 1]", "base_grey_min": "[0, 1]",
         "base_grey_max": "[0, 1]",
     }
-    choices: ClassVar[dict[str, tuple[str, ...]]] = {}
     static_params = frozenset({"period_s"})
 
     rab: RangeAndBearing
@@ -60,20 +59,12 @@ class FootbotController(Controller):
 
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
-        """``defaults`` overlaid with ``params``, every option one of its readings (ValueError otherwise)."""
+        """``defaults`` overlaid with ``params`` (each option one of its ``choices``), the turning thresholds in
+        order (ValueError otherwise)."""
         p = cls.with_defaults(params)
-        for name, allowed in cls.choices.items():
-            if p[name] not in allowed:
-                raise ValueError(f"{name}: expected one of {', '.join(allowed)}, got {p[name]!r}")
         if not p["no_turn_deg"] <= p["soft_turn_deg"] <= p["hard_turn_deg"]:
             raise ValueError("turning thresholds: expected no_turn_deg <= soft_turn_deg <= hard_turn_deg")
         return p
-
-    def set_param(self, name: str, value: Any) -> None:
-        allowed = self.choices.get(name)
-        if allowed is not None and value not in allowed:
-            raise ValueError(f"{name}: expected one of {', '.join(allowed)}, got {value!r}")
-        super().set_param(name, value)
 
     def init(self, robot: Robot) -> None:
         super().init(robot)

@@ -67,19 +67,7 @@ class ZebroController(Controller):
     imu: Imu
     legs: Locomotion
 
-    @classmethod
-    def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
-        """``defaults`` overlaid with ``params``, every option one of its readings (ValueError otherwise)."""
-        p = cls.with_defaults(params)
-        for name, allowed in cls.choices.items():
-            if p[name] not in allowed:
-                raise ValueError(f"{name}: expected one of {', '.join(allowed)}, got {p[name]!r}")
-        return p
-
     def set_param(self, name: str, value: Any) -> None:
-        allowed = self.choices.get(name)
-        if allowed is not None and value not in allowed:
-            raise ValueError(f"{name}: expected one of {', '.join(allowed)}, got {value!r}")
         super().set_param(name, value)
         self.rules = self._rules()
 
