@@ -28,11 +28,9 @@ from typing import Any
 import numpy as np
 import pybullet as pb
 
-from bridge.core.parts import Part, WorldModel
+from bridge.core.parts import Part
 from bridge.core.rng import stream
-
-LEGS = 6
-TWO_PI = 2 * math.pi
+from bridge.robots.decizebro.legs import LEGS, TWO_PI, LegMotors
 
 
 class ContactLegsParams(Part):
@@ -75,7 +73,7 @@ class ContactLegsParams(Part):
         return 2 * self.leg_radius_m + self.leg_thickness_m - self.hip_z_m
 
 
-class ContactLegs(WorldModel):
+class ContactLegs(LegMotors):
     name = "contact_legs"
 
     @classmethod
@@ -153,19 +151,6 @@ class ContactLegs(WorldModel):
         self._q_s = 0.0
 
     # -- what the leg modules' pins do and read ----------------------------------------------------------
-    def set_duty(self, r: int, leg: int, duty: float) -> None:
-        """Leg ``leg``'s motor gets signed duty ``duty`` (-1..1); a dead robot's legs stay off."""
-        if self.world.alive[r]:
-            self.duty[self.local[r], leg] = min(1.0, max(-1.0, float(duty)))
-
-    def angle(self, r: int, leg: int) -> float:
-        """The leg's angle (rad, 0 = pointing down, growing as it walks forward), wrapped to [0, 2 pi)."""
-        return float(self.theta[self.local[r], leg] % TWO_PI)
-
-    def omega(self, r: int, leg: int) -> float:
-        """The leg's angular speed (rad/s)."""
-        return float(self.rate[self.local[r], leg])
-
     def kill(self, r: int) -> None:
         """The H-bridges are off: no torque, the legs go limp."""
         k = self.local[r]
@@ -205,13 +190,6 @@ class ContactLegs(WorldModel):
         if self._q_s > 0:
             load[self.ids] += self._amp_s / self._q_s
 
-    def drive_speed(self, speed: np.ndarray) -> None:
-        speed[self.ids] = np.abs(self.rate).max(axis=1) * self.leg_r
-
-    def sense(self, r: int) -> dict[str, Any]:
-        """The six legs' angles (rad, wrapped) and speeds (rad/s)."""
-        k = self.local[r]
-        return {"leg_angles": (self.theta[k] % TWO_PI).tolist(), "leg_omegas": self.rate[k].tolist()}
 
 
 ContactLegsParams.world_model = ContactLegs

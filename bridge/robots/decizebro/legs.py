@@ -42,7 +42,38 @@ class LegsParams(Part):
     current_per_leg_ma: float  # one leg at full duty, walking
 
 
-class Legs(WorldModel):
+class LegMotors(WorldModel):
+    """What a leg module's pins meet, whatever the body model: each leg's signed duty in, its angle and speed out.
+    A body model keeps ``duty``, ``theta`` and ``rate`` (robots x legs) and ``leg_r`` (per robot)."""
+
+    duty: np.ndarray
+    theta: np.ndarray
+    rate: np.ndarray
+    leg_r: np.ndarray
+
+    def set_duty(self, r: int, leg: int, duty: float) -> None:
+        """Leg ``leg``'s motor gets signed duty ``duty`` (-1..1); a dead robot's legs stay off."""
+        if self.world.alive[r]:
+            self.duty[self.local[r], leg] = min(1.0, max(-1.0, float(duty)))
+
+    def angle(self, r: int, leg: int) -> float:
+        """The leg's angle (rad, 0 = pointing down, growing as it walks forward), wrapped to [0, 2 pi)."""
+        return float(self.theta[self.local[r], leg] % TWO_PI)
+
+    def omega(self, r: int, leg: int) -> float:
+        """The leg's angular speed (rad/s)."""
+        return float(self.rate[self.local[r], leg])
+
+    def drive_speed(self, speed: np.ndarray) -> None:
+        speed[self.ids] = np.abs(self.rate).max(axis=1) * self.leg_r
+
+    def sense(self, r: int) -> dict[str, Any]:
+        """The six legs' angles (rad, wrapped) and speeds (rad/s)."""
+        k = self.local[r]
+        return {"leg_angles": (self.theta[k] % TWO_PI).tolist(), "leg_omegas": self.rate[k].tolist()}
+
+
+class Legs(LegMotors):
     name = "legs"
 
     def __init__(self, world: Any, robots: list[int], parts: list[LegsParams]) -> None:
@@ -70,19 +101,6 @@ class Legs(WorldModel):
         self._w = np.zeros(n)
 
     # -- what the leg modules' pins do and read ----------------------------------------------------------
-    def set_duty(self, r: int, leg: int, duty: float) -> None:
-        """Leg ``leg``'s motor gets signed duty ``duty`` (-1..1); a dead robot's legs stay off."""
-        if self.world.alive[r]:
-            self.duty[self.local[r], leg] = min(1.0, max(-1.0, float(duty)))
-
-    def angle(self, r: int, leg: int) -> float:
-        """The leg's angle (rad, 0 = pointing down, growing as it walks forward), wrapped to [0, 2 pi)."""
-        return float(self.theta[self.local[r], leg] % TWO_PI)
-
-    def omega(self, r: int, leg: int) -> float:
-        """The leg's angular speed (rad/s)."""
-        return float(self.rate[self.local[r], leg])
-
     def kill(self, r: int) -> None:
         self.duty[self.local[r]] = 0.0
 
@@ -120,13 +138,6 @@ class Legs(WorldModel):
     def load_a(self, load: np.ndarray) -> None:
         load[self.ids] += self.i_leg * np.abs(self.duty).sum(axis=1)
 
-    def drive_speed(self, speed: np.ndarray) -> None:
-        speed[self.ids] = np.abs(self.rate).max(axis=1) * self.leg_r
-
-    def sense(self, r: int) -> dict[str, Any]:
-        """The six legs' angles (rad, wrapped) and speeds (rad/s)."""
-        k = self.local[r]
-        return {"leg_angles": (self.theta[k] % TWO_PI).tolist(), "leg_omegas": self.rate[k].tolist()}
 
 
 LegsParams.world_model = Legs
