@@ -74,11 +74,14 @@ class RobotPlan:
         return bool(self.xbee) and not self.xbee.get("device")
 
     def can_nodes(self) -> tuple[str, ...]:
-        """The roles of the nodes on this robot's CAN bus (none for a robot model without one)."""
+        """The roles of the nodes on this robot's CAN bus (none for a robot model without one): its LLC, its robot
+        model's own boards on the bus (``RobotSpec.can_roles``), its companion computer, an slcan adapter."""
         if self.can_device is None and self.vehicle is None and not robot_spec(self.profile).has_can:
             return ()
         llc = () if self.llc_role is None else (self.llc_role,)
-        return llc + (("logic",) if self.has_logic else ()) + (("slcan",) if self.slcan_pty else ())
+        spec = robot_spec(self.profile)
+        own = () if self.gateway is not None else tuple(r for r in spec.own_roles(self) if r in spec.can_roles)
+        return llc + own + (("logic",) if self.has_logic else ()) + (("slcan",) if self.slcan_pty else ())
 
     @property
     def host_node(self) -> str:

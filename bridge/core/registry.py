@@ -79,6 +79,9 @@ class RobotSpec:
     # put the robot's devices on ports it can open (dotted as a config names them: ``can.slcan_pty``, a model option
     # ``i2c_pty``) -> why and how to set it; a group with an external logic that leaves one unset is refused naming it
     external_ports: dict[str, str] = field(default_factory=dict)
+    # its own firmware entities that are nodes on the robot's CAN bus beside the LLC (a range-and-bearing board that
+    # reports on the bus the base board shares): they offer and receive ``can0`` items as the LLC does
+    can_roles: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if (self.board is None) != (self.pins is None):
@@ -89,11 +92,13 @@ class RobotSpec:
             raise PluginError(f"robot {self.name!r}: its firmware entities' roles and their modules go together")
         if self.ports and self.roles is None:
             raise PluginError(f"robot {self.name!r}: serial ports belong to its own firmware entities (roles)")
+        if self.can_roles and self.roles is None:
+            raise PluginError(f"robot {self.name!r}: CAN nodes of its own are its own firmware entities (roles)")
 
     @property
     def has_can(self) -> bool:
         """Its boards talk on a CAN bus (an LLC, a CAN interface): the companion computer is a node of it."""
-        return self.board is not None or self.can_db is not None
+        return self.board is not None or self.can_db is not None or bool(self.can_roles)
 
     def own_roles(self, rp: Any) -> tuple[str, ...]:
         """The roles of robot ``rp``'s own firmware entities (none for most robots)."""

@@ -274,3 +274,22 @@ def test_a_robot_model_names_the_ports_an_external_logic_needs(tmp_path: Path) -
         assert load_config(p).robots[0].logic == "external"  # no CAN bus asked of a robot that has none
     finally:
         ROBOTS.unregister("portbot")
+
+
+def test_a_robot_models_own_boards_can_be_nodes_on_its_can_bus() -> None:
+    """``RobotSpec.can_roles``: an own firmware entity named there is a node of the robot's CAN bus, beside the LLC
+    and the companion computer; the others (a radio on a UART) are not."""
+    from bridge.core.plan import RobotPlan
+
+    base = robot_spec("decizebro")
+    with pytest.raises(PluginError, match="CAN nodes of its own are its own firmware entities"):
+        dataclasses.replace(base, name="nobot", roles=None, modules=None, wiring=None, ports={}, can_roles=("x",))
+    spec = dataclasses.replace(base, name="canbot", can_roles=("imu",))
+    try:
+        register_robot(spec)
+        rp = RobotPlan(0, "r000", "canbot", "zebro_silent", {}, (0.0, 0.0, 0.0))
+        assert spec.has_can and "imu" in rp.modules()
+        assert rp.can_nodes() == ("imu", "logic")
+        assert RobotPlan(0, "r000", "decizebro", "zebro_silent", {}, (0.0, 0.0, 0.0)).can_nodes() == ()
+    finally:
+        ROBOTS.unregister("canbot")
