@@ -27,7 +27,10 @@ if TYPE_CHECKING:
 
 # A robot's own devices beyond the built-in ones (a Zebro's legs on I2C, its UWB data radio): HAL table name ->
 # ``open(cfg, robot)``, which returns the device (its ``poll()`` and ``close()``, when it has them, are called with
-# the robot's). Found by entry point (group ``swarm_sitl.devices``) or ``DEVICES.register``.
+# the robot's). A device that serves several faces over one link (a foot-bot's boards on its CAN bus: the wheels,
+# the proximity ring, the range-and-bearing board) lists them in ``faces()`` (name -> object), and the robot reaches
+# each as ``robot.device(name)`` too; the faces' own ``poll``/``close`` are not called, the device's are. Found by
+# entry point (group ``swarm_sitl.devices``) or ``DEVICES.register``.
 DEVICES: Registry[Any] = Registry("swarm_sitl.devices", "device", callable)
 BUILT_IN = ("llc_can", "llc_mavlink", "xbee", "uwb", "mavlink")  # the HAL tables Robot.open opens itself
 NOT_DEVICES = ("start_pose", "payload", "log", "robot_id", "behaviour", "seed", "params", "clock")
@@ -93,7 +96,12 @@ def open_devices(hal: dict[str, Any], robot: Any) -> dict[str, Any]:
         except LookupError:
             raise ValueError(f"HAL config {name}: not a device; devices: "
                              f"{', '.join([*BUILT_IN, *DEVICES.names()])}") from None
-        out[name] = opener(cfg, robot)
+        dev = out[name] = opener(cfg, robot)
+        faces = getattr(dev, "faces", None)
+        for face, obj in (faces() if callable(faces) else {}).items():
+            if face in out or face in hal:
+                raise ValueError(f"HAL config {name}: its device's face {face!r} is also another device's name")
+            out[face] = obj
     return out
 
 

@@ -107,19 +107,25 @@ class Robot:
             raise KeyError(f"robot {self.id} has no device {name!r}; it has: "
                            f"{', '.join(self.devices) or 'none of its own'}") from None
 
+    def _own_devices(self) -> list[Any]:
+        """Its devices as their HAL tables opened them, without the faces a device serves (``faces()``)."""
+        faces = {id(f) for d in self.devices.values() if callable(getattr(d, "faces", None))
+                 for f in d.faces().values()}
+        return [d for d in self.devices.values() if id(d) not in faces]
+
     def poll(self) -> None:
         """Drain every device's receive queue (non-blocking)."""
         if self.llc is not None:
             self.llc.poll()
         if self.xbee is not None:
             self.xbee.poll()
-        for d in self.devices.values():
+        for d in self._own_devices():
             poll = getattr(d, "poll", None)
             if poll is not None:
                 poll()
 
     def close(self) -> None:
-        for d in reversed(list(self.devices.values())):
+        for d in reversed(self._own_devices()):
             close = getattr(d, "close", None)
             if close is not None:
                 close()

@@ -49,3 +49,29 @@ def test_a_table_that_is_no_device_is_named(thermometer) -> None:
     robot = Robot.open(0, {"thermometer": {}}, SteppedClock(), seed=1)
     with pytest.raises(KeyError, match="has no device 'legs'; it has: thermometer"):
         robot.device("legs")
+
+
+class Station(Thermometer):
+    """One link serving two faces (as a foot-bot's CAN bus serves its boards' devices)."""
+
+    def __init__(self, cfg: dict[str, Any], robot: Robot) -> None:
+        super().__init__(cfg, robot)
+        self.inside, self.outside = Thermometer(cfg, robot), Thermometer(cfg, robot)
+
+    def faces(self) -> dict[str, Any]:
+        return {"inside": self.inside, "outside": self.outside}
+
+
+def test_a_device_serves_its_faces_and_is_polled_once() -> None:
+    DEVICES.register("station", Station)
+    try:
+        robot = Robot.open(1, {"station": {}}, SteppedClock(), seed=1)
+        s = robot.device("station")
+        assert robot.device("inside") is s.inside and robot.device("outside") is s.outside
+        robot.poll()
+        robot.close()
+        assert s.polls == 1 and s.closed and s.inside.polls == 0 and not s.inside.closed
+        with pytest.raises(ValueError, match="HAL config station: its device's face 'inside' is also"):
+            Robot.open(1, {"station": {}, "inside": {}}, SteppedClock(), seed=1)
+    finally:
+        DEVICES.unregister("station")
