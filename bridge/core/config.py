@@ -98,6 +98,23 @@ class WorldCfg(_Model):
     solver_iterations: int = Field(10, ge=1, le=200)
 
 
+class FloorPatch(_Model):
+    """A rectangle of the floor in a grey level of its own (ARGoS's floor entity: a nest painted grey, a black line),
+    what a robot's ground sensors read there."""
+
+    x_min: float
+    y_min: float
+    x_max: float
+    y_max: float
+    grey: float = Field(ge=0, le=1, description="0 black, 1 white")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> FloorPatch:
+        if not (self.x_min < self.x_max and self.y_min < self.y_max):
+            raise ValueError("a floor patch needs x_min < x_max and y_min < y_max")
+        return self
+
+
 class ArenaCfg(_Model):
     width_m: float = Field(10.0, gt=0, le=1000, description="extent along x")
     length_m: float = Field(20.0, gt=0, le=1000, description="extent along y")
@@ -106,6 +123,16 @@ class ArenaCfg(_Model):
     map: str | None = Field(None, description="monochrome bitmap, dark pixels are obstacles")
     map_resolution_m: float = Field(0.05, gt=0, description="metres per map pixel")
     map_threshold: int = Field(128, ge=1, le=255)
+    floor_grey: float = Field(1.0, ge=0, le=1, description="the floor's grey level where no patch is (0 black, 1 "
+                                                           "white), as ground sensors read it")
+    floor: list[FloorPatch] = Field([], description="patches of another grey level; a later one covers an earlier")
+
+    def grey_at(self, x: Any, y: Any) -> Any:
+        """The floor's grey level at (x, y): floats or numpy arrays of any shape."""
+        out = np.zeros(np.broadcast(x, y).shape) + self.floor_grey
+        for p in self.floor:
+            out = np.where((x >= p.x_min) & (x < p.x_max) & (y >= p.y_min) & (y < p.y_max), p.grey, out)
+        return out
 
 
 class BoxObstacle(_Model):

@@ -265,3 +265,21 @@ def test_speed_and_turn_rate_ranges_are_what_drive_cmd_carries() -> None:
     drive = eswarbot_llc_db().get_message_by_name("DRIVE_CMD")
     assert drive.get_signal_by_name("v_mm_s").maximum / 1000 == MAX_SPEED_MPS
     assert drive.get_signal_by_name("w_mrad_s").maximum / 1000 == MAX_TURN_RATE_RPS
+
+
+def test_floor_patches_paint_the_arena_and_a_reversed_one_is_named(tmp_path) -> None:
+    """``arena.floor``: grey patches ground sensors read (a later one covers an earlier); a patch with its corners
+    swapped is refused naming the field."""
+    import numpy as np
+
+    p = tmp_path / "floor.toml"
+    p.write_text('[arena]\nwidth_m = 5.0\nlength_m = 5.0\n'
+                 '[[arena.floor]]\nx_min = 0.0\ny_min = 0.0\nx_max = 1.0\ny_max = 5.0\ngrey = 0.5\n'
+                 '[[arena.floor]]\nx_min = 0.0\ny_min = 0.0\nx_max = 0.5\ny_max = 0.5\ngrey = 0.0\n'
+                 '[[robots]]\ncount = 1\n')
+    a = load_config(p).arena
+    assert a.grey_at(np.array([0.2, 0.7, 3.0]), np.array([0.2, 0.2, 3.0])).tolist() == [0.0, 0.5, 1.0]
+    p.write_text('[arena]\n[[arena.floor]]\nx_min = 2.0\ny_min = 0.0\nx_max = 1.0\ny_max = 5.0\ngrey = 0.5\n'
+                 '[[robots]]\ncount = 1\n')
+    with pytest.raises(ConfigError, match=r"arena\.floor\[0\]: a floor patch needs x_min < x_max"):
+        load_config(p)
