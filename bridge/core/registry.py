@@ -82,6 +82,10 @@ class RobotSpec:
     # its own firmware entities that are nodes on the robot's CAN bus beside the LLC (a range-and-bearing board that
     # reports on the bus the base board shares): they offer and receive ``can0`` items as the LLC does
     can_roles: tuple[str, ...] = ()
+    # the HAL table under which its robot program opens the robot's CAN bus in a session (given python-can's
+    # arguments for the simulated bus): ``llc_can``, the LLC client of ``swarm_logic.devices``, or a device of the
+    # model's own that speaks its boards' protocol (a foot-bot's ``footbot_can``)
+    can_hal: str = "llc_can"
 
     def __post_init__(self) -> None:
         if (self.board is None) != (self.pins is None):

@@ -28,7 +28,7 @@ SITL_CAN = {"interface": "sitl", "channel": "can0", "ignore_config": True}
 def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
     """The HAL config of a robot in a session: the devices it carries, on their simulated ports."""
     spec = robot_spec(rp.profile)
-    hal: dict[str, Any] = {"llc_can": dict(SITL_CAN)} if spec.board is not None else {}
+    hal: dict[str, Any] = {spec.can_hal: dict(SITL_CAN)} if spec.board is not None or spec.can_roles else {}
     if rp.vehicle is not None:  # a real MAVLink vehicle stands for the robot: the logic drives it over its link
         v = rp.vehicle
         hal = {"llc_mavlink": {"url": v["url"], "baudrate": v["baudrate"], "target_system": v["target_system"],

@@ -293,3 +293,21 @@ def test_a_robot_models_own_boards_can_be_nodes_on_its_can_bus() -> None:
         assert RobotPlan(0, "r000", "decizebro", "zebro_silent", {}, (0.0, 0.0, 0.0)).can_nodes() == ()
     finally:
         ROBOTS.unregister("canbot")
+
+
+def test_a_robot_model_names_the_hal_table_its_program_opens_its_can_bus_with() -> None:
+    """``RobotSpec.can_hal``: the eSwarBot's program gets its LLC client (``llc_can``); a model whose boards speak
+    another protocol has its program open the bus through a device of its own."""
+    from bridge.core.config import Config
+    from bridge.core.plan import RobotPlan
+    from bridge.hosts.logic import SITL_CAN, sitl_hal
+
+    cfg = Config.model_validate({"robots": [{"count": 1}]})
+    assert sitl_hal(RobotPlan(0, "r000", "eswarbot", "random_walk", {}, (1.0, 1.0, 0.0)), cfg)["llc_can"] == SITL_CAN
+    spec = dataclasses.replace(robot_spec("eswarbot"), name="otherbot", default=False, can_hal="other_can")
+    try:
+        register_robot(spec)
+        hal = sitl_hal(RobotPlan(0, "r000", "otherbot", "random_walk", {}, (1.0, 1.0, 0.0)), cfg)
+        assert hal["other_can"] == SITL_CAN and "llc_can" not in hal
+    finally:
+        ROBOTS.unregister("otherbot")
