@@ -5,7 +5,8 @@ the robot's CAN bus: ``firmware_sim.robots.footbot.rab_board``), the link's phys
 
 An emission ``["rab", {"op": "tx", "data"}]`` of robot ``s`` reaches every live foot-bot ``d`` whose board is within
 ``range_m`` of it and whose line of sight no wall, obstacle or other robot crosses (one ray from body surface to
-body surface at the boards' height; ARGoS checks occlusions by embodied entities), unless lost (``loss``); the
+disc to disc at the boards' height: another robot's body, a wall or an obstacle; ARGoS checks occlusions by
+embodied entities), unless lost (``loss``); the
 receiver measures range and bearing with Gaussian errors (``range_noise_rel`` of the range, ``bearing_noise_deg``).
 It is delivered at the next quantum boundary as ``["rab", {"src", "range_m", "bearing_rad", "data"}]``. The
 figures and their sources are in ``docs/footbot.md``. Each receiving robot draws its errors from its own stream, a
@@ -21,7 +22,6 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pybullet as pb
 
 from bridge.core.entities import entity
 from bridge.core.medium import Medium
@@ -71,6 +71,11 @@ class RabLinks(WorldModel):
         self._rng = {r: stream(world.seed, "rab", r) for r in robots}
         self._radius = {r: world.profiles[r].radius_m for r in robots}
         self._z = {r: q.height_m for r, q in zip(robots, parts, strict=True)}
+        z = min(q.height_m for q in parts) if parts else 0.0
+        # the bodies that can block the link: every robot taller than the boards (ARGoS: lower objects do not)
+        self._blockers = np.array([r for r in range(world.n) if world.profiles[r].height_m > z], dtype=int)
+        self._blocker_radius = np.array([world.profiles[r].radius_m for r in self._blockers])
+        self._interior = len(world.static_rects) > 4 or bool(world.cylinders)  # obstacles besides the arena walls
 
     def receivers(self, src: int) -> tuple[list[tuple[int, float, float]], list[int], list[int]]:
         """Who hears ``src``'s emission now: [(robot, measured range m, measured bearing rad)], and the robots in
@@ -105,19 +110,25 @@ class RabLinks(WorldModel):
         return heard, occluded, lost
 
     def _occluded(self, src: int, dst: np.ndarray, dist: np.ndarray) -> np.ndarray:
-        """One ray per receiver, from the sender's body surface to the receiver's at the boards' height: anything it
-        meets (a wall, an obstacle, another robot) blocks the line of sight."""
+        """Whether anything blocks the line of sight from ``src`` to each of ``dst`` at the boards' height: another
+        robot taller than that whose body (a disc of its radius) the segment crosses, or a wall or obstacle inside
+        the arena (the world's static ray test: the arena's own walls cannot stand between two robots in it)."""
         w = self.world
-        sx, sy, sz = float(w.pos[src, 0]), float(w.pos[src, 1]), self._z[src]
-        ux, uy = (w.pos[dst, 0] - sx) / np.maximum(dist, 1e-9), (w.pos[dst, 1] - sy) / np.maximum(dist, 1e-9)
-        r0 = self._radius[src] + 0.002
-        r1 = dist - np.array([self._radius[int(d)] for d in dst]) - 0.002
-        short = r1 <= r0  # touching: nothing fits between them
-        frm = np.column_stack([sx + r0 * ux, sy + r0 * uy, np.full(len(dst), sz)])
-        to = np.column_stack([sx + np.maximum(r1, r0) * ux, sy + np.maximum(r1, r0) * uy,
-                              np.array([self._z[int(d)] for d in dst])])
-        hits = pb.rayTestBatch(frm.tolist(), to.tolist(), numThreads=1, physicsClientId=w.cid)
-        return np.array([h[0] >= 0 for h in hits]) & ~short
+        others = self._blockers
+        p = w.pos[:, :2]
+        s = p[src]
+        seg = p[dst] - s  # (m, 2)
+        rel = p[others] - s  # (k, 2)
+        ll = np.maximum(dist * dist, 1e-18)
+        dot = seg @ rel.T  # (m, k)
+        cross = seg[:, 0:1] * rel[None, :, 1] - seg[:, 1:2] * rel[None, :, 0]
+        rad = self._blocker_radius[None, :]
+        blocked = (dot > 0) & (dot < ll[:, None]) & (cross * cross < rad * rad * ll[:, None])
+        blocked &= (others[None, :] != src) & (others[None, :] != dst[:, None]) & w.alive[others][None, :]
+        out = blocked.any(axis=1)
+        if self._interior:
+            out |= np.asarray(w.walls(src, dst), dtype=int) > 0
+        return out
 
 
 RabParams.world_model = RabLinks

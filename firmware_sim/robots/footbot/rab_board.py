@@ -7,7 +7,8 @@ robot's CAN bus on one side, its infrared emitters and receivers on the other.
 - **Reception.** What the air delivers (``{"src", "range_m", "bearing_rad", "data"}``: a neighbour's emission as
   this board's receivers measured it) is kept, the latest per sender, until the end of the period.
 - **Report.** At every period boundary it sends the period's readings on the bus: per robot heard RAB_RX_0 (index,
-  range in cm, bearing in 1/1024 of a turn, payload length and bytes 0-3) and RAB_RX_1 (bytes 4-9), then RAB_SCAN
+  range in cm, bearing in 1/1024 of a turn, payload length and bytes 0-3) and, for a payload longer than 4 bytes,
+  RAB_RX_1 (bytes 4-9), then RAB_SCAN
   (how many, the scan's number and the malformed frames so far), even when it heard no one.
 - **Bad input.** A payload longer than ``max_payload`` bytes, a frame of the wrong length or a RAB_DATA_1 with no
   RAB_DATA_0 before it: counted (``bad_frames``), dropped; the payload it emits stays the last good one.
@@ -102,7 +103,8 @@ class RabBoard:
             out.can.append((rx0.frame_id, bytes([k, rng & 0xFF, ((rng >> 8) & 0x03) | ((bearing & 0x3F) << 2),
                                                  ((bearing >> 6) & 0x0F) | (min(len(ev["data"]), 10) << 4),
                                                  *d[0:4]])))
-            out.can.append((rx1.frame_id, bytes([k, *d[4:10]])))
+            if len(ev["data"]) > 4:  # the rest of a longer payload
+                out.can.append((rx1.frame_id, bytes([k, *d[4:10]])))
         self.scan = (self.scan + 1) & 0xFF
         self.counters["scans"] += 1
         out.can.append((self.m["RAB_SCAN"].frame_id, self.m["RAB_SCAN"].encode(

@@ -139,10 +139,12 @@ class FootbotBoards:
             self.status = s
 
     def _scan(self, count: int) -> None:
-        """RAB_SCAN: the readings 0 .. count-1 are the robots heard; one that lost a frame is left out (counted)."""
+        """RAB_SCAN: the readings 0 .. count-1 are the robots heard (a payload longer than 4 bytes in two frames); one
+        that lost a frame is left out (counted)."""
         out = []
         for k in range(count):
-            a, b = self._rx0.get(k), self._rx1.get(k)
+            a = self._rx0.get(k)
+            b = self._rx1.get(k) if a is not None and a["length"] > 4 else b""
             if a is None or b is None:
                 self.counters["bad_frames"] += 1
                 continue
