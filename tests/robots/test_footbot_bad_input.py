@@ -230,3 +230,13 @@ def test_a_footbot_group_refuses_a_radio_naming_the_field(tmp_path: Path, field:
     with pytest.raises(ConfigError) as e:
         load_config(p)
     assert str(e.value) == f"{p}: robots[0]: {field}: {why}"
+
+
+def test_an_external_footbot_logic_needs_its_can_port(tmp_path: Path) -> None:
+    p = tmp_path / "c.toml"
+    p.write_text('[session]\nspeed = 1\n[[robots]]\nprofile = "footbot"\nlogic = "external"\n')
+    with pytest.raises(ConfigError, match=r"robots\[0\]: can\.slcan_pty: an external logic reaches the foot-bot's "
+                                          r"boards through its CAN bus: expose it, e\.g\. can = \{ slcan_pty"):
+        load_config(p)
+    p.write_text(p.read_text() + 'can = { slcan_pty = "r{id}-can" }\n')
+    assert load_config(p).robots[0].logic == "external"
