@@ -5,7 +5,8 @@ the PFSM controllers use (``interfaces``: ``range_and_bearing``, ``footbot_proxi
 
 ``poll()`` (the robot calls it before each control step) drains the bus: the base board's sensor frames update the
 rings and the ground sensors, the range-and-bearing board's RAB_RX frames fill a scan that its RAB_SCAN frame
-completes (``readings()`` is the last complete scan). Frames are decoded with the DBC's signal layouts (compiled
+completes (``readings()`` is the last complete scan; a reading missing a half, or with a length over 10, is counted
+and left out). Frames are decoded with the DBC's signal layouts (compiled
 once: ``FastDecoder``); a frame whose length is not its message's is counted (``counters["bad_frames"]``) and
 dropped. Commands go out when they change; the wheels' command is repeated every ``keepalive_s`` so the base's
 watchdog (0.5 s) holds while the controller keeps the same speeds.
@@ -139,13 +140,13 @@ class FootbotBoards:
             self.status = s
 
     def _scan(self, count: int) -> None:
-        """RAB_SCAN: the readings 0 .. count-1 are the robots heard (a payload longer than 4 bytes in two frames); one
-        that lost a frame is left out (counted)."""
+        """RAB_SCAN: the readings 0 .. count-1 are the robots heard (a payload longer than 4 bytes in two frames);
+        one that lost a frame, or whose length is more than a message carries, is left out (counted)."""
         out = []
         for k in range(count):
             a = self._rx0.get(k)
             b = self._rx1.get(k) if a is not None and a["length"] > 4 else b""
-            if a is None or b is None:
+            if a is None or b is None or int(a["length"]) > RAB_PAYLOAD_BYTES:
                 self.counters["bad_frames"] += 1
                 continue
             n = int(a["length"])
