@@ -32,11 +32,13 @@ bench: $(STAMP)
 	$(BIN)/swarm-sitl bench
 	$(BIN)/swarm-sitl bench --study rdpso
 	$(BIN)/swarm-sitl bench --study zebro
+	$(BIN)/swarm-sitl bench --study pfsm
 
 bench-smoke: $(STAMP)
 	$(BIN)/swarm-sitl bench --quick
 	$(BIN)/swarm-sitl bench --study rdpso --quick
 	$(BIN)/swarm-sitl bench --study zebro --quick
+	$(BIN)/swarm-sitl bench --study pfsm --quick
 
 survey: $(STAMP)
 	$(BIN)/swarm-sitl radio-survey hil_configs/demo.toml --out runs/radio-survey

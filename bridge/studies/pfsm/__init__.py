@@ -16,4 +16,4 @@ from bridge.studies.pfsm.loop_functions import PfsmLoopFunctions, SearchCfg
 STUDY = Study("pfsm", "Khan: multi-robot search with a probabilistic state machine and Lennard-Jones spacing",
               experiments=("bridge.studies.pfsm.experiments", "bridge.studies.pfsm.cosim_experiments"),
               loop_functions=PfsmLoopFunctions, configs="hil_configs/pfsm", sections=("search",),
-              config={"search": SearchCfg})
+              config={"search": SearchCfg}, bench="bridge.studies.pfsm.bench:bench")
