@@ -29,6 +29,8 @@ from swarm_logic.robots.footbot.interfaces import (
     ring_angles,
 )
 
+RAY_GAP_M = 0.002  # the proximity rays start this far outside the body (not to meet it)
+
 
 class FootbotSensorsParams(Part):
     """The base board's sensors: the rings' sizes and range, the sampling rate, the noise."""
@@ -55,7 +57,7 @@ class FootbotSensors(WorldModel):
         self._next_ns = 0
         self._rng = [stream(world.seed, "robot", r, "footbot_sensors") for r in robots]
         prof = [world.profiles[r] for r in robots]
-        self._r0 = np.array([q.radius_m + 0.002 for q in prof])  # rays start just outside the body
+        self._r0 = np.array([q.radius_m + RAY_GAP_M for q in prof])  # rays start just outside the body
         self._z = np.array([0.06 for _ in prof])  # the ring's height (ARGoS: 0.06 m)
         self._angles = [np.array(ring_angles(q.proximity_count)) for q in parts]
         self._light_angles = [np.array(ring_angles(q.light_count)) for q in parts]
@@ -101,7 +103,7 @@ class FootbotSensors(WorldModel):
             ang = float(w.yaw[r]) + self._angles[k]
             ca, sa = np.cos(ang), np.sin(ang)
             x, y, r0, z = float(w.pos[r, 0]), float(w.pos[r, 1]), self._r0[k], self._z[k]
-            r1 = r0 + q.proximity_range_m
+            r1 = r0 + q.proximity_range_m - RAY_GAP_M  # the ring reaches proximity_range_m from the body
             froms += np.column_stack([x + r0 * ca, y + r0 * sa, np.full(len(ang), z)]).tolist()
             tos += np.column_stack([x + r1 * ca, y + r1 * sa, np.full(len(ang), z)]).tolist()
         hits = pb.rayTestBatch(froms, tos, numThreads=1, physicsClientId=w.cid)
@@ -110,8 +112,8 @@ class FootbotSensors(WorldModel):
         for k in live:
             q = self.parts[k]
             m = q.proximity_count
-            self.proximity[k] = _noisy(argos_proximity(frac[i:i + m] * q.proximity_range_m, frac[i:i + m] < 1.0),
-                                       q.proximity_noise, self._rng[k])
+            d = RAY_GAP_M + frac[i:i + m] * (q.proximity_range_m - RAY_GAP_M)  # from the body, as ARGoS measures
+            self.proximity[k] = _noisy(argos_proximity(d, frac[i:i + m] < 1.0), q.proximity_noise, self._rng[k])
             i += m
 
     def take_new(self, r: int) -> dict[str, Any]:
