@@ -10,7 +10,7 @@ embodied entities), unless lost (``loss``); the
 receiver measures range and bearing with Gaussian errors (``range_noise_rel`` of the range, ``bearing_noise_deg``).
 It is delivered at the next quantum boundary as ``["rab", {"src", "range_m", "bearing_rad", "data"}]``. The
 figures and their sources are in ``docs/footbot.md``. Each receiving robot draws its errors from its own stream, a
-fixed number per emission in range, in the order of the senders' ids.
+fixed number per emission in range and in sight, in the order of the senders' ids.
 
 Recorded: ``/rNNN/rab/tx`` per emission (``swarm_sitl.RabTx``: payload, who heard it, who was in range but
 occluded or lost it). ``summary.json``: ``radio.rab`` (totals) and ``rab`` per robot.
