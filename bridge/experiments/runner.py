@@ -97,6 +97,9 @@ class Experiment:
     x_label: str = "iteration"
     curves: ClassVar[Sequence[tuple[str, str]]] = ()  # (curve name, y label): median and IQR band per cell
     boxes: ClassVar[Sequence[tuple[str, str]]] = ()  # (metric name, y label): a box per cell
+    # (factor, metrics, y label, cells): each metric's mean over the trials at each level of a cell factor, with its
+    # 95 % confidence interval, over the cells matching ``cells`` (a sub-dict of their values; {} all)
+    means: ClassVar[Sequence[tuple[str, tuple[str, ...], str, dict[str, Any]]]] = ()
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
         raise NotImplementedError
@@ -524,6 +527,55 @@ def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outc
         except Exception as e:
             plt.close("all")
             lines.append(f"- box plot of `{metric}` failed: {_md(_error_text(e).splitlines()[0])}")
+    lines += _mean_plots(exp, cells, by_cell, plots, plt)
+    return lines
+
+
+def mean_ci95(v: np.ndarray) -> tuple[float, float]:
+    """The mean of ``v`` and the half-width of its 95 % confidence interval (Student's t; 0 for one value)."""
+    from scipy import stats as st
+
+    if len(v) < 2:
+        return (float(v[0]) if len(v) else math.nan), 0.0
+    return float(np.mean(v)), float(st.t.ppf(0.975, len(v) - 1) * np.std(v, ddof=1) / math.sqrt(len(v)))
+
+
+def _mean_plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outcome]], plots: Path,
+                plt: Any) -> list[str]:
+    """``Experiment.means``: per factor, each metric's mean and 95 % CI at each of the factor's levels."""
+    lines: list[str] = []
+    for factor, metrics, ylabel, where in exp.means:
+        path = plots / f"mean-{_file_name('-'.join(metrics))}-by-{_file_name(factor)}.png"
+        try:
+            chosen = [(c, outs) for c, outs in zip(cells, by_cell, strict=True)
+                      if factor in c and all(c.get(k) == v for k, v in where.items())]
+            levels = sorted({c[factor] for c, _ in chosen})
+            fig, ax = plt.subplots(figsize=(5.5, 4.0), dpi=110)
+            for j, metric in enumerate(metrics):
+                ms, hs = [], []
+                for lv in levels:
+                    v = np.concatenate([finite_values(outs, metric) for c, outs in chosen if c[factor] == lv] or
+                                       [np.zeros(0)])
+                    m, h = mean_ci95(v)
+                    ms.append(m)
+                    hs.append(h)
+                x = np.arange(len(levels)) + (j - (len(metrics) - 1) / 2) * 0.08
+                ax.errorbar(x, ms, yerr=hs, marker="o", capsize=4, label=metric)
+            ax.set_xticks(range(len(levels)), [f"{lv:g}" if isinstance(lv, int | float) else str(lv)
+                                               for lv in levels])
+            ax.set_xlabel(factor)
+            ax.set_ylabel(ylabel)
+            ax.set_title(f"{exp.name}: mean and 95 % CI by {factor}", fontsize=9)
+            ax.grid(alpha=0.3, axis="y")
+            if len(metrics) > 1:
+                ax.legend(fontsize=7)
+            fig.tight_layout()
+            fig.savefig(path)
+            plt.close(fig)
+            lines.append(f"![{'/'.join(metrics)} by {factor}](plots/{path.name})")
+        except Exception as e:
+            plt.close("all")
+            lines.append(f"- plot of `{'/'.join(metrics)}` by `{factor}` failed: {_md(_error_text(e).splitlines()[0])}")
     return lines
 
 
@@ -639,7 +691,7 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         by_cell[k // n].append(o)  # plan is cell-major
     metric_keys = _write_tables(out_dir, plan, done, cells, outcomes, by_cell)
     plot_lines: list[str] = []
-    if exp.curves or exp.boxes:
+    if exp.curves or exp.boxes or exp.means:
         (out_dir / "plots").mkdir()
         plot_lines = _plots(exp, cells, by_cell, out_dir / "plots")
     verdicts, target_error = _judge(exp, outcomes)

@@ -102,6 +102,9 @@ class PfsmCosim(Experiment):
     trials = 3
     smoke_trials = 1
     boxes = (("p_sta", "P_STA (eq. 2), co-simulated"), ("t_total_s", "T_total (s), co-simulated"))
+    means = (("searchers", ("p_sta", "num_p_sta"), "P_STA (eq. 2): co-simulated, numerical", {}),
+             ("targets", ("p_sta", "num_p_sta"), "P_STA (eq. 2): co-simulated, numerical", {}),
+             ("targets", ("t_total_s", "num_t_total_s"), "T_total (s): co-simulated, numerical", {}))
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
         if smoke:

@@ -107,6 +107,7 @@ class PfsmSearch(Experiment):
     x_label = "time (s)"
     curves = (("energy", "searcher energy per second (robot-ticks not resting)"),)
     boxes = (("p_sta", "P_STA (eq. 2)"), ("t_total_s", "T_total (s)"))
+    means = tuple((f, ("p_sta",), "P_STA (eq. 2)", {"variant": "grid"}) for f in ("side", "searchers", "targets"))
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
         grid = itertools.product(SIDES, SEARCHERS, TARGETS)
