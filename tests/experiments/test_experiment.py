@@ -39,6 +39,7 @@ class MonteCarloPi(Experiment):
     x_label = "points drawn"
     curves = (("estimate", "estimate of pi"),)
     boxes = (("abs_error", "absolute error"),)
+    means = (("n", ("abs_error", "estimate"), "error, estimate", {}),)
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
         return [{"n": 100}, {"n": 1000}]
@@ -175,7 +176,7 @@ def test_report_targets_plots_and_clearing(tmp_path: Path, capsys: pytest.Captur
     assert "| not judged |" in next(s for s in lines if s.startswith("| PI3 |"))
     assert "1 pass, 1 fail, 1 not judged" in report
     assert "### n=100" in report and "| abs_error |" in report and "| close |" in report
-    for png in ("curve-estimate.png", "box-abs_error.png"):
+    for png in ("curve-estimate.png", "box-abs_error.png", "mean-abs_error-estimate-by-n.png"):
         assert (out / "plots" / png).stat().st_size > 1000 and f"(plots/{png})" in report
     assert [ok for _, _, ok, _ in run.verdicts] == [True, False, None]
 
@@ -303,3 +304,10 @@ def test_a_session_hands_a_caught_signal_on_to_the_program_that_ran_it() -> None
     _pass_on(signal.SIGTERM, {signal.SIGTERM: signal.SIG_DFL})
     _pass_on(None, {signal.SIGTERM: lambda s, f: got.append(s)})
     assert got == [signal.SIGTERM]
+
+
+def test_a_mean_and_its_95_percent_confidence_interval() -> None:
+    """Student's t with n - 1 degrees of freedom: for 1, 2, 3 the half-width is t(0.975, 2) x 1 / sqrt(3)."""
+    m, h = ex.mean_ci95(np.array([1.0, 2.0, 3.0]))
+    assert m == 2.0 and h == pytest.approx(4.302653 / math.sqrt(3), rel=1e-6)
+    assert ex.mean_ci95(np.array([5.0])) == (5.0, 0.0) and math.isnan(ex.mean_ci95(np.zeros(0))[0])
