@@ -11,6 +11,7 @@ import pytest
 
 from bridge.core.config import ConfigError, load_config, to_toml
 from bridge.core.launcher import run_session
+from bridge.core.plan import make_plan
 from bridge.core.recorder import iter_messages
 from bridge.studies.pfsm.cosim_experiments import scenario_config
 from bridge.studies.pfsm.numerical import Arena, deploy, p_sta
@@ -63,3 +64,14 @@ def test_a_session_finds_its_targets_and_scores_them_as_eq_2_says(tmp_path: Path
     assert sorted(f["target"] for f in found) == [3, 4]
     rab = summary["radio"]["rab"]
     assert rab["robots"] == 5 and rab["emitted"] > 0 and rab["received"] > 0
+
+
+def test_a_target_in_a_wall_and_a_cell_that_cannot_fit_its_robots_are_named(tmp_path: Path) -> None:
+    raw = scenario_config(10, 10, 3)
+    raw["robots"][1]["placement"]["poses"][4] = [4.96, 2.0, 0.0]  # 4 cm from the east wall: the body is in it
+    p = tmp_path / "s.toml"
+    p.write_text(to_toml(raw))
+    with pytest.raises(ConfigError, match=r"robots\[1\]\.placement\.poses\[4\]: \(4\.96, 2\.0\) is inside a wall"):
+        make_plan(load_config(p), str(p))  # what the launcher and `swarm-sitl validate` check before anything starts
+    with pytest.raises(ValueError, match=r"the base region \(1\.0 x 5\.0 m\) cannot hold 120 searchers"):
+        scenario_config(120, 10, 3)
