@@ -11,4 +11,4 @@ from __future__ import annotations
 from bridge.core.registry import Study
 
 STUDY = Study("pfsm", "Khan: multi-robot search with a probabilistic state machine and Lennard-Jones spacing",
-              experiments=("bridge.studies.pfsm.experiments",))
+              experiments=("bridge.studies.pfsm.experiments", "bridge.studies.pfsm.benchmark"))
