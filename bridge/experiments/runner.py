@@ -100,6 +100,9 @@ class Experiment:
     # (factor, metrics, y label, cells): each metric's mean over the trials at each level of a cell factor, with its
     # 95 % confidence interval, over the cells matching ``cells`` (a sub-dict of their values; {} all)
     means: ClassVar[Sequence[tuple[str, tuple[str, ...], str, dict[str, Any]]]] = ()
+    # cell keys left out of the trial seed: cells that differ only in these share their trials' seeds (common random
+    # numbers: e.g. algorithms compared on the same deployments)
+    seed_ignores: ClassVar[tuple[str, ...]] = ()
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
         raise NotImplementedError
@@ -108,6 +111,10 @@ class Experiment:
         raise NotImplementedError
 
     def targets(self) -> list[Target]:
+        return []
+
+    def sections(self, outcomes: list[Outcome]) -> list[str]:
+        """Extra markdown lines for report.md, after the targets (e.g. a comparison table); none by default."""
         return []
 
 
@@ -676,7 +683,8 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     out_dir = Path(out) if out is not None else default_out
     _clear_outputs(out_dir)
     work = (out_dir / "work").absolute()
-    plan = [Trial(name, dict(c), i, trial_seed(seed, name, c, i), smoke, str(work / _slug(c) / str(i)))
+    plan = [Trial(name, dict(c), i, trial_seed(seed, name, {k: v for k, v in c.items() if k not in cls.seed_ignores},
+                                               i), smoke, str(work / _slug(c) / str(i)))
             for c in cells for i in range(n)]
     ref = _ref(cls)
     _INSTANCES.setdefault(ref, exp)
@@ -711,6 +719,10 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
                       "cover only the trials that finished."]
     lines += _target_lines(verdicts, target_error)
+    try:
+        lines += exp.sections(outcomes)
+    except Exception as e:
+        lines += ["", f"sections() raised {_md(_error_text(e).splitlines()[0])}"]
     if plot_lines:
         lines += ["", "## Plots", "", *plot_lines]
     lines += _cell_lines(cells, by_cell, metric_keys) + _failure_lines(outcomes, failed)

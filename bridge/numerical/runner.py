@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -216,11 +217,14 @@ def _iteration_stats(per_iter: dict[int, list[tuple[int, int, bool, float, float
 def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, iterations: int,
         objective: Field, size: tuple[float, float], obstacles: np.ndarray | None = None,
         link: LinkModel | None = None, seed: int = 0, start: np.ndarray | None = None,
-        keep_logs: bool = False, deaths: dict[int, float] | None = None) -> RunResult:
+        keep_logs: bool = False, deaths: dict[int, float] | None = None,
+        until: Callable[[], bool] | None = None) -> RunResult:
     """Run ``n`` robots of ``behaviour`` for ``iterations`` iterations of their schedule; score them against
     ``objective``.
 
-    ``deaths``: robot -> simulated time from which it is dead (stops, says nothing: a battery death)."""
+    ``deaths``: robot -> simulated time from which it is dead (stops, says nothing: a battery death).
+    ``until``: asked after every round whose moves were applied (and the field observed); the run ends early when it
+    says True (a search that ends when every target is found)."""
     cls = load_behaviour(behaviour) if isinstance(behaviour, str) else behaviour
     rng = np.random.default_rng(seed)
     obstacles = np.zeros((0, 4)) if obstacles is None else np.asarray(obstacles, float)
@@ -303,6 +307,8 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
                 running_best = max(running_best, float(f.max()))
                 best[k], cur[k], mean[k] = running_best, f.max(), f.mean()
                 k_done = max(k_done, k + 1)
+            if until is not None and until():
+                break
     for c in ctls:
         c.destroy()
     for arr in (best, cur, mean):  # iterations where nobody moved keep the last values

@@ -14,6 +14,7 @@ from bridge.core.registry import Study
 from bridge.studies.pfsm.loop_functions import PfsmLoopFunctions, SearchCfg
 
 STUDY = Study("pfsm", "Khan: multi-robot search with a probabilistic state machine and Lennard-Jones spacing",
-              experiments=("bridge.studies.pfsm.experiments", "bridge.studies.pfsm.cosim_experiments"),
+              experiments=("bridge.studies.pfsm.experiments", "bridge.studies.pfsm.cosim_experiments",
+                           "bridge.studies.pfsm.benchmark"),
               loop_functions=PfsmLoopFunctions, configs="hil_configs/pfsm", sections=("search",),
               config={"search": SearchCfg}, bench="bridge.studies.pfsm.bench:bench")

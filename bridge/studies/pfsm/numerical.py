@@ -319,6 +319,7 @@ class PointRab:
         self.w, self.i = world, i
         self.range_m = world.rab_model.range_m
         self.bytes_sent = 0
+        self.sends = 0  # payloads set: one broadcast each (the board carries it from the next tick)
 
     def readings(self) -> list[RabPacket]:
         return self.w.rab_readings(self.i)
@@ -327,6 +328,7 @@ class PointRab:
         b = check_payload(data, self.max_payload)
         self.w.payload[self.i] = b
         self.bytes_sent += len(b)
+        self.sends += 1
 
 
 class PointProximity:
@@ -393,6 +395,7 @@ class SearchRun:
     energy_all: list[int]  # per tick: searchers not resting + targets driving home
     home: int  # targets that reached the base
     bytes_sent: int
+    searcher_sends: int = 0  # range-and-bearing broadcasts the searchers sent (``PointRab.sends``)
     search_ticks: int = 0  # searcher-ticks in SEARCH out of the base
     still_ticks: int = 0  # of those, with both wheels stopped (no target heard, LJ at rest: K-S5's stall)
     logs: list[dict[str, Any]] = field(default_factory=list)
@@ -486,4 +489,5 @@ class Swarm:
             c.destroy()
         home = sum(1 for c in self.ctls[self.world.ns:] if getattr(c, "state", None) == msg.HOME)
         return SearchRun(self.world.tick, list(self.found_s), self.energy, self.energy_all, home,
-                         sum(r.bytes_sent for r in self.rabs), self.search_ticks, self.still_ticks, self.logs)
+                         sum(r.bytes_sent for r in self.rabs), sum(r.sends for r in self.rabs[:self.world.ns]),
+                         self.search_ticks, self.still_ticks, self.logs)
