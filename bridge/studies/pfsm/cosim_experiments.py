@@ -78,7 +78,6 @@ def cosim_trial(ns: int, nt: int, seed: int, workdir: Path, max_s: float = COSIM
         "rab_emissions_per_robot_s": round(rab.get("emitted", 0) / (ns + nt) / max(summary["sim_time_s"], 1e-9), 2),
         "rab_occluded_share": round(rab.get("occluded", 0) / max(1, rab.get("occluded", 0) + rab.get("heard_by", 0)),
                                     4),
-        "rtf": summary["rtf"],
         "num_found": num["found"], "num_t_total_s": num["t_total_s"], "num_e_total": num["e_total"],
         "num_p_sta": num["p_sta"],
     }
