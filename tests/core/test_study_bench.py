@@ -13,7 +13,7 @@ from tests.conftest import ROOT
 
 def test_every_declared_study_bench_is_a_function_taking_the_bench_options() -> None:
     declared = {name: st.bench for name, st in STUDIES.items() if st.bench}
-    assert {"rdpso", "zebro"} <= set(declared)
+    assert {"rdpso", "zebro", "pfsm"} <= set(declared)
     for ref in declared.values():
         module, _, fn = ref.partition(":")
         params = inspect.signature(getattr(importlib.import_module(module), fn)).parameters
@@ -29,4 +29,4 @@ def test_an_unknown_study_or_one_without_a_bench_is_a_clear_error() -> None:
 
 def test_the_core_bench_knows_no_study() -> None:
     src = (ROOT / "bridge" / "tools" / "bench.py").read_text().lower()
-    assert "rdpso" not in src and "zebro" not in src
+    assert "rdpso" not in src and "zebro" not in src and "pfsm" not in src
