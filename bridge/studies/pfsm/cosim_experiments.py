@@ -98,7 +98,7 @@ class PfsmCosim(Experiment):
         "python-can and footbot.dbc, with the grid's readings (search_vector = diffusion, MaxTime_SEARCH 150 s). A "
         "session ends when every target has been found or at 240 s; the numerical model runs the same scenario and "
         "seed to the same limit (num_* columns). P_STA is eq. 2 from the study's loop functions.")
-    trials = 3
+    trials = 10
     smoke_trials = 1
     boxes = (("p_sta", "P_STA (eq. 2), co-simulated"), ("t_total_s", "T_total (s), co-simulated"))
     means = (("searchers", ("p_sta", "num_p_sta"), "P_STA (eq. 2): co-simulated, numerical", {}),
