@@ -183,6 +183,19 @@ def test_the_ground_sensors_read_the_floor_patch_under_them() -> None:
         [1.0] * 4]
 
 
+def test_the_base_ground_sensors_read_black_or_white() -> None:
+    """The 8 black-or-white sensors on their 8 cm ring: 0 on a dark patch (grey < 0.5), 1 on the white floor."""
+    patch = {"floor": [{"x_min": 0.0, "y_min": 0.0, "x_max": 3.0, "y_max": 10.0, "grey": 0.2}]}
+    w = footbots([[3.0, 5.0, 0.0], [3.0, 2.0, 90.0], [6.0, 5.0, 0.0]], arena=patch)
+    w.step_quantum(0, 10_000_000)
+    s = w.model("footbot_sensors")
+    # straddling the edge facing east: the sensors ahead (0, +-45 deg) on white, those behind on the patch; sensors
+    # 2 and 6 (+-90 deg) sit on the edge (x = 3.0: white, the patch ends before it)
+    assert s.take_new(0)["base_ground"] == [1, 1, 1, 0, 0, 0, 1, 1]
+    assert s.take_new(1)["base_ground"] == [1, 0, 0, 0, 1, 1, 1, 1]  # facing north: its left side on the patch
+    assert s.take_new(2)["base_ground"] == [1] * 8
+
+
 @pytest.mark.parametrize("yaw_deg", [0.0, 60.0, 200.0])
 @pytest.mark.parametrize(("lx", "ly"), [(7.0, 5.0), (3.0, 7.0), (4.0, 2.0)])
 def test_the_light_ring_points_to_the_light(yaw_deg: float, lx: float, ly: float) -> None:

@@ -117,10 +117,11 @@ def test_a_payload_over_10_bytes_raises_and_sends_nothing(wired: tuple[FootbotBo
 def test_a_known_frame_of_the_wrong_length_is_counted_and_dropped(wired: tuple[FootbotBoards, can.BusABC]) -> None:
     drv, boards = wired
     good = bytes(range(10, 18))
-    put(boards, [(ID["PROXIMITY_0"], good), (ID["GROUND"], bytes([51, 102, 153, 204, 1]))])
+    put(boards, [(ID["PROXIMITY_0"], good), (ID["GROUND"], bytes([51, 102, 153, 204, 0b10000101, 1]))])
     drv.poll()
     assert drv.proximity[:8] == [b / 255 for b in good] and drv.ground == [0.2, 0.4, 0.6, 0.8]
-    put(boards, [(ID["PROXIMITY_0"], bytes(7)), (ID["GROUND"], bytes(4)), (ID["ENCODERS"], bytes(9)),
+    assert drv.base_ground == [1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    put(boards, [(ID["PROXIMITY_0"], bytes(7)), (ID["GROUND"], bytes(5)), (ID["ENCODERS"], bytes(9)),
                  (ID["RAB_SCAN"], bytes(3)), (0x7FF, bytes(2))])  # the last one is no frame of the robot's: ignored
     assert drv.poll() == 5
     assert drv.counters["bad_frames"] == 4 and drv.counters["scans"] == 0

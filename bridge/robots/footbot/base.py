@@ -20,6 +20,7 @@ from firmware_sim.robots.footbot.base_board import (
     PIN_PWM,
     BaseParams,
     FootbotBase,
+    base_ground_pin,
     ground_pin,
     light_pin,
     proximity_pin,
@@ -37,6 +38,7 @@ register_schema(SCHEMA, {
         "proximity": {"type": "array", "items": {"type": "number"}},
         "light": {"type": "array", "items": {"type": "number"}},
         "ground": {"type": "array", "items": {"type": "number"}},
+        "base_ground": {"type": "array", "items": {"type": "integer"}},
         "pwm": {"type": "array", "items": {"type": "integer"}},
         "led": {"type": "array", "items": {"type": "integer"}},
     },
@@ -53,7 +55,8 @@ def base_params(p: RobotProfile) -> BaseParams:
                       loop_hz=p.llc_loop_hz, max_wheel_rad_s=d.motor_max_wheel_rad_s,
                       deadband_pwm=d.motor_deadband_pwm, motor_time_constant_s=d.motor_time_constant_s,
                       sensor_period_ms=round(1000 / s.rate_hz), proximity_count=s.proximity_count,
-                      light_count=s.light_count, ground_count=len(s.ground_offsets_m))
+                      light_count=s.light_count, ground_count=len(s.ground_offsets_m),
+                      base_ground_count=len(s.base_ground_offsets_m))
 
 
 class BaseBoard:
@@ -82,6 +85,8 @@ class BaseBoard:
         for key, pin in (("proximity", proximity_pin), ("light", light_pin), ("ground", ground_pin)):
             for i, v in enumerate(s.get(key, ())):  # a new sample: the sensors' outputs hold until the next
                 b.analog_volts[pin(i)] = v * b.VREF
+        for i, v in enumerate(s.get("base_ground", ())):  # the comparators' outputs: white high, black low
+            b.digital[base_ground_pin(i)] = 1 if v else 0
         for item in inputs["in"]:
             if item[0] == "can0_state":
                 b.can.set_error_state(item[1], item[2], item[3])

@@ -1,5 +1,6 @@
 """What the foot-bot's base board senses in the world, for every foot-bot at once: the 24 infrared proximity sensors
-(one batched ray test), the 24 light sensors (the arena's light sources), the 4 motor-ground sensors (the arena's
+(one batched ray test), the 24 light sensors (the arena's light sources), the 4 motor-ground sensors and the 8 base
+ground sensors (the arena's
 floor patches). All three sample together at the base board's sensor rate; ``seq`` counts the samples, so the
 board's wiring sends a new set of readings only when there is one (``take_new``).
 
@@ -7,7 +8,8 @@ The readings are ARGoS's where it has them (``docs/footbot.md`` has the figures 
 sensor reads ARGoS's curve of the distance to the first thing its ray meets within ``range_m`` of the body (0
 nothing, 1 touching: ``argos_proximity``), a light sensor the illuminance of each source
 at the robot relative to its peak, times the cosine of the sensor's angle off the source's direction (0 facing
-away; no occlusion), a ground sensor the floor's grey level under it. Each adds Gaussian noise of ``noise`` (ARGoS:
+away; no occlusion), a motor-ground sensor the floor's grey level under it, a base ground sensor 1 where that level
+is 0.5 or more and 0 below (ARGoS's black-and-white sensors). Each adds Gaussian noise of ``noise`` (ARGoS:
 0 by default) and is clipped to [0, 1].
 """
 
@@ -22,6 +24,7 @@ import pybullet as pb
 from bridge.core.parts import Part, WorldModel
 from bridge.core.rng import stream
 from swarm_logic.robots.footbot.interfaces import (
+    BASE_GROUND_OFFSETS_M,
     LIGHT_COUNT,
     MOTOR_GROUND_OFFSETS_M,
     PROXIMITY_COUNT,
@@ -39,6 +42,7 @@ class FootbotSensorsParams(Part):
     proximity_range_m: float = PROXIMITY_RANGE_M
     light_count: int = LIGHT_COUNT
     ground_offsets_m: tuple[tuple[float, float], ...] = MOTOR_GROUND_OFFSETS_M
+    base_ground_offsets_m: tuple[tuple[float, float], ...] = BASE_GROUND_OFFSETS_M
     rate_hz: float = 10.0  # one sample per ARGoS control step (assumed for the real boards: docs/footbot.md)
     proximity_noise: float = 0.0
     light_noise: float = 0.0
@@ -64,6 +68,7 @@ class FootbotSensors(WorldModel):
         self.proximity: list[list[float]] = [[0.0] * q.proximity_count for q in parts]
         self.light: list[list[float]] = [[0.0] * q.light_count for q in parts]
         self.ground: list[list[float]] = [[1.0] * len(q.ground_offsets_m) for q in parts]
+        self.base_ground: list[list[int]] = [[1] * len(q.base_ground_offsets_m) for q in parts]
 
     def sample(self, t_end_ns: int) -> None:
         if len(self.robots) and t_end_ns >= self._next_ns:
@@ -92,6 +97,9 @@ class FootbotSensors(WorldModel):
             gx = np.array([x + ox * c - oy * sn for ox, oy in q.ground_offsets_m])
             gy = np.array([y + ox * sn + oy * c for ox, oy in q.ground_offsets_m])
             self.ground[k] = _noisy(np.asarray(cfg.arena.grey_at(gx, gy), dtype=float), q.ground_noise, rng)
+            bx = np.array([x + ox * c - oy * sn for ox, oy in q.base_ground_offsets_m])
+            by = np.array([y + ox * sn + oy * c for ox, oy in q.base_ground_offsets_m])
+            self.base_ground[k] = (np.asarray(cfg.arena.grey_at(bx, by)) >= 0.5).astype(int).tolist()
 
     def _proximity(self, live: list[int]) -> None:
         """One ray batch for every live foot-bot's proximity ring."""
@@ -123,7 +131,8 @@ class FootbotSensors(WorldModel):
         if self._taken[k] == self.seq:
             return {}
         self._taken[k] = self.seq
-        return {"proximity": self.proximity[k], "light": self.light[k], "ground": self.ground[k]}
+        return {"proximity": self.proximity[k], "light": self.light[k], "ground": self.ground[k],
+                "base_ground": self.base_ground[k]}
 
 
 def argos_proximity(d: np.ndarray, hit: np.ndarray) -> np.ndarray:

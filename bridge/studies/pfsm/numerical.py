@@ -30,6 +30,8 @@ from swarm_logic.families.pfsm.searcher import PfsmSearcher
 from swarm_logic.families.pfsm.target import PfsmTarget
 from swarm_logic.robot import Robot
 from swarm_logic.robots.footbot.interfaces import (
+    BASE_GROUND,
+    BASE_GROUND_OFFSETS_M,
     BODY_RADIUS_M,
     LEDS,
     LIGHT,
@@ -355,6 +357,20 @@ class PointGround:
         return self.w.ground(self.i)
 
 
+class PointBaseGround:
+    """The 8 black-or-white sensors: 1 where the floor's grey level is 0.5 or more."""
+
+    def __init__(self, world: FootbotWorld, i: int) -> None:
+        self.w, self.i = world, i
+
+    def readings(self) -> list[GroundReading]:
+        w, i = self.w, self.i
+        x, y, h = float(w.pos[i, 0]), float(w.pos[i, 1]), float(w.h[i])
+        c, s = math.cos(h), math.sin(h)
+        return [GroundReading(float((GREY if w.arena.in_base(x + ox * c - oy * s, y + ox * s + oy * c) else WHITE)
+                                    >= 0.5), (ox, oy)) for ox, oy in BASE_GROUND_OFFSETS_M]
+
+
 class PointWheels:
     """``DifferentialSteering``: the speeds hold until changed; the world moves the body at the end of the tick."""
 
@@ -437,7 +453,8 @@ class Swarm:
             is_s = i < w.ns
             rab_dev, leds = PointRab(w, i), PointLeds()
             devs = {RANGE_AND_BEARING: rab_dev, PROXIMITY: PointProximity(w, i), LIGHT: PointLight(w, i),
-                    MOTOR_GROUND: PointGround(w, i), WHEELS: PointWheels(w, i), LEDS: leds}
+                    MOTOR_GROUND: PointGround(w, i), BASE_GROUND: PointBaseGround(w, i), WHEELS: PointWheels(w, i),
+                    LEDS: leds}
             own = dict((params if is_s else target_params) or {})
             robot = Robot(i, self.clock, None, stream(seed, "robot", i), own, log_sink=sink, devices=devs)
             c = (searcher if is_s else target)()

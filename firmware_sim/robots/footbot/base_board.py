@@ -5,6 +5,7 @@ Each loop: read CAN commands (WHEELS_CMD: the wheels' linear speeds; LEDS_CMD: t
 wheel speed servo on the encoders (``firmware_sim.board.wheel_pid``), stop the motors 0.5 s after the last
 WHEELS_CMD (watchdog) and at once while bus-off; every ``sensor_period_ms`` read the proximity ring, the light ring
 and the motor-ground sensors through the ADC (their values reach the board as pin voltages, 0 V to VREF for 0 to 1)
+and the 8 base ground sensors as digital inputs (a comparator each: high on white)
 and send them on the bus with the encoder counts, at 8 bits a sensor; a status frame every second. The CAN
 interface is ``swarm_logic/robots/footbot/footbot.dbc``. Its acceptance filter passes only its two commands; one of
 the wrong length is counted (BASE_STATUS.bad_frames) and dropped.
@@ -27,6 +28,10 @@ STATUS_PERIOD_MS = 1000
 
 def proximity_pin(i: int) -> str:
     return f"PROX{i}"
+
+
+def base_ground_pin(i: int) -> str:
+    return f"GNDB{i}"
 
 
 def light_pin(i: int) -> str:
@@ -56,6 +61,7 @@ class BaseParams:
     proximity_count: int = 24
     light_count: int = 24
     ground_count: int = 4
+    base_ground_count: int = 8
     battery_divider: float = 4.0  # the battery reaches its ADC pin through a 4:1 divider
 
 
@@ -143,7 +149,8 @@ class FootbotBase:
         for k in range(3):
             self._raw("LIGHT_" + str(k), bytes(light[8 * k:8 * k + 8]))
         ground = [self._adc8(ground_pin(i)) for i in range(p.ground_count)]
-        self._raw("GROUND", bytes([*ground, self.scan]))
+        base = sum(self.b.digital_read(base_ground_pin(i)) << i for i in range(self.p.base_ground_count))
+        self._raw("GROUND", bytes([*ground, base, self.scan]))
 
     def _report_status(self) -> None:
         self.heartbeat = (self.heartbeat + 1) & 0xFF

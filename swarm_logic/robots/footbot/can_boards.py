@@ -1,7 +1,7 @@
 """The foot-bot's boards as its computer reaches them: one python-can bus (a session's simulated one, socketcan on
 the robot, any interface python-can has) and the robot's CAN database (``footbot.dbc``), serving the device faces
 the PFSM controllers use (``interfaces``: ``range_and_bearing``, ``footbot_proximity``, ``footbot_light``,
-``footbot_motor_ground``, ``differential_steering``, ``leds``).
+``footbot_motor_ground``, ``footbot_base_ground``, ``differential_steering``, ``leds``).
 
 ``poll()`` (the robot calls it before each control step) drains the bus: the base board's sensor frames update the
 rings and the ground sensors, the range-and-bearing board's RAB_RX frames fill a scan that its RAB_SCAN frame
@@ -22,6 +22,8 @@ from cantools.database.can import Database
 
 from swarm_logic.robots.footbot import footbot_db
 from swarm_logic.robots.footbot.interfaces import (
+    BASE_GROUND,
+    BASE_GROUND_OFFSETS_M,
     LEDS,
     LIGHT,
     MOTOR_GROUND,
@@ -84,6 +86,7 @@ class FootbotBoards:
         self.proximity = [0.0] * RING
         self.light = [0.0] * RING
         self.ground = [1.0] * len(MOTOR_GROUND_OFFSETS_M)
+        self.base_ground = [1.0] * len(BASE_GROUND_OFFSETS_M)
         self.encoders = (0, 0)
         self.status: dict[str, float] = {}
         self.rab_scan: list[RabPacket] = []
@@ -95,7 +98,8 @@ class FootbotBoards:
         self._payload: bytes | None = None
         self.counters = {"frames": 0, "bad_frames": 0, "scans": 0, "send_errors": 0}
         self._faces = {RANGE_AND_BEARING: RabFace(self, rab_range_m), PROXIMITY: RingFace(self, "proximity"),
-                       LIGHT: RingFace(self, "light"), MOTOR_GROUND: GroundFace(self), WHEELS: WheelsFace(self),
+                       LIGHT: RingFace(self, "light"), MOTOR_GROUND: GroundFace(self),
+                       BASE_GROUND: GroundFace(self, "base_ground", BASE_GROUND_OFFSETS_M), WHEELS: WheelsFace(self),
                        LEDS: LedsFace(self)}
 
     def faces(self) -> dict[str, Any]:
@@ -128,6 +132,7 @@ class FootbotBoards:
             self.light[k:k + 8] = [b / 255 for b in data]
         elif name == "GROUND":
             self.ground = [b / 255 for b in data[:len(self.ground)]]
+            self.base_ground = [float(data[4] >> i & 1) for i in range(len(self.base_ground))]
         elif name == "RAB_RX_0":
             self._rx0[int(s["index"])] = s
         elif name == "RAB_RX_1":
@@ -218,13 +223,14 @@ class RingFace:
 
 
 class GroundFace:
-    """``MotorGround``: the 4 grey-level sensors on the base board."""
+    """``MotorGround`` (the 4 grey-level sensors) or ``BaseGround`` (the 8 black-or-white ones) on the base board."""
 
-    def __init__(self, boards: FootbotBoards) -> None:
-        self.boards = boards
+    def __init__(self, boards: FootbotBoards, sensors: str = "ground",
+                 offsets: tuple[tuple[float, float], ...] = MOTOR_GROUND_OFFSETS_M) -> None:
+        self.boards, self.sensors, self.offsets = boards, sensors, offsets
 
     def readings(self) -> list[GroundReading]:
-        return [GroundReading(v, o) for v, o in zip(self.boards.ground, MOTOR_GROUND_OFFSETS_M, strict=True)]
+        return [GroundReading(v, o) for v, o in zip(getattr(self.boards, self.sensors), self.offsets, strict=True)]
 
 
 class WheelsFace:

@@ -15,6 +15,7 @@ relative to the robot's heading (rad, + = left, counter-clockwise).
   has a light above it).
 - ``footbot_motor_ground`` (``MotorGround``): 4 grey-level sensors under the body (0 black, 1 white) at their
   offsets in the robot's frame; the base is a grey patch.
+- ``footbot_base_ground`` (``BaseGround``): 8 black-or-white sensors on a ring under the base (0 black, 1 white).
 - ``differential_steering`` (``DifferentialSteering``): the two wheels' linear speeds.
 - ``leds`` (``Leds``): the 12 ring LEDs and the beacon, one colour for all.
 """
@@ -29,9 +30,10 @@ RANGE_AND_BEARING = "range_and_bearing"
 PROXIMITY = "footbot_proximity"
 LIGHT = "footbot_light"
 MOTOR_GROUND = "footbot_motor_ground"
+BASE_GROUND = "footbot_base_ground"
 WHEELS = "differential_steering"
 LEDS = "leds"
-DEVICE_NAMES = (RANGE_AND_BEARING, PROXIMITY, LIGHT, MOTOR_GROUND, WHEELS, LEDS)
+DEVICE_NAMES = (RANGE_AND_BEARING, PROXIMITY, LIGHT, MOTOR_GROUND, BASE_GROUND, WHEELS, LEDS)
 
 # ARGoS foot-bot (footbot_entity.cpp, dynamics2d footbot model)
 BODY_RADIUS_M = 0.085
@@ -45,6 +47,9 @@ RAB_RANGE_M = 3.0  # ARGoS's range-and-bearing default range
 RAB_PAYLOAD_BYTES = 10  # ARGoS's foot-bot default message size
 # the 4 motor-ground sensors (x forward, y left), m
 MOTOR_GROUND_OFFSETS_M = ((0.063, 0.0116), (-0.063, 0.0116), (-0.063, -0.0116), (0.063, -0.0116))
+# the 8 base ground sensors: a ring of radius 0.08 m, every 45 degrees from straight ahead (ARGoS footbot_entity.cpp)
+BASE_GROUND_OFFSETS_M = tuple((round(0.08 * math.cos(k * math.pi / 4), 6), round(0.08 * math.sin(k * math.pi / 4), 6))
+                              for k in range(8))
 
 
 def ring_angles(count: int) -> tuple[float, ...]:
@@ -119,6 +124,13 @@ class Light(Protocol):
 class MotorGround(Protocol):
     def readings(self) -> list[GroundReading]:
         """The 4 grey-level sensors under the body."""
+        ...
+
+
+@runtime_checkable
+class BaseGround(Protocol):
+    def readings(self) -> list[GroundReading]:
+        """The 8 black-or-white sensors under the base (0 black, 1 white), counter-clockwise from straight ahead."""
         ...
 
 
