@@ -26,7 +26,7 @@ COSIM_MAX_S = 240.0  # a session's limit (s): the numerical model's 25 m^2 runs 
 
 
 def scenario_config(ns: int, nt: int, seed: int, max_s: float = COSIM_MAX_S, name: str | None = None,
-                    robots_per_process: int = 15) -> dict[str, Any]:
+                    robots_per_process: int = 30) -> dict[str, Any]:
     """A session of Khan's scenario (side 5 m, ``ns`` searchers, ``nt`` targets) deployed from ``seed`` as the
     numerical model deploys it."""
     arena = Arena(SIDE)
@@ -98,7 +98,7 @@ class PfsmCosim(Experiment):
         "python-can and footbot.dbc, with the grid's readings (search_vector = diffusion, MaxTime_SEARCH 150 s). A "
         "session ends when every target has been found or at 240 s; the numerical model runs the same scenario and "
         "seed to the same limit (num_* columns). P_STA is eq. 2 from the study's loop functions.")
-    trials = 10
+    trials = 5
     smoke_trials = 1
     boxes = (("p_sta", "P_STA (eq. 2), co-simulated"), ("t_total_s", "T_total (s), co-simulated"))
     means = (("searchers", ("p_sta", "num_p_sta"), "P_STA (eq. 2): co-simulated, numerical", {}),
