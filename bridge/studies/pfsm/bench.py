@@ -26,7 +26,7 @@ def bench(quick: bool = False, duration: float | None = None, out_dir: str = "ru
     code = 0
     for k in QUICK if quick else FULL:
         raw = scenario_config(30, 30, 1, max_s=dur, name="pfsm-bench", robots_per_process=k)
-        raw["search"]["end_after_found_s"] = None  # run the whole duration
+        raw["search"]["end_after_found_s"] = dur  # run the whole duration, every target found or not
         out = Path(out_dir) / f"pfsm_k{k}"
         out.mkdir(parents=True, exist_ok=True)
         cfg = out.parent / f"pfsm_k{k}.toml"
