@@ -1,0 +1,256 @@
+"""``RoyApf`` (behaviour ``roy_apf``): Roy's chapter 3 agent (digest 001 §2.1.13). Every step it reads its pose,
+the others' broadcast poses and its sonars, re-tunes its four gains (k_a, k_v, k_r, k_OA) with the chosen optimiser
+on Theta (eq. 3.22), computes u = -u^a + u^r + u^OA (+ target term) and commands the velocity v + u dt (saturated)
+to the tracking layer: a double integrator (eq. 3.1) whose velocity loop is the robot's.
+
+The law works in thesis units (1 unit = ``unit_m``, 0.1 m, digest §5.4); the devices speak SI.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any, ClassVar
+
+import numpy as np
+
+from swarm_logic.controller import Controller
+from swarm_logic.families.roy import potential
+from swarm_logic.families.roy.bat import BAT_MODES, bat
+from swarm_logic.families.roy.bfo import bfo
+from swarm_logic.families.roy.objective import MODES, AgentState, theta
+from swarm_logic.families.roy.pso import pso
+from swarm_logic.robot import Robot
+from swarm_logic.robots.sonpi.interfaces import (
+    LOCALISATION,
+    POSE,
+    SONAR,
+    VELOCITY,
+    HolonomicVelocity,
+    Localisation,
+    OwnPose,
+    Sonar,
+)
+
+OPTIMISERS = ("bat", "pso", "bfo", "bgpso", "psoabg", "fixed")
+POS = "(0, inf)"
+GAIN = "[0.1, 10]"
+COUNT = "[1, 10000]"
+UNIT = "[0, 1]"
+
+
+class RoyApf(Controller):
+    """Attraction + repulsion + obstacle avoidance with per-step gain tuning (Roy 2022, ch.3)."""
+
+    period_s = 0.05
+    defaults: ClassVar[dict[str, Any]] = {
+        "period_s": 0.05,  # erratum #1: the thesis gives no dt; ours 0.05 s
+        "unit_m": 0.1,  # digest §5.4: 1 unit = 0.1 m
+        "r_s": 1.0,  # Table 3.3, units
+        "delta": 4.0,  # Table 3.3 (sqrt(delta) r_s = 2 r_s, Theorem 1)
+        "target_x": 35.0,  # Table 3.3, T = (35, 35) units
+        "target_y": 35.0,
+        "v_max": 0.3,  # digest §5.3 [R], units/s
+        "d_max": 5.0,  # sensor range, units (digest §0 item 5): d in Theta when nothing echoes (erratum #3)
+        "optimiser": "bat",  # the thesis' choice
+        "objective": "lookahead",  # erratum #3: "literal" or "lookahead"
+        "oa_mode": "per_sensor",  # digest §2.1.6 [R]: one OA term per reading within r_s, or the nearest only
+        "neighbour_radius": 0.0,  # erratum #4: 0 = all agents (hardware broadcasts all poses); else units
+        "target_term": "saturated",  # erratum #2: "saturated" target term, or "none" (the law as printed)
+        "k_target": 1.0,  # erratum #2 [R]
+        "target_sat": 1.0,  # units: the offset the target pull saturates at [R]
+        "target_damping": 1.0,  # [R] absolute velocity damping of the target term
+        "gain_min": 0.1,  # erratum #3: box bounds [0.1, 10]
+        "gain_max": 10.0,
+        "k_a": 4.4,  # initial (warm start) and "fixed" gains: Table 3.4 BAT means
+        "k_v": 0.31,
+        "k_r": 6.64,
+        "k_oa": 2.5,
+        "retune_every": 1,  # steps between re-tunings; 1 = every step, as the thesis
+        "pso_particles": 50,  # Table 3.1
+        "pso_iters": 50,
+        "pso_c1": 1.5,
+        "pso_c2": 1.5,
+        "pso_w": 0.5,
+        "bfo_bacteria": 100,  # Table 3.2
+        "bfo_nc": 5,
+        "bfo_ns": 4,
+        "bfo_nre": 4,
+        "bfo_ned": 2,
+        "bfo_ped": 0.25,
+        "bfo_step": 0.05,  # erratum #6: C = 0.05 x gain range
+        "bfo_d_att": 0.1,  # erratum #6: Passino's J_cc defaults
+        "bfo_w_att": 0.2,
+        "bfo_h_rep": 0.1,
+        "bfo_w_rep": 10.0,
+        "bat_pop": 25,  # erratum #5: 25 bats x 50 iterations
+        "bat_iters": 50,
+        "bat_mode": "literal",  # erratum #5: "literal" (alpha 0.05, gamma 0.95) or "standard" (Yang)
+        "bat_f_min": 0.0,  # Table 3.3
+        "bat_f_max": 1.0,
+        "bat_a0": 1.0,
+        "bat_alpha": 0.05,
+        "bat_gamma": 0.95,
+        "deadlock_window_s": 2.0,  # erratum #7: PSOABG switches to PSO when the centroid moves
+        "deadlock_move": 0.05,  # < deadlock_move x r_s in deadlock_window_s
+        "goal_tol": 1.0,  # units (digest §5.5): no deadlock within this of T
+    }
+    ranges: ClassVar[dict[str, str]] = {
+        "period_s": "(0, 10]", "unit_m": POS, "r_s": POS, "delta": POS, "target_x": "(-inf, inf)",
+        "target_y": "(-inf, inf)", "v_max": POS, "d_max": POS, "neighbour_radius": "[0, inf)", "k_target": "[0, inf)",
+        "target_sat": "[0, inf)", "target_damping": "[0, inf)", "gain_min": POS, "gain_max": POS, "k_a": POS,
+        "k_v": POS, "k_r": POS, "k_oa": POS, "retune_every": COUNT, "pso_particles": COUNT, "pso_iters": "[0, 10000]",
+        "pso_c1": "[0, 10]", "pso_c2": "[0, 10]", "pso_w": "[0, 2]", "bfo_bacteria": "[2, 10000]", "bfo_nc": COUNT,
+        "bfo_ns": "[0, 1000]", "bfo_nre": COUNT, "bfo_ned": COUNT, "bfo_ped": UNIT, "bfo_step": "(0, 1]",
+        "bfo_d_att": "[0, inf)", "bfo_w_att": "[0, inf)", "bfo_h_rep": "[0, inf)", "bfo_w_rep": "[0, inf)",
+        "bat_pop": COUNT, "bat_iters": "[0, 10000]", "bat_f_min": "[0, inf)", "bat_f_max": "[0, inf)",
+        "bat_a0": "[0, 1]", "bat_alpha": "(0, 1]", "bat_gamma": "(0, inf)", "deadlock_window_s": POS,
+        "deadlock_move": "[0, inf)", "goal_tol": "[0, inf)",
+    }
+    choices: ClassVar[dict[str, tuple[str, ...]]] = {
+        "optimiser": OPTIMISERS, "objective": MODES, "oa_mode": ("per_sensor", "nearest"),
+        "target_term": ("saturated", "none"), "bat_mode": BAT_MODES,
+    }
+    static_params = frozenset({"period_s"})
+
+    pose: OwnPose
+    localisation: Localisation
+    sonar: Sonar
+    velocity: HolonomicVelocity
+
+    @classmethod
+    def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
+        """``with_defaults``, then the bounds in order and the initial gains within them (ValueError naming them)."""
+        p = cls.with_defaults(params)
+        if not p["gain_min"] < p["gain_max"]:
+            raise ValueError(f"gain_min: must be < gain_max ({p['gain_max']}), got {p['gain_min']}")
+        for k in ("k_a", "k_v", "k_r", "k_oa"):
+            if p["optimiser"] != "fixed" and not p["gain_min"] <= p[k] <= p["gain_max"]:
+                raise ValueError(f"{k}: the warm start must lie in [gain_min, gain_max], got {p[k]}")
+        if p["bat_f_min"] > p["bat_f_max"]:
+            raise ValueError(f"bat_f_min: must be <= bat_f_max ({p['bat_f_max']}), got {p['bat_f_min']}")
+        return p
+
+    def init(self, robot: Robot) -> None:
+        super().init(robot)
+        self.p = self.resolve(robot.params)
+        self.period_s = float(self.p["period_s"])
+        self.pose = robot.device(POSE)
+        self.localisation = robot.device(LOCALISATION)
+        self.sonar = robot.device(SONAR)
+        self.velocity = robot.device(VELOCITY)
+        self.reset()
+
+    def reset(self) -> None:
+        p = self.p
+        self.gains = np.array([p["k_a"], p["k_v"], p["k_r"], p["k_oa"]], float)
+        self.steps = 0
+        self.using_pso = False  # PSOABG: PSO engaged by the deadlock detector
+        self.centroids: deque[np.ndarray] = deque(maxlen=max(2, round(p["deadlock_window_s"] / self.period_s) + 1))
+        self.u = np.zeros(2)
+
+    def state(self) -> AgentState:
+        """What this agent knows now, in thesis units."""
+        p = self.p
+        unit = float(p["unit_m"])
+        me = self.pose.read()
+        x_i = np.array([me.x_m, me.y_m]) / unit
+        v_i = np.array([me.vx_mps, me.vy_mps]) / unit
+        poses = self.localisation.poses()
+        xs = np.array([[q.x_m, q.y_m] for q in poses], float).reshape(-1, 2) / unit
+        vs = np.array([[q.vx_mps, q.vy_mps] for q in poses], float).reshape(-1, 2) / unit
+        n = len(xs) + 1
+        x_bar = (xs.sum(axis=0) + x_i) / n
+        v_bar = (vs.sum(axis=0) + v_i) / n
+        others = xs
+        if p["neighbour_radius"] > 0 and len(xs):
+            others = xs[np.hypot(*(xs - x_i[None, :]).T) <= p["neighbour_radius"]]
+        readings = self.sonar.readings()
+        ranges = np.array([r.range_m for r in readings], float) / unit
+        angles = np.array([r.angle_rad for r in readings], float)
+        points = potential.obstacle_points(x_i, me.yaw_rad, ranges, angles)
+        dists = ranges[np.isfinite(ranges)]
+        r_s, delta = float(p["r_s"]), float(p["delta"])
+        oa = potential.obstacle_avoidance(x_i, points, dists, r_s, p["oa_mode"])
+        target = np.array([p["target_x"], p["target_y"]], float)
+        if p["target_term"] == "saturated":
+            extra = potential.target_term(x_i, v_i, target, p["k_target"], p["target_sat"], p["target_damping"])
+        else:
+            extra = np.zeros(2)
+        basis = potential.law_basis(x_i, v_i, x_bar, v_bar, others, oa, r_s, delta)
+        d_near = float(min(dists.min(), p["d_max"])) if len(dists) else float(p["d_max"])
+        return AgentState(x_i, v_i, x_bar, v_bar, n, others, points, max(d_near, 1e-6), basis, extra, target, r_s,
+                          self.period_s, float(p["d_max"]), float(p["v_max"]))
+
+    def deadlocked(self, s: AgentState) -> bool:
+        """Erratum #7: the centroid moved less than ``deadlock_move`` r_s over the last ``deadlock_window_s``,
+        away from the target."""
+        self.centroids.append(s.x_bar)
+        if len(self.centroids) < self.centroids.maxlen:  # type: ignore[operator]
+            return False
+        moved = float(np.hypot(*(self.centroids[-1] - self.centroids[0])))
+        far = float(np.hypot(*(s.x_bar - s.target))) > self.p["goal_tol"]
+        return far and moved < self.p["deadlock_move"] * s.r_s
+
+    def tune(self, s: AgentState) -> np.ndarray:
+        """The gains the chosen optimiser finds for Theta at state ``s``, warm-started at the last ones."""
+        p, rng = self.p, self.robot.rng
+        name = p["optimiser"]
+        deadlock = self.deadlocked(s)
+        if name == "fixed":
+            return self.gains
+        lo = np.full(4, float(p["gain_min"]))
+        hi = np.full(4, float(p["gain_max"]))
+        mode = p["objective"]
+
+        def f(k: np.ndarray) -> np.ndarray:
+            return theta(k, s, mode)
+
+        def run_pso(init: np.ndarray | None = None) -> np.ndarray:
+            return pso(f, lo, hi, rng, int(p["pso_particles"]), int(p["pso_iters"]), p["pso_c1"], p["pso_c2"],
+                       p["pso_w"], x0=self.gains, init=init)[0]
+
+        def run_bfo() -> tuple[np.ndarray, float, np.ndarray]:
+            return bfo(f, lo, hi, rng, int(p["bfo_bacteria"]), int(p["bfo_nc"]), int(p["bfo_ns"]), int(p["bfo_nre"]),
+                       int(p["bfo_ned"]), p["bfo_ped"], p["bfo_step"], p["bfo_d_att"], p["bfo_w_att"],
+                       p["bfo_h_rep"], p["bfo_w_rep"], x0=self.gains)
+
+        if name == "bat":
+            return bat(f, lo, hi, rng, int(p["bat_pop"]), int(p["bat_iters"]), p["bat_f_min"], p["bat_f_max"],
+                       p["bat_a0"], p["bat_alpha"], p["bat_gamma"], p["bat_mode"], x0=self.gains)[0]
+        if name == "pso":
+            return run_pso()
+        if name == "bfo":
+            return run_bfo()[0]
+        if name == "bgpso":  # Fig. 3.8: PSO after BFO's elimination-dispersal, from its population
+            return run_pso(init=run_bfo()[2])
+        self.using_pso = deadlock  # psoabg (Fig. 3.9): BFO, PSO while the swarm is stuck
+        return run_pso() if deadlock else run_bfo()[0]
+
+    def step(self) -> None:
+        s = self.state()
+        if self.steps % int(self.p["retune_every"]) == 0:
+            self.gains = np.asarray(self.tune(s), float)
+        elif self.p["optimiser"] == "psoabg":
+            self.deadlocked(s)
+        self.steps += 1
+        self.u = potential.control(self.gains, s.basis, s.extra)
+        v = s.v_i + self.u * self.period_s
+        speed = float(np.hypot(v[0], v[1]))
+        if speed > s.v_max:
+            v *= s.v_max / speed
+        unit = float(self.p["unit_m"])
+        self.velocity.set_velocity(float(v[0]) * unit, float(v[1]) * unit)
+
+    def telemetry(self) -> dict[str, float | int]:
+        k = self.gains
+        return {"k_a": float(k[0]), "k_v": float(k[1]), "k_r": float(k[2]), "k_oa": float(k[3]),
+                "pso_on": int(self.using_pso)}
+
+    def destroy(self) -> None:
+        """Command zero velocity."""
+        vel = getattr(self, "velocity", None)
+        if vel is not None:
+            vel.set_velocity(0.0, 0.0)
+
+
+
