@@ -81,7 +81,7 @@ class Ch3Scenario:
     lines: tuple[Segment, ...] = (((8.0, 14.0), (14.0, 8.0)),
                                   ((8.0, 32.0), (18.586, 21.414)), ((21.414, 18.586), (32.0, 8.0)))
     movers: tuple[Mover, ...] = (Mover((22.0, 32.0), (32.0, 22.0), 1.5, 0.2),)
-    goal_radius: float = 1.0  # digest §5.5
+    goal_radius: float = 1.0  # digest §5.5 (see ``Swarm.all_arrived``)
     timeout_s: float = 600.0  # 3 x the BAT's 200 s (§5.5)
 
     def __post_init__(self) -> None:
@@ -324,8 +324,12 @@ class Swarm:
             self.arrived_s = w.t
 
     def all_arrived(self) -> bool:
-        d = np.hypot(*(self.world.pos - np.array(self.sc.target)).T)
-        return bool(np.all(d <= self.sc.goal_radius))
+        """Arrival [R]: 6 agents 2 r_s apart cannot all be within 1 unit of T, so the centroid within
+        ``goal_radius`` of T and every agent within ``goal_radius`` + r_s sqrt(N) (the CI disc) of it."""
+        p, t = self.world.pos, np.array(self.sc.target)
+        d = np.hypot(*(p - t).T)
+        near = float(np.hypot(*(p.mean(axis=0) - t))) <= self.sc.goal_radius
+        return near and bool(np.all(d <= self.sc.goal_radius + self.r_s * math.sqrt(len(p))))
 
     def run(self, max_s: float | None = None, until_arrived: bool = True) -> Ch3Run:
         """Tick until every agent is within the goal radius (``until_arrived``) or ``max_s`` (default the

@@ -1,0 +1,132 @@
+"""Roy ch.3 family: the law's analytic targets (A1 pair spacing, A2 obstacle trigger; digest 001 §6), each
+optimiser improving its objective on a toy problem, determinism and parameter validation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from swarm_logic.families.roy import potential
+from swarm_logic.families.roy.bat import bat
+from swarm_logic.families.roy.bfo import bfo
+from swarm_logic.families.roy.controller import RoyApf
+from swarm_logic.families.roy.objective import AgentState, theta
+from swarm_logic.families.roy.pso import pso
+
+LO, HI = np.full(4, 0.1), np.full(4, 10.0)
+OPTIMUM = np.array([4.4, 0.31, 6.64, 2.5])
+
+
+def sphere(k: np.ndarray) -> np.ndarray:
+    return np.sum((np.atleast_2d(k) - OPTIMUM) ** 2, axis=1)
+
+
+@pytest.mark.parametrize(("k_a", "k_r", "d"), [(4.4, 6.64, 2.10), (8.8, 8.97, 1.69), (3.03, 4.95, 2.18)])
+def test_a1_pair_spacing_formula(k_a: float, k_r: float, d: float) -> None:
+    assert potential.pair_spacing(k_a, k_r) == pytest.approx(d, rel=0.01)
+
+
+def test_a1_the_law_balances_at_the_spacing() -> None:
+    """At d*, attraction to the pair's mean and the repulsion cancel (eq. 3.5, no velocity error)."""
+    k_a, k_r = 4.4, 6.64
+    d = potential.pair_spacing(k_a, k_r)
+    x1, x2 = np.array([0.0, 0.0]), np.array([d, 0.0])
+    basis = potential.law_basis(x1, np.zeros(2), (x1 + x2) / 2, np.zeros(2), x2[None, :], np.zeros(2), 1.0, 4.0)
+    assert np.allclose(potential.control(np.array([k_a, 0.31, k_r, 2.5]), basis), 0.0, atol=1e-12)
+
+
+def test_a2_obstacle_term_is_zero_beyond_r_s_and_points_away_within() -> None:
+    x = np.array([3.0, 4.0])
+    angles = np.radians([-90.0, -45.0, 0.0, 45.0, 90.0])
+    far = np.array([1.01, 2.0, math.inf, 4.9, 1.5])
+    pts = potential.obstacle_points(x, 0.3, far, angles)
+    assert np.all(potential.obstacle_avoidance(x, pts, far[np.isfinite(far)], 1.0) == 0.0)
+    near = np.array([math.inf, math.inf, 0.6, math.inf, math.inf])
+    pts = potential.obstacle_points(x, 0.3, near, angles)
+    assert np.allclose(pts[0], x + 0.6 * np.array([math.cos(0.3), math.sin(0.3)]))  # eq. 3.20
+    k_oa = 2.5
+    u = k_oa * potential.obstacle_avoidance(x, pts, np.array([0.6]), 1.0)
+    away = (x - pts[0]) / np.linalg.norm(x - pts[0])
+    assert np.allclose(u / np.linalg.norm(u), away)
+    assert np.linalg.norm(u) == pytest.approx(k_oa * math.exp(-0.36) * 0.6, rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["pso", "bfo", "bat_literal", "bat_standard"])
+def test_each_optimiser_improves_on_a_toy_problem(name: str) -> None:
+    rng = np.random.default_rng(3)
+    x0 = np.array([9.0, 9.0, 0.5, 9.0])
+    if name == "pso":
+        best, val = pso(sphere, LO, HI, rng, x0=x0)
+    elif name == "bfo":
+        best, val, pop = bfo(sphere, LO, HI, rng, bacteria=30, x0=x0)
+        assert pop.shape == (30, 4)
+    else:
+        best, val = bat(sphere, LO, HI, rng, mode=name.split("_")[1], x0=x0)
+    assert val == pytest.approx(float(sphere(best)[0]))
+    assert np.all((best >= LO) & (best <= HI))
+    assert val < 0.05 * float(sphere(x0)[0])
+
+
+def state(mode_points: bool = True) -> AgentState:
+    x_i, v_i = np.array([5.0, 5.0]), np.array([0.1, 0.0])
+    others = np.array([[6.0, 5.0], [5.0, 6.5], [4.0, 4.0]])
+    x_bar = (others.sum(axis=0) + x_i) / 4
+    v_bar = np.array([0.05, 0.05])
+    pts = np.array([[5.0, 4.3]]) if mode_points else np.zeros((0, 2))
+    oa = potential.obstacle_avoidance(x_i, pts, np.array([0.7]), 1.0) if mode_points else np.zeros(2)
+    basis = potential.law_basis(x_i, v_i, x_bar, v_bar, others, oa, 1.0, 4.0)
+    return AgentState(x_i, v_i, x_bar, v_bar, 4, others, pts, 0.7, basis, np.zeros(2), np.array([35.0, 35.0]), 1.0,
+                      0.05, 5.0, 0.3)
+
+
+@pytest.mark.parametrize("mode", ["literal", "lookahead"])
+def test_optimisers_improve_theta_in_both_modes(mode: str) -> None:
+    s = state()
+    x0 = np.array([4.4, 0.31, 6.64, 2.5])
+    start = float(theta(x0, s, mode)[0])
+    for run in (lambda r: pso(lambda k: theta(k, s, mode), LO, HI, r, 20, 20, x0=x0)[1],
+                lambda r: bat(lambda k: theta(k, s, mode), LO, HI, r, 15, 20, x0=x0)[1],
+                lambda r: bfo(lambda k: theta(k, s, mode), LO, HI, r, bacteria=20, x0=x0)[1]):
+        assert run(np.random.default_rng(1)) < start
+
+
+def test_literal_theta_is_linear_in_the_gains() -> None:
+    """The degeneracy the digest notes (§2.1.7): Theta's first three terms are linear in k_a, k_v, k_r."""
+    s = state()
+    k = np.array([[1.0, 1.0, 1.0, 1.0], [2.0, 1.0, 1.0, 1.0], [3.0, 1.0, 1.0, 1.0]])
+    t = theta(k, s, "literal")
+    assert t[2] - t[1] == pytest.approx(t[1] - t[0])
+    with pytest.raises(ValueError, match="objective"):
+        theta(k, s, "quadratic")
+
+
+def test_optimisers_are_deterministic_for_a_seed() -> None:
+    for opt in (lambda r: pso(sphere, LO, HI, r, 10, 10), lambda r: bat(sphere, LO, HI, r, 10, 10),
+                lambda r: bfo(sphere, LO, HI, r, bacteria=10)[:2]):
+        a, b = opt(np.random.default_rng(7)), opt(np.random.default_rng(7))
+        assert np.array_equal(a[0], b[0]) and a[1] == b[1]
+
+
+@pytest.mark.parametrize(("params", "name"), [
+    ({"bat_alpha": 2.0}, "bat_alpha"), ({"optimiser": "ga"}, "optimiser"), ({"objective": "x"}, "objective"),
+    ({"r_s": 0.0}, "r_s"), ({"pso_particles": 2.5}, "pso_particles"), ({"gain_min": 5.0, "gain_max": 1.0}, "gain_min"),
+    ({"k_a": 20.0}, "k_a"), ({"bat_f_min": 2.0}, "bat_f_min"), ({"bfo_ped": 1.5}, "bfo_ped"),
+])
+def test_parameter_errors_name_the_parameter(params: dict[str, object], name: str) -> None:
+    with pytest.raises(ValueError, match=name):
+        RoyApf.resolve(params)
+
+
+def test_bat_mode_and_pair_spacing_errors_name_their_argument() -> None:
+    with pytest.raises(ValueError, match="bat mode"):
+        bat(sphere, LO, HI, np.random.default_rng(0), mode="yang")
+    with pytest.raises(ValueError, match="k_a, k_r"):
+        potential.pair_spacing(10.0, 4.0)
+
+
+def test_the_behaviour_is_registered() -> None:
+    from importlib.metadata import entry_points
+
+    assert entry_points(group="swarm_sitl.behaviours")["roy_apf"].load() is RoyApf
