@@ -121,3 +121,23 @@ def test_the_study_is_registered() -> None:
 
     study = entry_points(group="swarm_sitl.studies")["roy"].load()
     assert study.name == "roy"
+
+
+@pytest.mark.parametrize("optimiser", ["bat", "pso", "bfo", "bgpso", "psoabg", "psoabg_stuck"])
+def test_each_optimiser_improves_theta_on_an_agent_of_the_scenario(optimiser: str) -> None:
+    """One re-tuning from the warm start never makes Theta worse, in both modes; PSOABG runs PSO when stuck."""
+    from swarm_logic.families.roy.objective import theta
+
+    sc = Ch3Scenario()
+    for mode in ("lookahead", "literal"):
+        sw = Swarm(sc, deploy(sc, 2), seed=2, params={"optimiser": optimiser.split("_")[0], "objective": mode,
+                                                      "bat_pop": 10, "bat_iters": 10, "pso_particles": 10,
+                                                      "pso_iters": 10, "bfo_bacteria": 10})
+        c = sw.ctls[0]
+        s = c.state()
+        if optimiser == "psoabg_stuck":
+            c.centroids.extend([s.x_bar] * (c.centroids.maxlen - 1))  # type: ignore[operator]
+        before = float(theta(c.gains, s, mode)[0])
+        after = float(theta(c.tune(s), s, mode)[0])
+        assert after <= before
+        assert c.using_pso == (optimiser == "psoabg_stuck")
