@@ -110,7 +110,7 @@ class RoyApf(Controller):
         "optimiser": OPTIMISERS, "objective": MODES, "oa_mode": ("per_sensor", "nearest"),
         "target_term": ("saturated", "none"), "bat_mode": BAT_MODES,
     }
-    static_params = frozenset({"period_s"})
+    static_params = frozenset({"period_s", "deadlock_window_s"})  # both size state built by ``init``
 
     pose: OwnPose
     localisation: Localisation
