@@ -82,10 +82,12 @@ def open_mavlink(cfg: dict[str, Any], robot_id: int, clock: Clock) -> MavlinkFac
     return open_face(cfg, robot_id, clock)
 
 
-def open_devices(hal: dict[str, Any], robot: Any) -> dict[str, Any]:
-    """The robot's own devices its HAL config names (``DEVICES``), in the config's order; a table that is neither a
-    built-in device, a robot setting nor a registered device is a ValueError naming what there is."""
+def open_devices(hal: dict[str, Any], robot: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The robot's own devices its HAL config names (``DEVICES``), in the config's order, and the faces they serve
+    (``faces()``); a table that is neither a built-in device, a robot setting nor a registered device is a ValueError
+    naming what there is."""
     out: dict[str, Any] = {}
+    served: dict[str, Any] = {}
     for name, cfg in hal.items():
         if name in BUILT_IN or name in NOT_DEVICES:
             continue
@@ -99,10 +101,10 @@ def open_devices(hal: dict[str, Any], robot: Any) -> dict[str, Any]:
         dev = out[name] = opener(cfg, robot)
         faces = getattr(dev, "faces", None)
         for face, obj in (faces() if callable(faces) else {}).items():
-            if face in out or face in hal:
+            if face in out or face in served or face in hal:
                 raise ValueError(f"HAL config {name}: its device's face {face!r} is also another device's name")
-            out[face] = obj
-    return out
+            served[face] = obj
+    return out, served
 
 
 def open_port(cfg: dict[str, Any], what: str, default_baud: int) -> serial.SerialBase:

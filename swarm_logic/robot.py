@@ -58,6 +58,7 @@ class Robot:
     mavlink: MavlinkFace | None = None
     payload: tuple[int, ...] = ()  # a carrier (TraxBot): the robots on its conveyor, in the order they drop off
     devices: dict[str, Any] = field(default_factory=dict)  # its own devices by HAL table name (swarm_logic.devices)
+    faces: dict[str, Any] = field(default_factory=dict)  # what those devices serve besides themselves, by name
     rng_py: random.Random = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -85,7 +86,7 @@ class Robot:
                 robot.uwb = devices.open_uwb(hal["uwb"], clock, robot.ports)
             if hal.get("mavlink") is not None:
                 robot.mavlink = devices.open_mavlink(hal["mavlink"], robot_id, clock)
-            robot.devices = devices.open_devices(hal, robot)
+            robot.devices, robot.faces = devices.open_devices(hal, robot)
             if log_sink is None and (hal.get("log") or {}).get("path"):
                 log_sink = JsonlLog(hal["log"]["path"], clock)
             robot.log_sink = log_sink
@@ -100,18 +101,13 @@ class Robot:
             self.log_sink(topic, values)
 
     def device(self, name: str) -> Any:
-        """Its device called ``name`` (the HAL table that opened it); KeyError naming the devices it has."""
-        try:
-            return self.devices[name]
-        except KeyError:
+        """Its device called ``name`` (the HAL table that opened it, or a face one serves); KeyError naming the
+        devices it has."""
+        dev = self.devices.get(name, self.faces.get(name))
+        if dev is None:
             raise KeyError(f"robot {self.id} has no device {name!r}; it has: "
-                           f"{', '.join(self.devices) or 'none of its own'}") from None
-
-    def _own_devices(self) -> list[Any]:
-        """Its devices as their HAL tables opened them, without the faces a device serves (``faces()``)."""
-        faces = {id(f) for d in self.devices.values() if callable(getattr(d, "faces", None))
-                 for f in d.faces().values()}
-        return [d for d in self.devices.values() if id(d) not in faces]
+                           f"{', '.join([*self.devices, *self.faces]) or 'none of its own'}")
+        return dev
 
     def poll(self) -> None:
         """Drain every device's receive queue (non-blocking)."""
@@ -119,13 +115,13 @@ class Robot:
             self.llc.poll()
         if self.xbee is not None:
             self.xbee.poll()
-        for d in self._own_devices():
+        for d in self.devices.values():
             poll = getattr(d, "poll", None)
             if poll is not None:
                 poll()
 
     def close(self) -> None:
-        for d in reversed(self._own_devices()):
+        for d in reversed(self.devices.values()):
             close = getattr(d, "close", None)
             if close is not None:
                 close()
