@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from firmware_sim.board.can_controller import CanController
+from firmware_sim.board.can_controller import CanController, Frame
 
 HIGH, LOW = 1, 0
 
@@ -34,6 +34,17 @@ class Board:
         # a motion-capture receiver's latest pose (x m, y m, yaw rad, world frame), when one is fitted
         self.external_pose: tuple[float, float, float] | None = None
         self.can = CanController(rx_depth=can_rx_depth)
+
+    def feed_can(self, items: list) -> None:
+        """What the robot's bus delivered to this node, as the firmware host hands it: ``["can0", id, data, extended,
+        t_ns]`` a frame from another node, ``["can0_state", state, tec, rec]`` a change of its controller's
+        fault-confinement state (its EFLG register); error frames (a sixth field) only moved the counters."""
+        for item in items:
+            if item[0] == "can0_state":
+                self.can.set_error_state(item[1], item[2], item[3])
+            elif item[0] == "can0" and len(item) == 5:
+                _bus, arb_id, data, ext, ts = item
+                self.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
 
     # -- Arduino API -------------------------------------------------------------------------------
     def millis(self) -> int:
@@ -90,3 +101,12 @@ class Sketch(Protocol):
     def setup(self) -> None: ...
 
     def loop(self) -> None: ...
+
+
+def next_loop_ns(nominal_ns: int, period_ns: int, t_ns: int) -> int:
+    """A fixed-rate loop's next nominal time after ``t_ns`` (millis()-based, as on the board): the world rounds it up
+    to a quantum boundary, so when the quantum does not divide the period the loop jitters but keeps its rate."""
+    nominal = nominal_ns + period_ns
+    while nominal <= t_ns:
+        nominal += period_ns
+    return nominal

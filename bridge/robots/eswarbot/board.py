@@ -16,8 +16,7 @@ from bridge.core.registry import PluginError
 from bridge.models.differential_drive import DriveParams
 from bridge.models.sonar import SonarParams
 from firmware_sim.board import sensors
-from firmware_sim.board.arduino import Board
-from firmware_sim.board.can_controller import Frame
+from firmware_sim.board.arduino import Board, next_loop_ns
 from firmware_sim.robots.eswarbot.llc import (
     PIN_BATTERY,
     PIN_DIR,
@@ -89,23 +88,12 @@ class LlcBoard:
         b.pwm_inputs[PIN_RSSI] = (s.get("rssi_pwm", 0.0), RSSI_PWM_HZ)
         pose = s.get("pose")  # a ground-truth robot's motion-capture receiver: the world pose (x, y, yaw)
         b.external_pose = (float(pose[0]), float(pose[1]), float(pose[2])) if pose is not None else None
-        for item in inputs["in"]:
-            if item[0] == "can0_state":  # the bus changed this node's fault-confinement state (its EFLG register)
-                b.can.set_error_state(item[1], item[2], item[3])
-            elif len(item) == 5:  # a frame from another node (error frames only move the counters above)
-                _bus, arb_id, data, ext, ts = item
-                b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
+        b.feed_can(inputs["in"])
         if self.nominal_ns is None:  # first tick: power-up
             self.nominal_ns = t_ns
             llc.setup()
         llc.loop()
-        # Next loop on the nominal schedule; the world rounds it up to a quantum boundary, so when the
-        # quantum does not divide the period the loop jitters but keeps its average rate.
-        period = llc.loop_period_us * 1000
-        nominal = self.nominal_ns + period
-        while nominal <= t_ns:
-            nominal += period
-        self.nominal_ns = nominal
+        self.nominal_ns = nominal = next_loop_ns(self.nominal_ns, llc.loop_period_us * 1000, t_ns)
         pwm = tuple(
             b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1) for i in (0, 1)
         )

@@ -13,8 +13,7 @@ from bridge.core.recorder import register_schema
 from bridge.core.registry import PluginError
 from bridge.models.differential_drive import DriveParams
 from bridge.robots.footbot.sensors import FootbotSensorsParams
-from firmware_sim.board.arduino import Board
-from firmware_sim.board.can_controller import Frame
+from firmware_sim.board.arduino import Board, next_loop_ns
 from firmware_sim.robots.footbot.base_board import (
     PIN_DIR,
     PIN_PWM,
@@ -87,21 +86,12 @@ class BaseBoard:
                 b.analog_volts[pin(i)] = v * b.VREF
         for i, v in enumerate(s.get("base_ground", ())):  # the comparators' outputs: white high, black low
             b.digital[base_ground_pin(i)] = 1 if v else 0
-        for item in inputs["in"]:
-            if item[0] == "can0_state":
-                b.can.set_error_state(item[1], item[2], item[3])
-            elif len(item) == 5:
-                _bus, arb_id, data, ext, ts = item
-                b.can.on_bus_frame(Frame(arb_id, data, ts // 1000, ext))
+        b.feed_can(inputs["in"])
         if self.nominal_ns is None:
             self.nominal_ns = t_ns
             self.fw.setup()
         self.fw.loop()
-        period = self.fw.loop_period_us * 1000
-        nominal = self.nominal_ns + period
-        while nominal <= t_ns:
-            nominal += period
-        self.nominal_ns = nominal
+        self.nominal_ns = nominal = next_loop_ns(self.nominal_ns, self.fw.loop_period_us * 1000, t_ns)
         pwm = tuple(b.pwm.get(PIN_PWM[i], 0) * (1 if b.digital_read(PIN_DIR[i]) else -1) for i in (0, 1))
         pins = (pwm, b.led_rgb)
         out: dict[str, Any] = {
