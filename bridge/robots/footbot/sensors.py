@@ -40,6 +40,7 @@ class FootbotSensorsParams(Part):
 
     proximity_count: int = PROXIMITY_COUNT
     proximity_range_m: float = PROXIMITY_RANGE_M
+    proximity_height_m: float = 0.06  # the ring's height above the floor (ARGoS footbot_entity.cpp)
     light_count: int = LIGHT_COUNT
     ground_offsets_m: tuple[tuple[float, float], ...] = MOTOR_GROUND_OFFSETS_M
     base_ground_offsets_m: tuple[tuple[float, float], ...] = BASE_GROUND_OFFSETS_M
@@ -62,7 +63,6 @@ class FootbotSensors(WorldModel):
         self._rng = [stream(world.seed, "robot", r, "footbot_sensors") for r in robots]
         prof = [world.profiles[r] for r in robots]
         self._r0 = np.array([q.radius_m + RAY_GAP_M for q in prof])  # rays start just outside the body
-        self._z = np.array([0.06 for _ in prof])  # the ring's height (ARGoS: 0.06 m)
         self._angles = [np.array(ring_angles(q.proximity_count)) for q in parts]
         self._light_angles = [np.array(ring_angles(q.light_count)) for q in parts]
         self.proximity: list[list[float]] = [[0.0] * q.proximity_count for q in parts]
@@ -110,7 +110,7 @@ class FootbotSensors(WorldModel):
             r, q = self.robots[k], self.parts[k]
             ang = float(w.yaw[r]) + self._angles[k]
             ca, sa = np.cos(ang), np.sin(ang)
-            x, y, r0, z = float(w.pos[r, 0]), float(w.pos[r, 1]), self._r0[k], self._z[k]
+            x, y, r0, z = float(w.pos[r, 0]), float(w.pos[r, 1]), self._r0[k], q.proximity_height_m
             r1 = r0 + q.proximity_range_m - RAY_GAP_M  # the ring reaches proximity_range_m from the body
             froms += np.column_stack([x + r0 * ca, y + r0 * sa, np.full(len(ang), z)]).tolist()
             tos += np.column_stack([x + r1 * ca, y + r1 * sa, np.full(len(ang), z)]).tolist()

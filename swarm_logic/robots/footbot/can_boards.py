@@ -26,9 +26,11 @@ from swarm_logic.robots.footbot.interfaces import (
     BASE_GROUND_OFFSETS_M,
     LEDS,
     LIGHT,
+    LIGHT_COUNT,
     MOTOR_GROUND,
     MOTOR_GROUND_OFFSETS_M,
     PROXIMITY,
+    PROXIMITY_COUNT,
     RAB_PAYLOAD_BYTES,
     RAB_RANGE_M,
     RANGE_AND_BEARING,
@@ -39,8 +41,6 @@ from swarm_logic.robots.footbot.interfaces import (
     check_payload,
     ring_angles,
 )
-
-RING = 24
 
 
 class FastDecoder:
@@ -83,8 +83,8 @@ class FootbotBoards:
         self.dec = FastDecoder(self.db)
         self.ids = {m.name: m.frame_id for m in self.db.messages}
         self.keepalive_s = keepalive_s
-        self.proximity = [0.0] * RING
-        self.light = [0.0] * RING
+        self.proximity = [0.0] * PROXIMITY_COUNT
+        self.light = [0.0] * LIGHT_COUNT
         self.ground = [1.0] * len(MOTOR_GROUND_OFFSETS_M)
         self.base_ground = [1.0] * len(BASE_GROUND_OFFSETS_M)
         self.encoders = (0, 0)
@@ -97,8 +97,9 @@ class FootbotBoards:
         self._leds: tuple[int, int, int] | None = None
         self._payload: bytes | None = None
         self.counters = {"frames": 0, "bad_frames": 0, "scans": 0, "send_errors": 0}
-        self._faces = {RANGE_AND_BEARING: RabFace(self, rab_range_m), PROXIMITY: RingFace(self, "proximity"),
-                       LIGHT: RingFace(self, "light"), MOTOR_GROUND: GroundFace(self),
+        self._faces = {RANGE_AND_BEARING: RabFace(self, rab_range_m),
+                       PROXIMITY: RingFace(self, "proximity", PROXIMITY_COUNT),
+                       LIGHT: RingFace(self, "light", LIGHT_COUNT), MOTOR_GROUND: GroundFace(self),
                        BASE_GROUND: GroundFace(self, "base_ground", BASE_GROUND_OFFSETS_M), WHEELS: WheelsFace(self),
                        LEDS: LedsFace(self)}
 
@@ -212,11 +213,11 @@ class RabFace:
 
 
 class RingFace:
-    """``Proximity`` or ``Light``: a ring of 24 sensors on the base board."""
+    """``Proximity`` or ``Light``: a ring of sensors on the base board (24 each)."""
 
-    def __init__(self, boards: FootbotBoards, ring: str) -> None:
+    def __init__(self, boards: FootbotBoards, ring: str, count: int) -> None:
         self.boards, self.ring = boards, ring
-        self.angles = ring_angles(RING)
+        self.angles = ring_angles(count)
 
     def readings(self) -> list[RingReading]:
         return [RingReading(v, a) for v, a in zip(getattr(self.boards, self.ring), self.angles, strict=True)]
