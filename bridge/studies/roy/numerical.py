@@ -76,24 +76,18 @@ def _wall(side: float) -> tuple[Segment, ...]:
     return (((0, 0), (side, 0)), ((side, 0), (side, side)), ((side, side), (0, side)), ((0, side), (0, 0)))
 
 
-def gap_line(c: float, centre: tuple[float, float], gap: float, side: float) -> tuple[Segment, Segment]:
-    """The line x + y = ``c`` from wall to wall with an opening ``gap`` units wide centred on ``centre``."""
-    u = np.array([1.0, -1.0]) / math.sqrt(2)
-    m = np.array(centre, float)
-    a, b = m - u * gap / 2, m + u * gap / 2
-    lo, hi = (max(0.0, c - side), min(side, c)), (min(side, c), max(0.0, c - side))
-    return ((lo, (float(a[0]), float(a[1]))), ((float(b[0]), float(b[1])), hi))
-
-
 @dataclass(frozen=True)
 class Ch3Scenario:
     """The chapter 3 world [R where the figures are lost]: T = (35, 35), ``n`` agents placed at random in the start
     box at least ``min_sep`` apart (§4.1), line obstacles, a moving circle, walls.
 
-    "roy-ch3-v2" (the default): a wall-to-wall line along x + y = 22 with a 6-unit opening off the diagonal (centred
-    on (14, 8): the swarm turns and funnels), a wall-to-wall line along x + y = 40 with a 3-unit opening on the
-    diagonal (the narrow gap: narrower than a 6-agent formation, 2 r_s spacing, so it must stretch into a column),
-    and a circle of radius 1.5 crossing the diagonal near (27, 27). ``v1`` gives the first layout."""
+    "roy-ch3-v2" (the default): a baffle y = 11 from the west wall to x = 12 (the swarm, heading along the diagonal,
+    meets it at 45 degrees and slides east round its end); a wall along x + y = 40 from wall to wall, closed but for
+    a 3-unit gap centred on (20, 20) (narrower than a 6-agent formation at 2 r_s spacing: it must stretch to pass);
+    and a circle of radius 1.5 crossing the diagonal near (27, 27). Against either line the target's pull slides an
+    agent towards the way on: east along the baffle, and along the wall towards the gap, the foot of the
+    perpendicular from T (a wall across the approach whose opening lies elsewhere traps a potential field).
+    ``v1`` gives the first layout."""
 
     version: str = "roy-ch3-v2"
     side: float = 40.0
@@ -102,7 +96,8 @@ class Ch3Scenario:
     start_lo: tuple[float, float] = (2.0, 2.0)
     start_hi: tuple[float, float] = (8.0, 8.0)
     min_sep: float = 1.0
-    lines: tuple[Segment, ...] = (*gap_line(22.0, (14.0, 8.0), 6.0, 40.0), *gap_line(40.0, (20.0, 20.0), 3.0, 40.0))
+    lines: tuple[Segment, ...] = (((0.0, 11.0), (12.0, 11.0)), ((0.0, 40.0), (18.939, 21.061)),
+                                  ((21.061, 18.939), (40.0, 0.0)))
     movers: tuple[Mover, ...] = (Mover((22.0, 32.0), (32.0, 22.0), 1.5, 0.2),)
     goal_radius: float = 1.0  # digest §5.5 (see ``all_arrived``)
     timeout_s: float = 600.0  # 3 x the BAT's 200 s (§5.5)

@@ -16,8 +16,11 @@ from swarm_logic.families.roy.pso import BatchObjective, Objective, box, single
 
 def j_cc(pos: np.ndarray, d_att: float, w_att: float, h_rep: float, w_rep: float) -> np.ndarray:
     """Passino's cell-to-cell attractant and repellent for each bacterium (..., S, D) -> (..., S)."""
-    diff = pos[..., :, None, :] - pos[..., None, :, :]
-    d2 = np.sum(diff * diff, axis=-1)
+    d2 = 0.0
+    for k in range(pos.shape[-1]):
+        c = pos[..., k]
+        diff = c[..., :, None] - c[..., None, :]
+        d2 = d2 + diff * diff
     return np.sum(-d_att * np.exp(-w_att * d2) + h_rep * np.exp(-w_rep * d2), axis=-1)
 
 

@@ -48,13 +48,14 @@ class RoyApf(Controller):
         "delta": 4.0,  # Table 3.3 (sqrt(delta) r_s = 2 r_s, Theorem 1)
         "target_x": 35.0,  # Table 3.3, T = (35, 35) units
         "target_y": 35.0,
-        "v_max": 0.3,  # digest §5.3 [R], units/s
+        "v_max": 0.25,  # digest §5.3 [R], units/s: calibrated, BAT arrives near 200 s in roy-ch3-v2 (docs/roy.md)
         "d_max": 5.0,  # sensor range, units (digest §0 item 5): d in Theta when nothing echoes (erratum #3)
         "optimiser": "bat",  # the thesis' choice
         "objective": "lookahead",  # erratum #3: "literal" or "lookahead"
         "oa_mode": "per_sensor",  # digest §2.1.6 [R]: one OA term per reading within r_s, or the nearest only
-        "oa_law": "literal",  # eq. 3.21 as printed, or "bounded" [R]: not vanishing at contact
-        "lookahead_s": 0.0,  # erratum #3 look-ahead horizon; 0 = one period_s (the one-step reading)
+        "oa_law": "bounded",  # [R] not vanishing at contact; "literal": eq. 3.21 as printed
+        "lookahead_s": 1.0,  # erratum #3 [R]: the look-ahead's horizon, s; 0 = one period_s (the one-step reading)
+        "progress": "swarm",  # erratum #3 [R]: look-ahead target term n |x_bar' - T|; "centroid": |x_bar' - T|
         "neighbour_radius": 0.0,  # erratum #4: 0 = all agents (hardware broadcasts all poses); else units
         "target_term": "saturated",  # erratum #2: "saturated" target term, or "none" (the law as printed)
         "k_target": 1.0,  # erratum #2 [R]
@@ -110,6 +111,7 @@ class RoyApf(Controller):
     }
     choices: ClassVar[dict[str, tuple[str, ...]]] = {
         "optimiser": OPTIMISERS, "objective": MODES, "oa_mode": ("per_sensor", "nearest"), "oa_law": OA_LAWS,
+        "progress": ("swarm", "centroid"),
         "target_term": ("saturated", "none"), "bat_mode": BAT_MODES,
     }
     static_params = frozenset({"period_s", "deadlock_window_s"})  # both size state built by ``init``

@@ -5,11 +5,14 @@ Literal (erratum #3 mode a): k_a ||x_bar - T|| + k_v ||v_i - v_bar|| + k_r sum_j
 a norm on term 2, d the nearest reading (``d_max`` when nothing echoes). Linear in three gains: its minimum lies on
 the bounds (the digest's degeneracy), kept as the thesis prints it.
 
-Look-ahead (erratum #3 mode b): each candidate's u, held for the horizon h (``lookahead_s``; one ``dt`` by
-default, the digest's one-step reading), moves the agent (v' = sat(v + u h), x' = x + v' h), then Theta's state
-terms are scored at the predicted state, unweighted by the gains:
-||x_bar' - T|| + ||v_i' - v_bar'|| + sum_j (x'_ij / 2r_s - 1)^2 + 1 / d'^2 (the cohesion term squared so spacing
+Look-ahead (erratum #3 mode b): each candidate's u, held for the horizon h (``lookahead_s``; 0 = one ``dt``, the
+digest's one-step reading), moves the agent (v' = sat(v + u h), x' = x + v' h), then Theta's state terms are
+scored at the predicted state, unweighted by the gains:
+w ||x_bar' - T|| + ||v_i' - v_bar'|| + sum_j (x'_ij / 2r_s - 1)^2 + 1 / d'^2 (the cohesion term squared so spacing
 *at* 2 r_s is the minimum rather than collapse; d' the predicted distance to the sensed points, ``d_max`` if none).
+w = 1 (``progress`` "centroid", the digest's reading) or n ("swarm": the agent's own move counts in full towards
+the swarm's progress, as it does in the other terms; with w = 1 a move shifts the first term n times less than
+the second, and the optimiser neglects the target).
 
 Every array carries leading batch dimensions S (none for one agent on a robot; (runs, agents) in the numerical
 model's batched runner), through the same arithmetic.
@@ -50,6 +53,7 @@ class AgentState:
     v_max: float = np.inf
     near: np.ndarray | None = None  # (S, m) the neighbours among ``others``; None: all of them
     horizon: float | None = None  # the look-ahead's h; None: dt
+    progress: str = "centroid"  # the look-ahead's first term: ||x_bar' - T|| ("centroid") or n times it ("swarm")
 
 
 def observe(x_i: np.ndarray, v_i: np.ndarray, xs: np.ndarray, vs: np.ndarray, heading: np.ndarray | float,
@@ -66,7 +70,8 @@ def observe(x_i: np.ndarray, v_i: np.ndarray, xs: np.ndarray, vs: np.ndarray, he
         near = np.hypot(dj[..., 0], dj[..., 1]) <= p["neighbour_radius"]
     r_s, delta, d_max = float(p["r_s"]), float(p["delta"]), float(p["d_max"])
     points = potential.obstacle_points(x_i, heading, ranges, angles)
-    oa = potential.obstacle_avoidance(x_i, points, ranges, r_s, p["oa_mode"], p["oa_law"])
+    oa = potential.obstacle_avoidance(x_i, points, ranges, r_s, p["oa_mode"], p["oa_law"],
+                                      potential.ray_directions(heading, angles))
     target = np.array([p["target_x"], p["target_y"]], float)
     if p["target_term"] == "saturated":
         extra = potential.target_term(x_i, v_i, target, p["k_target"], p["target_sat"], p["target_damping"])
@@ -76,7 +81,7 @@ def observe(x_i: np.ndarray, v_i: np.ndarray, xs: np.ndarray, vs: np.ndarray, he
     d_near = np.maximum(np.minimum(np.min(ranges, axis=-1, initial=np.inf), d_max), 1e-6)
     h = float(p["lookahead_s"]) or None
     return AgentState(x_i, v_i, x_bar, v_bar, n, xs, points, d_near, basis, extra, target, r_s,
-                      float(p["period_s"]), d_max, float(p["v_max"]), near, h)
+                      float(p["period_s"]), d_max, float(p["v_max"]), near, h, p["progress"])
 
 
 def theta(gains: np.ndarray, s: AgentState, mode: str = "lookahead") -> np.ndarray:
@@ -108,6 +113,8 @@ def theta(gains: np.ndarray, s: AgentState, mode: str = "lookahead") -> np.ndarr
     e0 = s.x_bar[..., None, 0] + (x0 - s.x_i[..., None, 0]) / s.n - s.target[0]  # x_bar' - T
     e1 = s.x_bar[..., None, 1] + (x1 - s.x_i[..., None, 1]) / s.n - s.target[1]
     t1 = np.sqrt(e0 * e0 + e1 * e1)
+    if s.progress == "swarm":
+        t1 = t1 * s.n
     f0 = v0 - (s.v_bar[..., None, 0] + (v0 - s.v_i[..., None, 0]) / s.n)  # v_i' - v_bar'
     f1 = v1 - (s.v_bar[..., None, 1] + (v1 - s.v_i[..., None, 1]) / s.n)
     out = t1 + np.sqrt(f0 * f0 + f1 * f1)

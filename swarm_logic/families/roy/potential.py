@@ -30,22 +30,29 @@ def obstacle_points(x_i: np.ndarray, heading: np.ndarray | float, ranges: np.nda
                     angles: np.ndarray) -> np.ndarray:
     """Eq. 3.20: the world point x_i + d [cos(theta + beta), sin(theta + beta)] of each reading (..., k, 2); a
     reading with no echo (``inf``) gives an infinite point."""
-    a = np.asarray(angles, float) + np.asarray(heading, float)[..., None]
     ok = np.isfinite(ranges)
     d = np.where(ok, ranges, 0.0)
-    p = x_i[..., None, :] + d[..., None] * np.stack([np.cos(a), np.sin(a)], axis=-1)
+    p = x_i[..., None, :] + d[..., None] * ray_directions(heading, angles)
     return np.where(ok[..., None], p, np.inf)
 
 
+def ray_directions(heading: np.ndarray | float, angles: np.ndarray) -> np.ndarray:
+    """The unit vector of each sonar (..., k, 2): its mounting angle ``angles`` (k,) from the ``heading`` (...)."""
+    a = np.asarray(angles, float) + np.asarray(heading, float)[..., None]
+    return np.stack([np.cos(a), np.sin(a)], axis=-1)
+
+
 def obstacle_avoidance(x_i: np.ndarray, points: np.ndarray, dists: np.ndarray, r_s: float,
-                       mode: str = "per_sensor", law: str = "literal") -> np.ndarray:
+                       mode: str = "per_sensor", law: str = "literal", dirs: np.ndarray | None = None) -> np.ndarray:
     """Eq. 3.21 without its gain for each reading within r_s (``per_sensor``), or the nearest one only
     (``nearest``); zero when none is within r_s (target A2). ``points`` (..., k, 2) and ``dists`` (..., k) from
     ``obstacle_points`` (``inf`` for no echo).
 
     ``law`` "literal": exp(-d^2 / r_s^2) (x_i - O), as printed: its size d exp(-d^2 / r_s^2) peaks at d = r_s / sqrt 2
     and vanishes at contact. "bounded" [R]: exp(-d^2 / r_s^2) r_s (x_i - O) / d, the same direction and the same size
-    at the trigger d = r_s, growing monotonically to r_s at contact (see docs/roy.md, "The obstacle term")."""
+    at the trigger d = r_s, growing monotonically to r_s at contact (see docs/roy.md, "The obstacle term"). Its
+    direction (x_i - O) / d is the reading's ray reversed: given the rays' unit vectors ``dirs`` (..., k, 2), it is
+    taken from them, so it stays defined at contact (d = 0)."""
     if law not in OA_LAWS:
         raise ValueError(f"oa_law: expected one of {', '.join(OA_LAWS)}, got {law!r}")
     near = dists <= r_s
@@ -54,9 +61,12 @@ def obstacle_avoidance(x_i: np.ndarray, points: np.ndarray, dists: np.ndarray, r
         near = near & (np.arange(dists.shape[-1]) == k[..., None])
     d = np.where(near, dists, r_s)
     w = np.where(near, np.exp(-d * d / (r_s * r_s)), 0.0)
-    if law == "bounded":
-        w = w * (r_s / np.maximum(d, 1e-9))
-    diff = np.where(near[..., None], x_i[..., None, :] - np.where(near[..., None], points, 0.0), 0.0)
+    if law == "bounded" and dirs is not None:
+        w, diff = w * r_s, np.where(near[..., None], -dirs, 0.0)
+    else:
+        if law == "bounded":
+            w = w * (r_s / np.maximum(d, 1e-9))
+        diff = np.where(near[..., None], x_i[..., None, :] - np.where(near[..., None], points, 0.0), 0.0)
     return (w[..., None] * diff).sum(axis=-2)
 
 

@@ -52,7 +52,7 @@ def take(s: AgentState, idx: np.ndarray) -> AgentState:
         return None if a is None else a[idx]
     return AgentState(s.x_i[idx], s.v_i[idx], s.x_bar[idx], s.v_bar[idx], s.n, s.others[idx], s.points[idx],
                       s.d_near[idx], s.basis[idx], s.extra[idx], s.target, s.r_s, s.dt, s.d_max, s.v_max,
-                      cut(s.near), s.horizon)
+                      cut(s.near), s.horizon, s.progress)
 
 
 def tune(p: dict[str, Any], k: str, s: AgentState, gains: np.ndarray, u: dict[str, np.ndarray]) -> np.ndarray:

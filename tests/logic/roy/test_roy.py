@@ -95,7 +95,7 @@ def test_each_optimiser_improves_on_a_toy_problem(name: str) -> None:
 
 def state() -> AgentState:
     """One agent with three others and a wall point 0.7 below it (its right-hand sonar, heading +x)."""
-    p = RoyApf.resolve({})
+    p = RoyApf.resolve({"oa_law": "literal"})
     x_i, v_i = np.array([[5.0, 5.0]]), np.array([[0.1, 0.0]])
     xs = np.array([[[6.0, 5.0], [5.0, 6.5], [4.0, 4.0]]])
     vs = np.array([[[0.0, 0.1], [0.1, 0.1], [0.0, 0.0]]])

@@ -20,7 +20,7 @@ from bridge.studies.roy.numerical import (
 )
 
 OPEN = Ch3Scenario(lines=(), movers=())
-LITERAL_LAW = {"optimiser": "fixed", "target_term": "none", "v_max": 100.0}
+LITERAL_LAW = {"optimiser": "fixed", "target_term": "none", "v_max": 100.0, "oa_law": "literal"}
 
 
 @pytest.mark.parametrize(("k_a", "k_v", "k_r", "d"),
@@ -180,3 +180,25 @@ def test_a_batch_stops_each_run_where_it_arrives() -> None:
     for seed, r in zip([1, 2], runs, strict=True):
         alone = Swarm(sc, deploy(sc, seed), seed, params).run()
         assert r.success and r.mission_s == alone.mission_s and same_run(r, alone)
+
+
+def test_the_bounded_obstacle_term_takes_fixed_gains_round_the_baffle_where_the_printed_one_jams() -> None:
+    """roy-ch3-v2 with the fixed gains: eq. 3.21 as printed fades at contact and the agents press into the baffle
+    (refused moves pile up); the bounded reading keeps them off it and they round its end, without a collision."""
+    from bridge.studies.roy.numerical import ch3_batch
+
+    bounded, literal = (ch3_batch([7], {"optimiser": "fixed", "oa_law": law}, max_s=70.0)[0]
+                        for law in ("bounded", "literal"))
+    assert bounded.collisions == 0 and bounded.trace[-1, 2] > 12.0  # the centroid is past the baffle (y = 11)
+    assert literal.collisions > 100 and literal.path_length < bounded.path_length
+
+
+def test_the_v2_layout_closes_the_way_but_for_the_gap() -> None:
+    """The wall along x + y = 40 runs from wall to wall with one 3-unit opening centred on (20, 20)."""
+    from bridge.studies.roy.numerical import SCENARIOS
+
+    sc = SCENARIOS["roy-ch3-v2"]
+    assert sc.version == "roy-ch3-v2" and SCENARIOS["roy-ch3-v1"].version == "roy-ch3-v1"
+    (_, a), (b, _) = sc.lines[1], sc.lines[2]
+    assert math.dist(a, b) == pytest.approx(3.0, abs=1e-3) and np.allclose(np.add(a, b) / 2, [20.0, 20.0], atol=1e-3)
+    assert sc.lines[1][0] == (0.0, 40.0) and sc.lines[2][1] == (40.0, 0.0)
