@@ -438,7 +438,8 @@ class Swarm:
         self.sc = sc
         self.world = w = PointWorld(sc, start)
         self.clock = SteppedClock("the point-agent model drives controllers by ticks; they must not sleep")
-        own = controller_params(sc, params)
+        world = controller_params(sc, None)  # what this world sets, for a controller that has the parameter
+        own = {**{k: v for k, v in world.items() if k in controller.defaults}, **(params or {})}
         self.ctls: list[Controller] = []
         for i in range(w.n):
             v_max = float(own.get("v_max", RoyApf.defaults["v_max"]))
