@@ -40,10 +40,11 @@ def bench(quick: bool = False, duration: float | None = None, out_dir: str = "ru
     t1 = time.process_time()
     ch3_trial(1, {"optimiser": "bat"}, SCENARIOS["roy-ch3-v2"], max_s=5.0)
     alone = (time.process_time() - t1) / 5.0
-    print(f"\nswarm-sitl bench --study roy ({os.cpu_count()} cores)", file=sys.stderr)
+    print(f"\nswarm-sitl bench --study roy ({os.cpu_count()} cores)")
     print(f"  numerical chapter 3 scenario (roy-ch3-v2, BAT 25 x 50 every step, 6 agents): {n} runs in {wall:.1f} s "
           f"wall with {jobs} processes, {n / wall:.2f} runs/s (target for 100 runs: < {TARGET_S:g} s); "
           f"{arrived}/{n} arrived; {sim_s:.0f} simulated s, {cpu / max(sim_s, 1e-9):.4f} CPU-s per simulated s "
           f"({cpu / max(sim_s, 1e-9) * 200:.1f} CPU-s per 200-s run)")
+    print(f"  ran {n} runs in {wall:.1f} s", file=sys.stderr)
     print(f"  one run through the controllers (RoyApf per agent, no batch): {alone:.3f} CPU-s per simulated s")
     return 0
