@@ -37,7 +37,31 @@ COUNT = "[1, 10000]"
 UNIT = "[0, 1]"
 
 
-class RoyApf(Controller):
+class SonpiAgent(Controller):
+    """A chapter 3 agent on the SonPI's four devices: ``init`` binds them, ``destroy`` commands zero velocity."""
+
+    pose: OwnPose
+    localisation: Localisation
+    sonar: Sonar
+    velocity: HolonomicVelocity
+
+    def bind(self, robot: Robot, p: dict[str, Any]) -> None:
+        """Keep the resolved parameters ``p`` and the period, and look up the devices."""
+        self.p = p
+        self.period_s = float(p["period_s"])
+        self.pose = robot.device(POSE)
+        self.localisation = robot.device(LOCALISATION)
+        self.sonar = robot.device(SONAR)
+        self.velocity = robot.device(VELOCITY)
+
+    def destroy(self) -> None:
+        """Command zero velocity."""
+        vel = getattr(self, "velocity", None)
+        if vel is not None:
+            vel.set_velocity(0.0, 0.0)
+
+
+class RoyApf(SonpiAgent):
     """Attraction + repulsion + obstacle avoidance with per-step gain tuning (Roy 2022, ch.3)."""
 
     period_s = 0.05
@@ -116,11 +140,6 @@ class RoyApf(Controller):
     }
     static_params = frozenset({"period_s", "deadlock_window_s"})  # both size state built by ``init``
 
-    pose: OwnPose
-    localisation: Localisation
-    sonar: Sonar
-    velocity: HolonomicVelocity
-
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
         """``with_defaults``, then the bounds in order and the initial gains within them (ValueError naming them)."""
@@ -136,12 +155,7 @@ class RoyApf(Controller):
 
     def init(self, robot: Robot) -> None:
         super().init(robot)
-        self.p = self.resolve(robot.params)
-        self.period_s = float(self.p["period_s"])
-        self.pose = robot.device(POSE)
-        self.localisation = robot.device(LOCALISATION)
-        self.sonar = robot.device(SONAR)
-        self.velocity = robot.device(VELOCITY)
+        self.bind(robot, self.resolve(robot.params))
         self.reset()
 
     def reset(self) -> None:
@@ -189,9 +203,3 @@ class RoyApf(Controller):
         k = self.gains
         return {"k_a": float(k[0]), "k_v": float(k[1]), "k_r": float(k[2]), "k_oa": float(k[3]),
                 "pso_on": int(self.using_pso)}
-
-    def destroy(self) -> None:
-        """Command zero velocity."""
-        vel = getattr(self, "velocity", None)
-        if vel is not None:
-            vel.set_velocity(0.0, 0.0)

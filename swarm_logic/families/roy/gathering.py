@@ -23,11 +23,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from swarm_logic.controller import Controller
 from swarm_logic.families.roy import potential
-from swarm_logic.families.roy.controller import RoyApf
+from swarm_logic.families.roy.controller import RoyApf, SonpiAgent
 from swarm_logic.robot import Robot
-from swarm_logic.robots.sonpi.interfaces import LOCALISATION, POSE, SONAR, VELOCITY
 
 
 def enclosing_circle(points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -79,7 +77,7 @@ def ring_slots(n: int, r_s: float) -> np.ndarray:
     return np.array(out, float).reshape(n, 2)
 
 
-class CircleGathering(Controller):
+class CircleGathering(SonpiAgent):
     """Circle-based gathering as a rigid formation marched to the target (our reading of Sharma et al. 2017)."""
 
     period_s = 0.05
@@ -104,12 +102,7 @@ class CircleGathering(Controller):
 
     def init(self, robot: Robot) -> None:
         super().init(robot)
-        self.p = self.with_defaults(robot.params)
-        self.period_s = float(self.p["period_s"])
-        self.pose = robot.device(POSE)
-        self.localisation = robot.device(LOCALISATION)
-        self.sonar = robot.device(SONAR)
-        self.velocity = robot.device(VELOCITY)
+        self.bind(robot, self.with_defaults(robot.params))
         self.centre: np.ndarray | None = None
         self.offsets: dict[int, np.ndarray] = {}
         self.rounds = 0
@@ -157,8 +150,3 @@ class CircleGathering(Controller):
 
     def telemetry(self) -> dict[str, float | int]:
         return {"rounds": self.rounds}
-
-    def destroy(self) -> None:
-        vel = getattr(self, "velocity", None)
-        if vel is not None:
-            vel.set_velocity(0.0, 0.0)
