@@ -258,7 +258,7 @@ class SonarBoard:
 
     def _latch(self) -> None:
         """The window ends: its figures go to WINDOW, a new one starts."""
-        self.seq = (self.seq + 1) & 0xFFFF
+        self.seq = self.seq % 0xFFFF + 1  # 1-65535: 0 is "no window yet"
         self.stats["windows"] += 1
         rows = []
         for i, a in enumerate(self.acc):

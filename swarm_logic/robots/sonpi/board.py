@@ -154,7 +154,7 @@ class SonpiBoard:
         self.odo_t = t
 
     def _window(self, w: P.Window) -> None:
-        if self.window is not None and w.seq == self.window.seq:
+        if w.seq == 0 or (self.window is not None and w.seq == self.window.seq):  # none complete yet, or seen
             return
         if self.window is not None and (w.seq - self.window.seq) & 0xFFFF > 1:
             self.counters["windows_missed"] += ((w.seq - self.window.seq) & 0xFFFF) - 1
