@@ -4,8 +4,6 @@ or, in the world process, from ``world.model("marker")``."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from pydantic import Field
 
 from bridge.core.parts import Part, WorldModel
@@ -22,9 +20,6 @@ class TopMarkers(WorldModel):
     def rgb(self, r: int) -> tuple[int, int, int]:
         """Robot ``r``'s marker colour."""
         return self.parts[self.local[r]].rgb
-
-    def sense(self, r: int) -> dict[str, Any]:
-        return {}
 
 
 TopMarker.world_model = TopMarkers

@@ -8,25 +8,17 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from bridge.core.recorder import iter_messages
 from tests.conftest import ROOT
+from tests.robots.test_zebro_bus_session import run
 
 pytestmark = pytest.mark.session
 
 SANDBOX = ROOT / "hil_configs" / "sonpi" / "sandbox.toml"
-
-
-def run(cfg: Path, out: Path, *extra: str) -> dict:
-    cmd = [sys.executable, "-m", "bridge.tools.cli", "run", str(cfg), "--out", str(out), "--quiet", *extra]
-    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stdout + r.stderr
-    return json.loads((out / "summary.json").read_text())
 
 
 def test_sonpis_wander_on_their_sonar_boards_and_the_summary_scores_the_windows(tmp_path: Path) -> None:
