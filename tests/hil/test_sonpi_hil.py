@@ -18,6 +18,9 @@ from typing import Any
 
 import pytest
 
+from bridge.core.config import load_config
+from bridge.core.plan import make_plan
+from bridge.robots.sonpi import firmware
 from swarm_logic.__main__ import load_hal, main
 from swarm_logic.clock import WallClock
 from swarm_logic.drivers.i2c import open_smbus
@@ -129,3 +132,25 @@ def test_the_real_sonpi_hal_config_is_valid_and_a_missing_bus_is_named() -> None
         pytest.skip("this machine has an I2C bus 1")
     with pytest.raises(SystemExit, match=r"sonpi_real\.toml: cannot open the robot's devices: .*i2c-1"):
         main(["--hal", str(p), "--duration", "1"])
+
+
+def test_the_outside_session_and_its_ports_config_agree() -> None:
+    """hil_configs/hil/sonpi_outside.toml and the HAL config its outside program runs name the same robot, port, start
+    pose and wheels; the session gives its own programs the same table on the simulated bus."""
+    outside = ROOT / "hil_configs" / "hil" / "sonpi_outside.toml"
+    cfg = load_config(outside)
+    ext = [g for g in cfg.robots if g.logic == "external"]
+    assert len(ext) == 1 and ext[0].profile == "sonpi" and ext[0].model_extra["i2c_pty"] == "r{id}-i2c"
+    hal = load_hal(str(ROOT / "hil_configs" / "robots" / "sonpi_sitl_ports.toml"))
+    rid = sum(g.count for g in cfg.robots[: cfg.robots.index(ext[0])])
+    assert hal["robot_id"] == rid and hal["sonpi_board"]["bus"] == f"usb-iss://runs/{cfg.session.name}/r{rid}-i2c"
+    assert hal["start_pose"] == list(ext[0].placement.poses[0]) and hal["behaviour"] == ext[0].behaviour
+    plan = make_plan(cfg, str(outside))
+    session_table = firmware.hal(plan.robots[0], cfg)["sonpi_board"]
+    assert session_table["bus"] == "sitl://i2c" and firmware.hal(plan.robots[rid], cfg) == {}
+    for key in ("wheel_radius_m", "half_track_m", "encoder_cpr", "max_speed_mps"):
+        assert hal["sonpi_board"][key] == session_table[key], key
+    real = load_hal(str(ROOT / "hil_configs" / "robots" / "sonpi_real.toml"))["sonpi_board"]
+    assert {k: real[k] for k in ("wheel_radius_m", "half_track_m", "encoder_cpr")} == {
+        k: session_table[k] for k in ("wheel_radius_m", "half_track_m", "encoder_cpr")
+    }
