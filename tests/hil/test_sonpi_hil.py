@@ -89,8 +89,9 @@ def test_a_session_sonpi_is_driven_from_outside_through_its_bus(tmp_path: Path) 
             board.poll()
             assert board.counters["windows"] >= 5 and board.counters["bus_errors"] == 0
             ranges = [r.range_m for r in board.faces()[SONAR].readings()]
-            # the arena's walls: 1 m to the right and to the left, the east wall ahead within 2 m
-            assert ranges[0] == pytest.approx(1.0, abs=0.15) and ranges[4] == pytest.approx(2.0, abs=0.15)
+            # the arena's walls, from sensors 0.09 m off the centre: 1 m to the right, 2 m to the left (the robot keeps
+            # within 0.15 m of its line), the east wall ahead within 2 m
+            assert 0.7 < ranges[0] < 1.1 and 1.7 < ranges[4] < 2.1
             assert math.isfinite(ranges[2]) and ranges[2] < 2.0
             window = board.window
             assert window is not None and window.seq >= 5
