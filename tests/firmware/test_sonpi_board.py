@@ -18,7 +18,7 @@ from tests.support.sonpi_bench import MOTORS, MS, Board
 
 def test_identity_and_the_attach() -> None:
     b = Board([1.0] * 5)
-    assert b.out[0] == ["i2c_attach", P.ADDRESS, False]
+    assert b.out[0] == ["i2c_attach", P.ADDRESS, False, True]  # no general call; it may refuse reads
     assert b.read(P.WHO_AM_I, 2) == bytes([P.WHO_AM_I_VALUE, P.VERSION_VALUE])
     assert struct.unpack("<H", b.read(P.WINDOW_MS, 2))[0] == 250
     assert b.read(P.FIRING) == bytes([P.FIRING_SEQUENTIAL]) and b.read(P.WATCHDOG) == bytes([50])
@@ -160,10 +160,19 @@ def test_open_loop_pwm_and_the_speed_clip() -> None:
 
 def test_bad_input_is_refused_whole_and_counted() -> None:
     b = Board([1.0] * 5)
-    # a read of a missing register: no data from the sketch, the pull-ups read 0xFF; recorded and counted
-    assert b.read(0x07) == b"\xff"
-    assert b.read(0x2E, 4) == bytes(b.read(0x2E, 2)) + b"\xff\xff"  # a read running off the window block
-    assert b.b.counters["bad_reads"] == 2
+    # a read after the pointer was set to a missing register: refused (its address NACKed), recorded and counted;
+    # the transaction ends there, so a write after it in the same transaction never arrives
+    assert b.read(0x07) is None
+    assert b.transfer([[P.ADDRESS, False, b"\x30"], [P.ADDRESS, True, 2], [P.ADDRESS, False, b"\x05\x02"]]) == [None]
+    assert b.read(P.FIRING) == bytes([P.FIRING_SEQUENTIAL])
+    assert b.transfer([[P.ADDRESS, True, 1]]) == [bytes([50])]  # a bare read goes on at WATCHDOG
+    c = b.b.counters
+    assert c["refused_reads"] == 2 and c["bytes_read"] == 2 and c["bad_reads"] == 0
+    assert b.read(P.ERROR_COUNT, 2) == bytes([2, P.ERR_BAD_REGISTER])
+    # a read that starts at a register and runs off its block cannot be refused: the pull-ups read 0xFF, counted
+    assert b.read(0x2E, 4) == bytes(b.read(0x2E, 2)) + b"\xff\xff"
+    assert b.b.counters["bad_reads"] == 1 and b.b.counters["refused_reads"] == 2
+    assert b.transfer([[P.ADDRESS, True, 1]]) == [None]  # that read left the pointer at 0x32, a missing register
     assert b.read(P.LAST_ERROR) == bytes([P.ERR_BAD_REGISTER]) and b.read(P.STATUS)[0] & P.ST_ERROR
     b.write(P.WHO_AM_I, 0x00)  # read-only
     assert b.read(P.WHO_AM_I) == bytes([P.WHO_AM_I_VALUE]) and b.read(P.LAST_ERROR) == bytes([P.ERR_READ_ONLY])
@@ -176,7 +185,7 @@ def test_bad_input_is_refused_whole_and_counted() -> None:
     b.write(P.SPEED_SP, *([0] * 40))  # more than the 32-byte buffer
     assert b.read(P.LAST_ERROR) == bytes([P.ERR_OVERFLOW])
     c = b.b.counters
-    assert c["refused_writes"] == 5 and b.read(P.ERROR_COUNT) == bytes([7])
+    assert c["refused_writes"] == 5 and b.read(P.ERROR_COUNT) == bytes([9])
     b.tick([["i2c", 99, "not segments"], ["can0", 1, b""], []])  # not bus traffic: dropped, counted
     assert b.b.counters["malformed"] == 3
     b.write(P.ERROR_COUNT, 0)  # any write clears the errors

@@ -79,8 +79,9 @@ class Board:
             self.t += Q
             self.tick([])
 
-    def transfer(self, msgs: list[list]) -> list[bytes]:
-        """One transaction's messages to the sketch, as the bus delivers them; the read messages' bytes."""
+    def transfer(self, msgs: list[list]) -> list[bytes | None]:
+        """One transaction's messages to the sketch, as the bus delivers them; the read messages' bytes (None: the
+        sketch refused that read, and the transaction ended there)."""
         self.txn += 1
         self.out.clear()
         self.tick([["i2c", self.txn, msgs]])
@@ -90,7 +91,7 @@ class Board:
     def write(self, reg: int, *data: int) -> None:
         self.transfer([[P.ADDRESS, False, bytes([reg, *data])]])
 
-    def read(self, reg: int, n: int = 1) -> bytes:
+    def read(self, reg: int, n: int = 1) -> bytes | None:
         return self.transfer([[P.ADDRESS, False, bytes([reg])], [P.ADDRESS, True, n]])[0]
 
     def window(self) -> P.Window:
@@ -98,7 +99,8 @@ class Board:
 
 
 class WiredBus(PlainI2cSMBus):
-    """An ``smbus2.SMBus`` wired straight to the bench's sketch: another address, or ``unplugged``, is not ACKed."""
+    """An ``smbus2.SMBus`` wired straight to the bench's sketch: another address, ``unplugged``, or a read the sketch
+    refuses, is not ACKed."""
 
     def __init__(self, board: Board) -> None:
         super().__init__()
@@ -108,7 +110,10 @@ class WiredBus(PlainI2cSMBus):
     def _transfer(self, msgs: list[Message]) -> list[bytes]:
         if self.unplugged or any(addr != P.ADDRESS for addr, _, _ in msgs):
             raise OSError(errno.EREMOTEIO, os.strerror(errno.EREMOTEIO))
-        return self.board.transfer([[a, rd, d] for a, rd, d in msgs])
+        got = self.board.transfer([[a, rd, d] for a, rd, d in msgs])
+        if any(b is None for b in got):
+            raise OSError(errno.EREMOTEIO, os.strerror(errno.EREMOTEIO))
+        return got  # type: ignore[return-value]
 
 
 class BenchClock:

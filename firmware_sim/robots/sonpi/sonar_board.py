@@ -25,12 +25,17 @@ are latched each control loop (``LOOP_HZ``).
 
 **Bad input.** The TWI slave ACKs every byte it is sent (the medium has no data NACK); a write the sketch refuses (a
 read-only or missing register, a set-point pair written in part, a value out of range, more than its 32-byte buffer)
-is dropped whole, recorded in ``ERROR_COUNT``/``LAST_ERROR`` and counted. A read of a missing register gets no data
-from the sketch: the bus's pull-ups read 0xFF; it is recorded (``BAD_REGISTER``) and counted (``bad_reads``).
+is dropped whole, recorded in ``ERROR_COUNT``/``LAST_ERROR`` and counted. A read whose pointer is at a missing
+register is refused: the sketch clears TWEA, so the read's address is NACKed and the master's transfer fails
+(``EREMOTEIO``); the pointer stays, the read is recorded (``BAD_REGISTER``) and counted (``refused_reads``), and the
+sketch ignores the rest of that transaction (the master stopped there). A read that starts at a register and runs
+past its block cannot be refused (a slave transmitter cannot NACK): the missing bytes read 0xFF, recorded
+(``BAD_REGISTER``) and counted (``bad_reads``).
 
-Items as a leg module's: ``["i2c", txn, segments]`` in, ``["i2c", txn, [bytes...]]`` out for reads, ``["i2c_attach",
-0x20, False]`` at power-up; pins in: ``ranges_m`` (the surface in each sensor's beam, m, ``inf`` beyond reach),
-``encoders``, ``battery_v``; pins out: ``pwm`` (left, right).
+Items as a leg module's: ``["i2c", txn, segments]`` in, ``["i2c", txn, [bytes | None...]]`` out for reads (``None``: a
+refused read, the last), ``["i2c_attach", 0x20, False, True]`` at power-up (it may refuse reads); pins in: ``ranges_m``
+(the surface in each sensor's beam, m, ``inf`` beyond reach), ``encoders``, ``battery_v``; pins out: ``pwm`` (left,
+right).
 """
 
 from __future__ import annotations
@@ -121,6 +126,7 @@ class SonarBoard:
         self.t0 = 0
         self.now = 0
         self.pointer = 0
+        self.txn: Any = None  # the transaction the last bus traffic belonged to (one may come in parts)
         self.error_count = 0
         self.last_error = 0
         # motors
@@ -150,6 +156,7 @@ class SonarBoard:
             "bytes_written": 0,
             "bytes_read": 0,
             "refused_writes": 0,
+            "refused_reads": 0,
             "bad_reads": 0,
             "malformed": 0,
             "loops": 0,
@@ -181,7 +188,7 @@ class SonarBoard:
             self.booted = True
             self.t0 = self.next_loop = self.next_fire = t_ns
             self.window_end = t_ns + WINDOW_MS * 1_000_000
-            out.append(["i2c_attach", P.ADDRESS, False])
+            out.append(["i2c_attach", P.ADDRESS, False, True])
         self._sonars(t_ns, sens.get("ranges_m"))
         for item in inputs.get("in", ()):
             try:
@@ -191,7 +198,7 @@ class SonarBoard:
             except (TypeError, ValueError, IndexError):
                 self.stats["malformed"] += 1
                 continue
-            replies = self.receive(segs)
+            replies = self.receive(segs, item[1])
             if any(rd for _, rd, _ in segs):
                 out.append(["i2c", item[1], replies])
         res: dict[str, Any] = {"out": out, "wom": ["i2c"]}
@@ -315,13 +322,19 @@ class SonarBoard:
             self.pwm = self.pwm_sp
 
     # -- the TWI slave ---------------------------------------------------------------------------------------------
-    def receive(self, segments: list[tuple[int, bool, bytes | int]]) -> list[bytes]:
-        """One transaction's messages to this board, then its STOP: writes applied whole, reads answered."""
-        self.stats["transactions"] += 1
-        replies: list[bytes] = []
+    def receive(self, segments: list[tuple[int, bool, bytes | int]], txn: Any = None) -> list[bytes | None]:
+        """One transaction's messages to this board (or a part of it, with the same ``txn``): writes applied whole,
+        reads answered; a refused read (``None``) ends it, the master stops there."""
+        if txn is None or txn != self.txn:
+            self.stats["transactions"] += 1
+        self.txn = txn
+        replies: list[bytes | None] = []
         for _addr, read, data in segments:
             if read:
-                replies.append(self._read(int(data)))  # type: ignore[arg-type]
+                got = self._read(int(data))  # type: ignore[arg-type]
+                replies.append(got)
+                if got is None:
+                    break
                 continue
             buf = bytes(data)  # type: ignore[arg-type]
             if not buf:
@@ -334,7 +347,12 @@ class SonarBoard:
                 self._write(buf[0], buf[1:])
         return replies
 
-    def _read(self, n: int) -> bytes:
+    def _read(self, n: int) -> bytes | None:
+        """A read of ``n`` bytes from the pointer; None: refused (the pointer is at a missing register)."""
+        if self.pointer not in P.READABLE:
+            self.stats["refused_reads"] += 1
+            self._report(P.ERR_BAD_REGISTER)
+            return None
         image = self._image()
         regs = [(self.pointer + k) & 0xFF for k in range(n)]
         self.pointer = (self.pointer + n) & 0xFF

@@ -42,7 +42,8 @@ BATTERY_MV = 0x64  # uint16
 ODOMETRY = ENCODERS  # one read of 0x50-0x65 (22 bytes): encoders, speeds, PWM, millis, battery
 ODOMETRY_BYTES = 0x66 - ENCODERS
 
-# registers a read may start at or run through (everything else is missing: the board answers 0xFF, counts it)
+# registers a read may start at or run through (everything else is missing: a read starting there is refused, its
+# address NACKed; one running into it reads 0xFF there)
 READABLE = frozenset(
     [
         *range(WHO_AM_I, WATCHDOG + 1),
@@ -69,7 +70,7 @@ FIRING_NAMES = ("sequential", "simultaneous", "ideal")
 ERR_READ_ONLY = 1  # a write to a read-only or missing register
 ERR_PARTIAL = 2  # a multi-byte set-point written in part
 ERR_VALUE = 3  # a value out of range (a firing mode, a PWM beyond 255)
-ERR_BAD_REGISTER = 4  # a read of a missing register
+ERR_BAD_REGISTER = 4  # a read of a missing register (refused, or run into)
 ERR_OVERFLOW = 5  # more bytes in one write than the sketch's 32-byte buffer
 ERROR_NAMES = {
     ERR_READ_ONLY: "READ_ONLY",
