@@ -30,6 +30,7 @@ from bridge.core.profile import RobotProfile
 from bridge.core.registry import SERVICES, STUDIES, PluginError, default_robot, robot_profile, robot_spec
 from bridge.media.radio import RadioCfg
 from bridge.media.uwb import UwbCfg
+from bridge.media.wifi import WifiCfg
 
 
 class ConfigError(Exception):
@@ -652,6 +653,7 @@ class Config(_Model):
     can: CanCfg = Field(CanCfg(), description="the robots' CAN buses")
     mavlink: MavlinkCfg = Field(MavlinkCfg(), description="the robots' MAVLink faces and the ground-station endpoint")
     xbee_gateways: list[XBeeGatewayCfg] = Field([], description="real XBees joined to the simulated radio channel")
+    wifi: WifiCfg = Field(WifiCfg(), description="the Wi-Fi network between the robots and the services")
     services: list[ServiceCfg] = Field([], description="centralised programs, each in a process of its own")
 
     @model_validator(mode="after")
