@@ -1,5 +1,5 @@
-"""What a session can be made of, found by name: robots, media, services and studies (swarm behaviours are found the same way
-on the robot's side, ``swarm_logic.behaviours``).
+"""What a session can be made of, found by name: robots, media, services and studies (swarm behaviours are found the
+same way on the robot's side, ``swarm_logic.behaviours``).
 
 Every plugin, swarm-sitl's own included, comes from an entry point of an installed package (``pyproject.toml``:
 ``[project.entry-points."swarm_sitl.robots"]`` and so on) or from a ``register_*`` call in the process; ``swarm-sitl

@@ -49,8 +49,12 @@ class ServiceOptions(BaseModel):
 
 def _poses(world: Any, robots: list[int]) -> dict[str, Any]:
     """Every robot's true pose in the world frame and whether it is alive (a tracking system's ground truth)."""
-    return {"x": [float(world.pos[r, 0]) for r in robots], "y": [float(world.pos[r, 1]) for r in robots],
-            "yaw": [float(world.yaw[r]) for r in robots], "alive": [bool(world.alive[r]) for r in robots]}
+    return {
+        "x": [float(world.pos[r, 0]) for r in robots],
+        "y": [float(world.pos[r, 1]) for r in robots],
+        "yaw": [float(world.yaw[r]) for r in robots],
+        "alive": [bool(world.alive[r]) for r in robots],
+    }
 
 
 # what a service kind may be entitled to sense of the world, by name: (world, robot ids) -> the values
@@ -163,8 +167,10 @@ def service_context(plan: Plan, name: str) -> tuple[ServiceSpec, ServiceContext]
         if rp.gateway is not None:
             continue
         prof = robot_profile(rp.profile, rp.options)
-        robots.append(RobotInfo(rp.id, f"r{rp.id:03d}", rp.profile, prof.radius_m, prof.height_m, prof.length_m,
-                                prof.width_m))
-    ctx = ServiceContext(name, spec.options.model_validate(sc.options), cfg, robots, cfg.session.quantum_ns,
-                         cfg.session.seed)
+        robots.append(
+            RobotInfo(rp.id, f"r{rp.id:03d}", rp.profile, prof.radius_m, prof.height_m, prof.length_m, prof.width_m)
+        )
+    ctx = ServiceContext(
+        name, spec.options.model_validate(sc.options), cfg, robots, cfg.session.quantum_ns, cfg.session.seed
+    )
     return spec, ctx

@@ -40,17 +40,20 @@ if TYPE_CHECKING:
 KIND = "wifi"
 UDP_MAX = 65507  # the largest UDP payload over IPv4
 
-register_schema("swarm_sitl.WifiTx", {
-    "type": "object",
-    "properties": {
-        "src": {"type": "string", "description": "sender's address"},
-        "dest": {"type": ["string", "null"], "description": "addressee, null for a broadcast"},
-        "len": {"type": "integer"},
-        "data": {"type": "string", "description": "the payload, hex"},
-        "heard": {"type": "array", "description": "addresses that received it"},
-        "lost": {"type": "array", "description": "addresses it was meant for that did not"},
+register_schema(
+    "swarm_sitl.WifiTx",
+    {
+        "type": "object",
+        "properties": {
+            "src": {"type": "string", "description": "sender's address"},
+            "dest": {"type": ["string", "null"], "description": "addressee, null for a broadcast"},
+            "len": {"type": "integer"},
+            "data": {"type": "string", "description": "the payload, hex"},
+            "heard": {"type": "array", "description": "addresses that received it"},
+            "lost": {"type": "array", "description": "addresses it was meant for that did not"},
+        },
     },
-})
+)
 
 
 class WifiCfg(BaseModel):
@@ -58,15 +61,22 @@ class WifiCfg(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    mode: Literal["ideal", "lossy"] = Field("ideal", description="ideal: no loss, one-quantum latency (the "
-                                                                 "thesis' assumption); lossy: latency, jitter, loss")
-    enabled: bool = Field(False, description="give the robots Wi-Fi even without a service (a session with "
-                                             "[[services]] always has it)")
+    mode: Literal["ideal", "lossy"] = Field(
+        "ideal",
+        description="ideal: no loss, one-quantum latency (the thesis' assumption); lossy: latency, jitter, loss",
+    )
+    enabled: bool = Field(
+        False, description="give the robots Wi-Fi even without a service (a session with [[services]] always has it)"
+    )
     latency_ms: float = Field(3.0, ge=0, le=10_000, description="lossy: mean one-way latency")
     jitter_ms: float = Field(1.0, ge=0, le=10_000, description="lossy: standard deviation of the latency")
     loss: float = Field(0.0, ge=0, le=1, description="lossy: probability a receiver loses a datagram")
-    max_datagram: int = Field(1472, ge=1, le=UDP_MAX, description="the largest payload (bytes; 1472 fits one "
-                                                                   "802.11 frame without IP fragmentation)")
+    max_datagram: int = Field(
+        1472,
+        ge=1,
+        le=UDP_MAX,
+        description="the largest payload (bytes; 1472 fits one 802.11 frame without IP fragmentation)",
+    )
     record_payload: bool = Field(True, description="record each datagram's payload in /wifi/tx")
 
     @model_validator(mode="after")
@@ -100,8 +110,9 @@ class WifiNetwork(Medium):
         self.cfg: WifiCfg = hub.cfg.wifi
         self.seed = hub.cfg.session.seed
         # address -> entity, in a fixed order: the robots', then the services'
-        self.nodes: dict[str, str] = {robot_address(r): entity(r, "logic")
-                                      for r, rp in enumerate(hub.plan.robots) if rp.has_logic}
+        self.nodes: dict[str, str] = {
+            robot_address(r): entity(r, "logic") for r, rp in enumerate(hub.plan.robots) if rp.has_logic
+        }
         self.nodes.update({s: e for s, e in hub.service_entities.items()})
         self.address = {e: a for a, e in self.nodes.items()}
         self._rng: dict[tuple[str, str], np.random.Generator] = {}
@@ -119,8 +130,12 @@ class WifiNetwork(Medium):
         src = self.address.get(e)
         dest = item[1] if len(item) == 3 else 0
         data = item[2] if len(item) == 3 else None
-        if (src is None or not isinstance(data, bytes) or not 0 < len(data) <= self.cfg.max_datagram
-                or not (dest is None or (isinstance(dest, str) and dest in self.nodes and dest != src))):
+        if (
+            src is None
+            or not isinstance(data, bytes)
+            or not 0 < len(data) <= self.cfg.max_datagram
+            or not (dest is None or (isinstance(dest, str) and dest in self.nodes and dest != src))
+        ):
             self.totals["malformed"] += 1
             raise ValueError("not a datagram")
         hub = self.hub
@@ -163,5 +178,9 @@ class WifiNetwork(Medium):
             self.hub.inbox[e].append([KIND, [src, data]])
 
     def report(self, result: dict[str, Any]) -> None:
-        result["wifi"] = {"mode": self.cfg.mode, "nodes": len(self.nodes), **self.totals,
-                          "per_node": {a: dict(self.per_node[a]) for a in self.nodes if a in self.per_node}}
+        result["wifi"] = {
+            "mode": self.cfg.mode,
+            "nodes": len(self.nodes),
+            **self.totals,
+            "per_node": {a: dict(self.per_node[a]) for a in self.nodes if a in self.per_node},
+        }

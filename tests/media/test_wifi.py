@@ -30,9 +30,14 @@ class WifiBench:
     """The medium under a stand-in hub: three robots' logic and one service (``ctl``)."""
 
     def __init__(self, wifi: dict[str, Any] | None = None, seed: int = 1) -> None:
-        self.cfg = Config.model_validate({
-            "session": {"seed": seed}, "robots": [{"profile": "eswarbot", "count": 3}],
-            "services": [{"kind": "global_controller", "name": "ctl"}], "wifi": wifi or {}})
+        self.cfg = Config.model_validate(
+            {
+                "session": {"seed": seed},
+                "robots": [{"profile": "eswarbot", "count": 3}],
+                "services": [{"kind": "global_controller", "name": "ctl"}],
+                "wifi": wifi or {},
+            }
+        )
         self.plan = make_plan(self.cfg)
         self.q_ns = Q
         self.service_entities = {"ctl": service_entity("ctl")}
@@ -89,8 +94,14 @@ def test_ideal_unicast_and_broadcast_arrive_one_quantum_later() -> None:
 
 def test_malformed_datagrams_are_counted_and_dropped() -> None:
     b = WifiBench()
-    for dest, data in (("nobody", b"x"), ("ctl", "not bytes"), ("ctl", b""), ("ctl", b"x" * 1473), (7, b"x"),
-                       ("r001", b"to myself")):
+    for dest, data in (
+        ("nobody", b"x"),
+        ("ctl", "not bytes"),
+        ("ctl", b""),
+        ("ctl", b"x" * 1473),
+        (7, b"x"),
+        ("r001", b"to myself"),
+    ):
         with pytest.raises(ValueError):
             b.medium.transmit("r001/logic", 1, 0, ["wifi", dest, data])
     with pytest.raises(ValueError):
@@ -193,5 +204,5 @@ def test_the_udp_link_unicasts_and_broadcasts_on_loopback() -> None:
         a.close()
         b.close()
     for url in ("udp://nohost", "udp://127.0.0.1:0/path", "wifi0", "nope://x"):
-        with pytest.raises(Exception, match="udp://|URL|unknown"):
+        with pytest.raises(Exception, match=r"udp://|URL|unknown"):
             open_link(url)

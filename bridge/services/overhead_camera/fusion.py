@@ -1,0 +1,107 @@
+"""The thesis' comparator (Roy 2022, §3.2 of the digest): the camera's fix against the robot's encoder odometry, whose
+error drives a correction. Here a complementary filter per robot, on the pose (x, y, yaw):
+
+    predicted  p = last estimate moved by the odometry's displacement since the last frame (taken in the robot's own
+                   frame, so it does not matter where the odometry's frame lies in the world)
+    error      e = camera fix - p                      (the comparator's output; yaw wrapped to (-pi, pi])
+    estimate   p + gain * e                            (the correction)
+
+The odometry carries the motion between frames (smooth, drifting), the camera holds the estimate to the world (noisy,
+drift-free). With gain 1, or without fresh odometry (none within ``odometry_timeout_s``), the estimate is the fix.
+A robot the camera does not see this frame gets no estimate (no pose rather than a wrong one) and starts again from
+its next fix.
+
+Velocity: the odometry's speed along the estimated heading when it is fresh; otherwise the displacement between the
+last two fixes, smoothed (first-order, ``velocity_smoothing``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+def wrap(a: float) -> float:
+    return math.remainder(a, math.tau)
+
+
+@dataclass
+class OdometryReading:
+    t_s: float
+    x: float
+    y: float
+    yaw: float
+    v: float
+    w: float
+
+
+@dataclass
+class Estimate:
+    x: float
+    y: float
+    yaw: float
+    vx: float
+    vy: float
+
+
+class PoseFilter:
+    """One robot's fused pose."""
+
+    def __init__(self, gain: float, odometry_timeout_s: float, velocity_smoothing: float) -> None:
+        self.gain = gain
+        self.timeout = odometry_timeout_s
+        self.alpha_v = velocity_smoothing
+        self.est: Estimate | None = None
+        self.t_est = 0.0
+        self.odom: OdometryReading | None = None  # the latest reading
+        self.odom_used: OdometryReading | None = None  # the reading the estimate has taken in
+        self.last_error = (0.0, 0.0, 0.0)
+
+    def odometry(self, reading: OdometryReading) -> None:
+        if self.odom is None or reading.t_s >= self.odom.t_s:
+            self.odom = reading
+
+    def _fresh(self, t_s: float) -> bool:
+        return self.odom is not None and t_s - self.odom.t_s <= self.timeout
+
+    def update(self, t_s: float, fix: tuple[float, float, float] | None) -> Estimate | None:
+        """The estimate at frame time ``t_s`` given this frame's camera fix (None: unseen, no estimate)."""
+        if fix is None:
+            self.est = None
+            self.odom_used = None
+            return None
+        fx, fy, fyaw = fix
+        fresh = self._fresh(t_s)
+        prev = self.est
+        if prev is None:
+            x, y, yaw = fx, fy, fyaw
+            self.last_error = (0.0, 0.0, 0.0)
+        else:
+            px, py, pyaw = prev.x, prev.y, prev.yaw
+            if fresh and self.odom_used is not None:
+                o0, o1 = self.odom_used, self.odom
+                assert o1 is not None
+                c0, s0 = math.cos(o0.yaw), math.sin(o0.yaw)
+                dx, dy = o1.x - o0.x, o1.y - o0.y
+                fwd, left = c0 * dx + s0 * dy, -s0 * dx + c0 * dy  # the move in the robot's own frame
+                px += fwd * math.cos(pyaw) - left * math.sin(pyaw)
+                py += fwd * math.sin(pyaw) + left * math.cos(pyaw)
+                pyaw = wrap(pyaw + wrap(o1.yaw - o0.yaw))
+            g = self.gain if fresh else 1.0
+            ex, ey, eyaw = fx - px, fy - py, wrap(fyaw - pyaw)
+            self.last_error = (ex, ey, eyaw)
+            x, y, yaw = px + g * ex, py + g * ey, wrap(pyaw + g * eyaw)
+        if fresh:
+            assert self.odom is not None
+            vx, vy = self.odom.v * math.cos(yaw), self.odom.v * math.sin(yaw)
+        elif prev is not None and t_s > self.t_est:
+            dt = t_s - self.t_est
+            a = self.alpha_v
+            vx = a * (x - prev.x) / dt + (1 - a) * prev.vx
+            vy = a * (y - prev.y) / dt + (1 - a) * prev.vy
+        else:
+            vx = vy = 0.0
+        self.est = Estimate(x, y, yaw, vx, vy)
+        self.t_est = t_s
+        self.odom_used = self.odom if fresh else None
+        return self.est
