@@ -341,6 +341,15 @@ class VehicleCfg(_Model):
     timeout_s: float = Field(10.0, gt=0, description="how long the logic waits for the vehicle's first heartbeat")
 
 
+def _registered(get: Any, name: str, rename: tuple[str, str] = ("", "")) -> str:
+    """``name`` if a plugin registry knows it (``get(name)``), else a ValueError saying which there are."""
+    try:
+        get(name)
+    except PluginError as e:
+        raise ValueError(str(e).replace(*rename) if rename[0] else str(e)) from None
+    return name
+
+
 class _NoOptions(_Model):
     """The options of a robot model that declares none."""
 
@@ -491,11 +500,7 @@ class RobotGroup(_Model):
     @field_validator("profile")
     @classmethod
     def _known_profile(cls, v: str) -> str:
-        try:
-            robot_spec(v)
-        except PluginError as e:
-            raise ValueError(str(e).replace("unknown robot", "unknown robot profile")) from None
-        return v
+        return _registered(robot_spec, v, ("unknown robot", "unknown robot profile"))
 
 
 class XBeeGatewayCfg(_Model):
@@ -616,11 +621,7 @@ class ServiceCfg(_Model):
     @field_validator("kind")
     @classmethod
     def _known_kind(cls, v: str) -> str:
-        try:
-            SERVICES.get(v)
-        except PluginError as e:
-            raise ValueError(str(e)) from None
-        return v
+        return _registered(SERVICES.get, v)
 
     @model_validator(mode="after")
     def _options(self) -> ServiceCfg:

@@ -118,17 +118,11 @@ class GlobalControllerService(Service):
 
     def step(self, t_ns: int, datagrams: list[tuple[str, bytes]], sensed: dict[str, Any]) -> int | None:
         for src, data in datagrams:
-            try:
-                head, content = pp.decode(data)
-            except pp.PacketError:
-                self.counts["malformed"] += 1
+            verdict, head, content = pp.accept(data, pp.Status, self.address.get(src))
+            if verdict != "ok":
+                self.counts[verdict] += 1  # ignored: another node's broadcast (the camera's poses)
                 continue
-            if not isinstance(content, pp.Status):
-                self.counts["ignored"] += 1  # another node's broadcast (the camera's poses)
-                continue
-            if self.address.get(src) != content.id:
-                self.counts["malformed"] += 1
-                continue
+            assert isinstance(content, pp.Status) and head is not None
             self.counts["status"] += 1
             self.controller.on_status(head.t_s, content)
         t_s = t_ns / 1e9

@@ -12,28 +12,20 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field
 
+from bridge.core.config import BoxObstacle
 from bridge.core.services import ServiceContext, ServiceOptions, ServiceSpec
 
 MAX_TRACKED = 12  # robots told apart by marker hue; beyond, use mode = "noise"
 
 
-class OccluderCfg(BaseModel):
-    """Something overhead that hides the floor from the camera (robots drive under it)."""
+class OccluderCfg(BoxObstacle):
+    """Something overhead that hides the floor from the camera (a lamp, a beam: robots drive under it), a box as an
+    obstacle is, hanging at ``z``."""
 
-    model_config = ConfigDict(extra="forbid")
-    x: float
-    y: float
+    type: Literal["box"] = "box"
     z: float = Field(gt=0, description="its underside's height (m)")
-    size: tuple[float, float, float] = Field(description="extents x, y, z (m)")
-
-    @field_validator("size")
-    @classmethod
-    def _positive(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
-        if min(v) <= 0:
-            raise ValueError("all extents must be > 0")
-        return v
 
 
 class OverheadCameraOptions(ServiceOptions):

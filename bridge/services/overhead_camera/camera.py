@@ -35,6 +35,7 @@ class Occluder:
     y: float
     z: float  # its underside's height
     size: tuple[float, float, float]
+    yaw: float = 0.0  # rad
 
 
 def marker_hues(n: int) -> list[float]:
@@ -85,7 +86,9 @@ class OverheadCamera:
             )
             pb.createMultiBody(0, self._collision_cylinder(r, h), v, basePosition=[x, y, h / 2], physicsClientId=c)
         for o in occluders:
-            self._box((o.x, o.y, o.z + o.size[2] / 2), (o.size[0] / 2, o.size[1] / 2, o.size[2] / 2), OCCLUDER_GREY)
+            self._box(
+                (o.x, o.y, o.z + o.size[2] / 2), (o.size[0] / 2, o.size[1] / 2, o.size[2] / 2), OCCLUDER_GREY, o.yaw
+            )
         self.heights = [h for _, h in bodies]
         self.marker_radius = marker_radius
         self.bodies: list[int] = []

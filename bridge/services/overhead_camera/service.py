@@ -56,7 +56,7 @@ def build_camera(ctx: ServiceContext) -> OverheadCamera:
         a.wall_thickness_m,
         boxes,
         cylinders,
-        [Occluder(c.x, c.y, c.z, c.size) for c in o.occluders],
+        [Occluder(c.x, c.y, c.z, c.size, math.radians(c.yaw_deg)) for c in o.occluders],
         [(r.radius_m, r.height_m) for r in ctx.robots],
         radii,
         eye,
@@ -111,17 +111,11 @@ class OverheadCameraService(Service):
     def _datagram(self, src: str, data: bytes) -> None:
         """A robot's odometry; another SonPI packet is ignored; what is not one, or odometry naming another robot than
         its sender, is malformed (counted, dropped)."""
-        try:
-            head, content = pp.decode(data)
-        except pp.PacketError:
-            self.counts["malformed"] += 1
+        verdict, head, content = pp.accept(data, pp.Odometry, self.address.get(src))
+        if verdict != "ok":
+            self.counts[verdict] += 1
             return
-        if not isinstance(content, pp.Odometry):
-            self.counts["ignored"] += 1  # another node's broadcast (a mission): not for the camera
-            return
-        if self.address.get(src) != content.id:
-            self.counts["malformed"] += 1  # odometry of another robot than its sender
-            return
+        assert isinstance(content, pp.Odometry) and head is not None
         self.counts["odometry"] += 1
         self.filters[self.index[content.id]].odometry(
             OdometryReading(head.t_s, content.x_m, content.y_m, content.yaw_rad, content.v_mps, content.w_radps)

@@ -124,6 +124,21 @@ def encode_status(seq: int, t_s: float, s: Status) -> bytes:
     )
 
 
+def accept(data: bytes, kind: type, sender: int | None) -> tuple[str, Header | None, Content | None]:
+    """A receiver's verdict on a datagram from robot ``sender`` (None: not a robot) that should carry ``kind``
+    (``Odometry``, ``Status``): ``"ok"`` with its header and content; ``"ignored"``, another SonPI packet (a broadcast
+    meant for others); ``"malformed"``, not a packet, or one naming another robot than its sender."""
+    try:
+        head, content = decode(data)
+    except PacketError:
+        return "malformed", None, None
+    if not isinstance(content, kind):
+        return "ignored", None, None
+    if getattr(content, "id", sender) != sender:
+        return "malformed", None, None
+    return "ok", head, content
+
+
 def _finite(values: tuple[float, ...]) -> None:
     if not all(math.isfinite(v) for v in values):
         raise PacketError("a number is not finite")
