@@ -62,10 +62,13 @@ class OverheadCamera:
         width: int,
         height: int,
     ) -> None:
+        # two clients: the static scene (rendered once, and what lines of sight meet) and the robots (each frame)
+        self.scene = pb.connect(pb.DIRECT)
         self.cid = pb.connect(pb.DIRECT)
         self.width, self.height = width, height
         self.eye = np.asarray(eye, float)
-        c = self.cid
+        self._background: tuple[np.ndarray, np.ndarray] | None = None
+        c = self.scene
         self._box(
             (arena_w / 2, arena_l / 2, -0.005),
             (arena_w / 2 + 2 * wall_t + 5, arena_l / 2 + 2 * wall_t + 5, 0.005),
@@ -90,6 +93,7 @@ class OverheadCamera:
                 (o.x, o.y, o.z + o.size[2] / 2), (o.size[0] / 2, o.size[1] / 2, o.size[2] / 2), OCCLUDER_GREY, o.yaw
             )
         self.heights = [h for _, h in bodies]
+        c = self.cid
         self.marker_radius = marker_radius
         self.bodies: list[int] = []
         self.discs: list[int] = []
@@ -121,12 +125,12 @@ class OverheadCamera:
         self._pv_inv = np.linalg.inv(self._pv)
 
     def _collision_cylinder(self, r: float, h: float) -> int:
-        return pb.createCollisionShape(pb.GEOM_CYLINDER, radius=r, height=h, physicsClientId=self.cid)
+        return pb.createCollisionShape(pb.GEOM_CYLINDER, radius=r, height=h, physicsClientId=self.scene)
 
     def _box(
         self, pos: tuple[float, float, float], half: tuple[float, float, float], grey: float, yaw: float = 0.0
     ) -> None:
-        c = self.cid
+        c = self.scene
         v = pb.createVisualShape(pb.GEOM_BOX, halfExtents=list(half), rgbaColor=[grey] * 3 + [1], physicsClientId=c)
         s = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=list(half), physicsClientId=c)
         pb.createMultiBody(
@@ -160,8 +164,8 @@ class OverheadCamera:
                 physicsClientId=c,
             )
 
-    def render(self) -> np.ndarray:
-        """The frame: an RGB image (height x width x 3, uint8)."""
+    def _shoot(self, cid: int) -> tuple[np.ndarray, np.ndarray]:
+        """One client's image (RGB) and depth buffer."""
         img = pb.getCameraImage(
             self.width,
             self.height,
@@ -173,9 +177,20 @@ class OverheadCamera:
             lightAmbientCoeff=0.8,
             lightDiffuseCoeff=0.2,
             lightSpecularCoeff=0.0,
-            physicsClientId=self.cid,
+            physicsClientId=cid,
         )
-        return np.asarray(img[2], dtype=np.uint8).reshape(self.height, self.width, 4)[:, :, :3]
+        rgb = np.asarray(img[2], dtype=np.uint8).reshape(self.height, self.width, 4)[:, :, :3]
+        return rgb, np.asarray(img[3], dtype=np.float32).reshape(self.height, self.width)
+
+    def render(self) -> np.ndarray:
+        """The frame: an RGB image (height x width x 3, uint8). The static scene is rendered once; each frame renders
+        the robots alone and puts them in front of it where they are nearer the lens (a pixel the tiny renderer
+        shades costs far more than an empty one, and the floor fills every pixel)."""
+        if self._background is None:
+            self._background = self._shoot(self.scene)
+        bg_rgb, bg_depth = self._background
+        rgb, depth = self._shoot(self.cid)
+        return np.where((depth < bg_depth)[:, :, None], rgb, bg_rgb)
 
     # -- optics ----------------------------------------------------------------------------------------------
     def project(self, pts: np.ndarray) -> np.ndarray:
@@ -216,7 +231,7 @@ class OverheadCamera:
             pts.append([x[i] + off * math.cos(yaw[i]), y[i] + off * math.sin(yaw[i]), z])
         pts_a = np.array(pts)
         uv = self.project(pts_a)
-        res = pb.rayTestBatch([self.eye.tolist()] * len(pts), pts_a.tolist(), physicsClientId=self.cid)
+        res = pb.rayTestBatch([self.eye.tolist()] * len(pts), pts_a.tolist(), physicsClientId=self.scene)
         for k, i in enumerate(idx):
             r_px = self.marker_radius[i] * self.pixels_per_m(self.marker_height(i))
             u, v = uv[2 * k]
@@ -226,5 +241,6 @@ class OverheadCamera:
         return out
 
     def close(self) -> None:
-        if self.cid is not None and pb.isConnected(self.cid):
-            pb.disconnect(self.cid)
+        for cid in (self.cid, self.scene):
+            if pb.isConnected(cid):
+                pb.disconnect(cid)
