@@ -26,7 +26,6 @@ if TYPE_CHECKING:
     import numpy as np
 
     from bridge.core.config import Config
-    from bridge.core.plan import Plan
 
 SERVICE_ROLE = "service"
 
@@ -152,25 +151,3 @@ class ServiceSpec:
             from swarm_logic.plugins import PluginError
 
             raise PluginError(f"service {self.name!r}: cannot sense {unknown}; a service senses {sorted(SENSES)}")
-
-
-def service_context(plan: Plan, name: str) -> tuple[ServiceSpec, ServiceContext]:
-    """Service ``name``'s kind and the context it is built with, from the session's plan."""
-    from bridge.core.config import Config
-    from bridge.core.registry import SERVICES, robot_profile
-
-    cfg = Config.model_validate(plan.config)
-    sc = next(s for s in cfg.services if s.name == name)
-    spec = SERVICES.get(sc.kind)
-    robots = []
-    for rp in plan.robots:
-        if rp.gateway is not None:
-            continue
-        prof = robot_profile(rp.profile, rp.options)
-        robots.append(
-            RobotInfo(rp.id, f"r{rp.id:03d}", rp.profile, prof.radius_m, prof.height_m, prof.length_m, prof.width_m)
-        )
-    ctx = ServiceContext(
-        name, spec.options.model_validate(sc.options), cfg, robots, cfg.session.quantum_ns, cfg.session.seed
-    )
-    return spec, ctx

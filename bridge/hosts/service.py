@@ -10,8 +10,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from bridge.core.config import Config
 from bridge.core.plan import Plan
-from bridge.core.services import service_context, service_entity
+from bridge.core.registry import SERVICES, robot_profile
+from bridge.core.services import RobotInfo, ServiceContext, ServiceSpec, service_entity
 
 
 class ServiceHost:
@@ -30,3 +32,22 @@ class ServiceHost:
 
     def stop(self) -> None:
         self.service.close()
+
+
+def service_context(plan: Plan, name: str) -> tuple[ServiceSpec, ServiceContext]:
+    """Service ``name``'s kind and the context it is built with, from the session's plan."""
+    cfg = Config.model_validate(plan.config)
+    sc = next(s for s in cfg.services if s.name == name)
+    spec = SERVICES.get(sc.kind)
+    robots = []
+    for rp in plan.robots:
+        if rp.gateway is not None:
+            continue
+        prof = robot_profile(rp.profile, rp.options)
+        robots.append(
+            RobotInfo(rp.id, f"r{rp.id:03d}", rp.profile, prof.radius_m, prof.height_m, prof.length_m, prof.width_m)
+        )
+    ctx = ServiceContext(
+        name, spec.options.model_validate(sc.options), cfg, robots, cfg.session.quantum_ns, cfg.session.seed
+    )
+    return spec, ctx

@@ -10,7 +10,7 @@ import pytest
 
 from bridge.core.config import Config
 from bridge.core.plan import make_plan
-from bridge.core.services import service_context
+from bridge.hosts.service import service_context
 from swarm_logic.robots.sonpi import pose_packet as pp
 
 Q = 10_000_000

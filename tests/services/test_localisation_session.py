@@ -118,3 +118,39 @@ def test_a_lossy_wifi_loses_pose_packets_but_never_delivers_a_wrong_pose(tmp_pat
     _, s = run(tmp_path, "noise", wifi='mode = "lossy"\nloss = 0.3\nlatency_ms = 5.0\njitter_ms = 2.0', tag="-lossy")
     assert s["wifi"]["lost"] > 0
     assert s["services"]["cam"]["frames"] == 40
+
+
+FAILING = """
+[session]
+name = "failing-service"
+duration_s = 3
+on_robot_failure = "{policy}"
+[arena]
+width_m = 4
+length_m = 4
+[[robots]]
+profile = "eswarbot"
+count = 2
+behaviour = "random_walk"
+[[services]]
+kind = "global_controller"
+name = "ctl"
+options = {{ controller = "tests.support.failing_controller:FailsAtOneSecond", target = [2.0, 2.0] }}
+"""
+
+
+@pytest.mark.parametrize("policy, code", [("continue", 0), ("stop", 1)])
+def test_a_service_that_raises_is_a_recorded_failure(tmp_path: Path, policy: str, code: int) -> None:
+    cfg = tmp_path / f"{policy}.toml"
+    cfg.write_text(FAILING.format(policy=policy))
+    rc, s = session_run(cfg, tmp_path / policy)
+    assert rc == code
+    (f,) = s["failures"]
+    assert f["service"] == "ctl" and f["kind"] == "raised" and "controller fault at 1 s" in f["detail"]
+    assert f["t_s"] == pytest.approx(1.0)
+    assert s["services"]["ctl"]["failed"] and s["services"]["ctl"]["missions"] == 4  # 0, 0.25, 0.5, 0.75 s
+    assert all(r["alive"] for r in s["per_robot"])  # the robots go on without it
+    assert s["sim_time_s"] == pytest.approx(3.0 if policy == "continue" else 1.01)
+    events = [json.loads(d) for topic, _, d in iter_messages(tmp_path / policy / "session.mcap")
+              if topic == "/session/events"]
+    assert events and events[0]["service"] == "ctl"

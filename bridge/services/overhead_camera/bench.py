@@ -18,7 +18,7 @@ import numpy as np
 
 from bridge.core.config import Config
 from bridge.core.plan import make_plan
-from bridge.core.services import service_context
+from bridge.hosts.service import service_context
 
 
 def measure(

@@ -255,4 +255,6 @@ class SonpiWifi:
 
 
 def open_sonpi_wifi(cfg: dict[str, Any], robot: Any) -> SonpiWifi:
+    """The HAL ``sonpi_wifi`` table's device: poses and the mission over Wi-Fi (``url``: ``udp://HOST:PORT``,
+    ``sitl://wifi``), odometry and status sent back."""
     return SonpiWifi(cfg, robot)
