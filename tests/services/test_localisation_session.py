@@ -151,6 +151,7 @@ def test_a_service_that_raises_is_a_recorded_failure(tmp_path: Path, policy: str
     assert s["services"]["ctl"]["failed"] and s["services"]["ctl"]["missions"] == 4  # 0, 0.25, 0.5, 0.75 s
     assert all(r["alive"] for r in s["per_robot"])  # the robots go on without it
     assert s["sim_time_s"] == pytest.approx(3.0 if policy == "continue" else 1.01)
-    events = [json.loads(d) for topic, _, d in iter_messages(tmp_path / policy / "session.mcap")
-              if topic == "/session/events"]
+    events = [
+        json.loads(d) for topic, _, d in iter_messages(tmp_path / policy / "session.mcap") if topic == "/session/events"
+    ]
     assert events and events[0]["service"] == "ctl"
