@@ -71,6 +71,7 @@ class RobotInfo:
     height_m: float
     length_m: float | None  # a box body: along the heading (None: a cylinder)
     width_m: float | None
+    marker_radius_m: float | None = None  # the marker on its top for an overhead camera, if its profile has one
 
 
 @dataclass

@@ -14,6 +14,7 @@ from bridge.core.config import Config
 from bridge.core.plan import Plan
 from bridge.core.registry import SERVICES, robot_profile
 from bridge.core.services import RobotInfo, ServiceContext, ServiceSpec, service_entity
+from bridge.models.marker import TopMarker
 
 
 class ServiceHost:
@@ -44,8 +45,18 @@ def service_context(plan: Plan, name: str) -> tuple[ServiceSpec, ServiceContext]
         if rp.gateway is not None:
             continue
         prof = robot_profile(rp.profile, rp.options)
+        marker = next((p for p in prof.parts if isinstance(p, TopMarker)), None)
         robots.append(
-            RobotInfo(rp.id, f"r{rp.id:03d}", rp.profile, prof.radius_m, prof.height_m, prof.length_m, prof.width_m)
+            RobotInfo(
+                rp.id,
+                f"r{rp.id:03d}",
+                rp.profile,
+                prof.radius_m,
+                prof.height_m,
+                prof.length_m,
+                prof.width_m,
+                None if marker is None else marker.radius_m,
+            )
         )
     ctx = ServiceContext(
         name, spec.options.model_validate(sc.options), cfg, robots, cfg.session.quantum_ns, cfg.session.seed

@@ -155,3 +155,48 @@ def test_a_service_that_raises_is_a_recorded_failure(tmp_path: Path, policy: str
         json.loads(d) for topic, _, d in iter_messages(tmp_path / policy / "session.mcap") if topic == "/session/events"
     ]
     assert events and events[0]["service"] == "ctl"
+
+
+SONPIS = """
+[session]
+name = "sonpi-camera"
+duration_s = 4
+seed = 2
+robots_per_process = 3
+[arena]
+width_m = 3
+length_m = 3
+[[robots]]
+count = 3
+profile = "sonpi"
+behaviour = "roy_apf"
+params = { optimiser = "fixed" }
+placement = { kind = "explicit", poses = [[0.6, 0.6, 0.0], [1.2, 0.6, 0.0], [0.6, 1.2, 0.0]] }
+[robots.devices.sonpi_wifi]
+url = "sitl://wifi"
+localisation = "camera"
+controller = "controller"
+[[services]]
+kind = "overhead_camera"
+name = "camera"
+[[services]]
+kind = "global_controller"
+name = "controller"
+options = { target = [2.5, 2.5] }
+"""
+
+
+def test_sonpis_send_their_odometry_and_the_camera_fuses_it(tmp_path: Path) -> None:
+    """Chapter 3's controller on SonPIs, its poses from the camera: every robot's Arduino odometry reaches the camera
+    and corrects its fixes; the controller hears every robot."""
+    cfg = tmp_path / "sonpis.toml"
+    cfg.write_text(SONPIS)
+    rc, s = session_run(cfg, tmp_path / "sonpis")
+    assert rc == 0, s.get("error")
+    cam = s["services"]["camera"]
+    assert cam["frames"] == 40 and cam["frames_without_pose"] == 0 and cam["malformed"] == 0
+    assert cam["odometry"] >= 3 * 36  # every robot, 10 a second once its program runs
+    assert cam["fused"] >= 3 * 34
+    assert cam["position_error_m"]["p95"] < 0.01 and cam["heading_error_deg"]["p95"] < 10
+    assert s["services"]["controller"]["robots_reporting"] == 3
+    assert all(r["alive"] for r in s["per_robot"])

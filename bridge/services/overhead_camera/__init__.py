@@ -42,7 +42,12 @@ class OverheadCameraOptions(ServiceOptions):
         "default: above the arena's centre, high "
         "enough to see it whole",
     )
-    marker_radius_m: float | None = Field(None, gt=0, description="default: 0.8 x the robot's radius")
+    marker_radius_m: float | None = Field(
+        None,
+        gt=0,
+        description="default: the radius of the marker its profile carries (a TopMarker part), else 0.8 x "
+        "the robot's radius",
+    )
     occluders: list[OccluderCfg] = Field([], description="overhead things between the camera and the floor")
     fusion_gain: float = Field(0.3, gt=0, le=1, description="the comparator's correction gain (1: the camera alone)")
     odometry_timeout_s: float = Field(0.5, gt=0, description="odometry older than this is not fused")

@@ -48,7 +48,7 @@ def build_camera(ctx: ServiceContext) -> OverheadCamera:
         if o.eye is not None
         else default_eye(a.width_m, a.length_m, o.fov_deg, o.width_px / o.height_px, top)
     )
-    radii = [o.marker_radius_m or MARKER_SHARE * r.radius_m for r in ctx.robots]
+    radii = [o.marker_radius_m or r.marker_radius_m or MARKER_SHARE * r.radius_m for r in ctx.robots]
     return OverheadCamera(
         a.width_m,
         a.length_m,

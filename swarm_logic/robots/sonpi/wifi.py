@@ -199,7 +199,7 @@ class SonpiWifi:
         now = self.clock.now()
         odom = self._odometry()
         if odom is not None and now >= self._next_odom:
-            self._next_odom = now + self.odom_period
+            self._next_odom = _next(self._next_odom, now, self.odom_period)
             o = odom.read()
             self._send(
                 pp.encode_odometry(
@@ -220,7 +220,7 @@ class SonpiWifi:
             )
             self.counters["odometry_sent"] += 1
         if self.controller and now >= self._next_status:
-            self._next_status = now + self.status_period
+            self._next_status = _next(self._next_status, now, self.status_period)
             own = self.own
             state = "running" if self.mission is not None and self.mission.run else "idle"
             self._send(
@@ -235,7 +235,7 @@ class SonpiWifi:
             )
             self.counters["status_sent"] += 1
         if self.log_period > 0 and now >= self._next_log and self.own is not None:
-            self._next_log = now + self.log_period
+            self._next_log = _next(self._next_log, now, self.log_period)
             p = self.own
             self.robot.log(
                 "wifi_pose",
@@ -252,6 +252,12 @@ class SonpiWifi:
 
     def close(self) -> None:
         self.link.close()
+
+
+def _next(due: float, now: float, period: float) -> float:
+    """The next time a periodic send is due: one period after the last due time (so polls that come a little late
+    keep the rate), or one period from now after a long gap (no burst to catch up)."""
+    return due + period if now - due < period else now + period
 
 
 def open_sonpi_wifi(cfg: dict[str, Any], robot: Any) -> SonpiWifi:
