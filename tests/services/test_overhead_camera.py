@@ -141,11 +141,11 @@ def test_noise_model_fit_recovers_its_parameters():
         valid = [bool(rng.random() > 0.1), True, False]
         frames.append(
             {
-                "valid": valid,
+                "fix": valid,
                 "visible": vis,
-                "ex": [float(rng.normal(0.001, 0.002)) for _ in vis],
-                "ey": [float(rng.normal(-0.001, 0.003)) for _ in vis],
-                "eyaw": [float(rng.normal(0.0, 0.02)) for _ in vis],
+                "fx": [float(rng.normal(0.001, 0.002)) for _ in vis],
+                "fy": [float(rng.normal(-0.001, 0.003)) for _ in vis],
+                "fyaw": [float(rng.normal(0.0, 0.02)) for _ in vis],
             }
         )
     model, counts = fit(frames)

@@ -6,7 +6,8 @@ fix with probability 1 - ``miss``, displaced by independent normal errors in x, 
 means and standard deviations; an unseen robot gets none, as in tracking mode.
 
 The defaults (``noise_model.json`` beside this module) are fitted on tracking-mode sessions: every frame of such a
-session logs each robot's fix error against the ground truth (``/svc/NAME/log/frame``), and
+session logs each robot's fix error against the ground truth, before any fusion with odometry
+(``/svc/NAME/log/frame``: ``fix``, ``fx``, ``fy``, ``fyaw``), and
 
     python -m bridge.services.overhead_camera.noise RUN_DIR [RUN_DIR ...] --out FILE
 
@@ -56,11 +57,13 @@ class NoiseModel:
 
 
 def fit(frames: list[dict[str, Any]]) -> tuple[NoiseModel, dict[str, int]]:
-    """The model that fits tracking-mode frames (each ``{valid, visible, ex, ey, eyaw}``, lists over robots)."""
+    """The model that fits tracking-mode frames (each ``{fix, visible, fx, fy, fyaw}``, lists over robots: whether
+    the camera had a fix, whether the robot could be seen, the fix's errors against the ground truth before any
+    fusion with odometry)."""
     ex, ey, eyaw = [], [], []
     visible = missed = 0
     for f in frames:
-        for valid, vis, a, b, c in zip(f["valid"], f["visible"], f["ex"], f["ey"], f["eyaw"], strict=True):
+        for valid, vis, a, b, c in zip(f["fix"], f["visible"], f["fx"], f["fy"], f["fyaw"], strict=True):
             if vis:
                 visible += 1
                 missed += not valid

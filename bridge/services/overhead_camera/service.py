@@ -103,6 +103,8 @@ class OverheadCameraService(Service):
         self.counts = {"frames": 0, "pose_packets": 0, "odometry": 0, "ignored": 0, "malformed": 0, "fused": 0}
         self.pos_err: list[float] = []
         self.yaw_err: list[float] = []
+        self.fix_pos_err: list[float] = []
+        self.fix_yaw_err: list[float] = []
         self.robot_frames = 0
         self.without_pose = 0
         self.hidden = 0
@@ -145,7 +147,8 @@ class OverheadCameraService(Service):
                 fixes.append((xs[k] + ex, ys[k] + ey, wrap(yaws[k] + eyaw)) if ok else None)
         t_s = t_ns / 1e9
         entries: list[pp.PoseEntry] = []
-        rec: dict[str, list] = {"valid": [], "visible": [], "ex": [], "ey": [], "eyaw": []}
+        keys = ("valid", "visible", "ex", "ey", "eyaw", "fix", "fx", "fy", "fyaw")
+        rec: dict[str, list] = {key: [] for key in keys}
         for k, rid in enumerate(self.ids):
             est = self.filters[k].update(t_s, fixes[k] if alive[k] else None)
             if est is not None and self.filters[k].odom_used is not None:
@@ -156,7 +159,8 @@ class OverheadCameraService(Service):
                 if est is not None
                 else pp.PoseEntry(rid, False)
             )
-            ex = ey = eyaw = 0.0
+            ex = ey = eyaw = fx = fy = fyaw = 0.0
+            fix = fixes[k] if alive[k] else None
             if alive[k]:
                 self.robot_frames += 1
                 self.hidden += not visible[k]
@@ -166,14 +170,12 @@ class OverheadCameraService(Service):
                     ex, ey, eyaw = est.x - xs[k], est.y - ys[k], wrap(est.yaw - yaws[k])
                     self.pos_err.append(math.hypot(ex, ey))
                     self.yaw_err.append(abs(eyaw))
-            for key, v in (
-                ("valid", valid),
-                ("visible", visible[k]),
-                ("ex", round(ex, 6)),
-                ("ey", round(ey, 6)),
-                ("eyaw", round(eyaw, 6)),
-            ):
-                rec[key].append(v)
+                if fix is not None:  # the camera's own fix, before the comparator's correction
+                    fx, fy, fyaw = fix[0] - xs[k], fix[1] - ys[k], wrap(fix[2] - yaws[k])
+                    self.fix_pos_err.append(math.hypot(fx, fy))
+                    self.fix_yaw_err.append(abs(fyaw))
+            for key, v in zip(keys, (valid, visible[k], ex, ey, eyaw, fix is not None, fx, fy, fyaw), strict=True):
+                rec[key].append(round(v, 6) if isinstance(v, float) else v)
         self.send(pp.encode_poses(self.frame, t_s, entries))
         self.counts["pose_packets"] += 1
         self.counts["frames"] += 1
@@ -195,6 +197,9 @@ class OverheadCameraService(Service):
             "robot_frames_hidden": self.hidden,
             "position_error_m": _stats(self.pos_err),
             "heading_error_deg": _stats(self.yaw_err, 180 / math.pi),
+            # the camera's own fixes, before fusion with odometry (in noise mode, the drawn ones)
+            "fix_position_error_m": _stats(self.fix_pos_err),
+            "fix_heading_error_deg": _stats(self.fix_yaw_err, 180 / math.pi),
             "tracker": dict(self.tracker.counts) if self.tracker is not None else None,
             # wall-clock cost of a frame in this process (render, track, fuse, encode): a speed figure, not simulated
             "frame_cost_ms": {"mean": round(float(cost.mean()), 3), "p95": round(float(np.quantile(cost, 0.95)), 3)}
