@@ -182,7 +182,9 @@ class Hub:
 
     def is_dead(self, e: str) -> bool:
         """Entity ``e``'s robot is dead, or ``e`` is a service that failed."""
-        r = self.ent_robot[e]
+        r = self.ent_robot.get(e)
+        if r is None:  # not one of this session's entities: its id names its robot
+            r = robot_of(e)
         return r in self.dead if r >= 0 else e in self.dead_services
 
     def record(self, t: int, topic: str, schema: str, payload: Any) -> None:
@@ -315,6 +317,13 @@ class Hub:
             self.failed_stop = True
             self.stop_reason = f"service {name} failed ({kind}) and on_robot_failure = stop"
 
+    def _entity_failed(self, e: str, r: int, t_ns: int, kind: str, detail: str) -> None:
+        """Entity ``e`` failed: its robot (``r``) or, for a service (``r`` < 0), the service."""
+        if r >= 0:
+            self.robot_failed(r, t_ns, kind, detail)
+        else:
+            self.service_failed(e, t_ns, kind, detail)
+
     def proc_failed(self, proc: str, t_ns: int, kind: str, detail: str) -> None:
         if proc not in self.live_procs:
             return
@@ -431,11 +440,9 @@ class Hub:
             if self.is_dead(e):
                 continue
             res = merged[e]
-            fail = self.robot_failed if r >= 0 else (lambda _r, t_ns, kind, detail, e=e: self.service_failed(
-                e, t_ns, kind, detail))
             if not _valid_reply(res):
                 self.counts["malformed_done"] += 1
-                fail(r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
+                self._entity_failed(e, r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
                 continue
             pins = res.get("pins")
             wiring = self.wiring.get(e)
@@ -446,7 +453,7 @@ class Hub:
                     pins_io.update(pins)
                 self.rec.write(t, self._pins_topics[e], wiring.schema, pins_io)
             if res.get("err"):
-                fail(r, t, "raised", res["err"])
+                self._entity_failed(e, r, t, "raised", res["err"])
                 continue
             w = res.get("wake")
             self.next_wake[e] = None if w is None else max(t + q, -(-w // q) * q)
