@@ -190,7 +190,10 @@ class OverheadCamera:
             self._background = self._shoot(self.scene)
         bg_rgb, bg_depth = self._background
         rgb, depth = self._shoot(self.cid)
-        return np.where((depth < bg_depth)[:, :, None], rgb, bg_rgb)
+        out = bg_rgb.copy()
+        near = depth < bg_depth
+        out[near] = rgb[near]
+        return out
 
     # -- optics ----------------------------------------------------------------------------------------------
     def project(self, pts: np.ndarray) -> np.ndarray:
