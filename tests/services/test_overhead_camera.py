@@ -110,15 +110,17 @@ def test_a_hidden_robot_gets_no_fix_rather_than_a_wrong_one(camera):
 
 
 def test_fusion_corrects_odometry_drift_towards_the_camera():
-    f = PoseFilter(gain=0.3, odometry_timeout_s=0.5, velocity_smoothing=0.5)
+    f = PoseFilter(position_gain=0.3, heading_gain=0.3, odometry_timeout_s=0.5, velocity_smoothing=0.5)
     # odometry in its own frame (starting at 0, 0, 0), drifting: it says 0.11 m per frame, the truth is 0.1 m
     truth = [(1.0 + 0.1 * k, 2.0, 0.0) for k in range(30)]
     for k, (x, y, yaw) in enumerate(truth):
         f.odometry(OdometryReading(0.1 * k, 0.11 * k, 0.0, 0.0, 1.1, 0.0))
         est = f.update(0.1 * k, (x, y, yaw))
     assert est is not None
-    assert abs(est.x - truth[-1][0]) < 0.01 * 3  # the error stays bounded, the correction holds it
-    assert f.last_error[0] == pytest.approx(-0.01 / 0.3 * 0.7 + 0.0, abs=0.01)
+    # the steady state: 0.01 m too far each frame, corrected by 0.3 of the comparator's error, leaves the estimate
+    # d = 0.01 (1 - g) / g ahead of the fix and the error at -0.01 / g
+    assert est.x - truth[-1][0] == pytest.approx(0.01 * 0.7 / 0.3, rel=1e-3)
+    assert f.last_error[0] == pytest.approx(-0.01 / 0.3, rel=1e-3)
     assert est.vx == pytest.approx(1.1) and est.vy == pytest.approx(0.0, abs=1e-9)
     assert f.update(3.0, None) is None  # unseen: no pose
     again = f.update(3.1, (5.0, 5.0, 1.0))
@@ -126,7 +128,7 @@ def test_fusion_corrects_odometry_drift_towards_the_camera():
 
 
 def test_fusion_without_odometry_is_the_camera_with_a_finite_difference_velocity():
-    f = PoseFilter(gain=0.3, odometry_timeout_s=0.5, velocity_smoothing=1.0)
+    f = PoseFilter(position_gain=0.3, heading_gain=0.3, odometry_timeout_s=0.5, velocity_smoothing=1.0)
     f.update(0.0, (1.0, 1.0, 0.0))
     est = f.update(0.1, (1.05, 0.98, 0.1))
     assert (est.x, est.y, est.yaw) == (1.05, 0.98, 0.1)
@@ -166,3 +168,21 @@ def test_the_shipped_noise_model_is_fitted_with_provenance():
     model = NoiseModel.load()
     assert 0 < model.x_std_m < 0.02 and 0 < model.yaw_std_rad < math.radians(10)
     assert d["provenance"]["fixes"] > 1000 and d["provenance"]["sessions"]
+
+
+def test_fusion_holds_when_odometry_comes_at_its_own_times_and_late():
+    """Odometry every 0.1 s half a frame off the camera's, one reading in four lost, each arriving 30 ms late: the
+    prediction carries the latest reading on to the frame's time, so the fused pose stays on the fixes."""
+    f = PoseFilter(position_gain=0.3, heading_gain=0.3, odometry_timeout_s=0.5, velocity_smoothing=0.5)
+    v = 0.15
+    readings = [(0.1 * k + 0.05, 0.1 * k + 0.08) for k in range(60) if k % 4 != 3]  # (taken, arrives)
+    worst = 0.0
+    for frame in range(1, 60):
+        t = 0.1 * frame
+        for taken, arrives in readings:
+            if t - 0.1 < arrives <= t:
+                f.odometry(OdometryReading(taken, v * taken, 0.0, 0.0, v, 0.0))  # its own frame from (0, 0, 0)
+        est = f.update(t, (1.0 + v * t, 2.0, 0.0))
+        if frame > 5:
+            worst = max(worst, abs(est.x - (1.0 + v * t)))
+    assert worst < 1e-6  # slip-free odometry and exact fixes agree at every frame

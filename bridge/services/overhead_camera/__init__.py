@@ -49,7 +49,10 @@ class OverheadCameraOptions(ServiceOptions):
         "the robot's radius",
     )
     occluders: list[OccluderCfg] = Field([], description="overhead things between the camera and the floor")
-    fusion_gain: float = Field(0.3, gt=0, le=1, description="the comparator's correction gain (1: the camera alone)")
+    position_gain: float = Field(
+        0.8, gt=0, le=1, description="the comparator's correction gain on x and y (1: the camera alone)"
+    )
+    heading_gain: float = Field(0.3, gt=0, le=1, description="the comparator's correction gain on the heading")
     odometry_timeout_s: float = Field(0.5, gt=0, description="odometry older than this is not fused")
     velocity_smoothing: float = Field(0.5, gt=0, le=1, description="camera-only velocity: first-order smoothing")
     noise_model: str | None = Field(None, description="noise mode: a fitted model (JSON); default the one shipped")

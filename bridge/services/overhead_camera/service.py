@@ -99,7 +99,9 @@ class OverheadCameraService(Service):
         self.ids = [r.id for r in ctx.robots]
         self.index = {r.id: k for k, r in enumerate(ctx.robots)}
         self.address = {r.address: r.id for r in ctx.robots}
-        self.filters = [PoseFilter(o.fusion_gain, o.odometry_timeout_s, o.velocity_smoothing) for _ in ctx.robots]
+        self.filters = [
+            PoseFilter(o.position_gain, o.heading_gain, o.odometry_timeout_s, o.velocity_smoothing) for _ in ctx.robots
+        ]
         self.counts = {"frames": 0, "pose_packets": 0, "odometry": 0, "ignored": 0, "malformed": 0, "fused": 0}
         self.pos_err: list[float] = []
         self.yaw_err: list[float] = []
