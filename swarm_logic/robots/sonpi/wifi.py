@@ -16,13 +16,15 @@ HAL table (``swarm_sitl.devices`` name ``sonpi_wifi``):
 
 Packets are taken in whenever the robot polls its devices (each controller step) and when a read waits for the first
 pose. A datagram that is not a SonPI packet is counted (``counters["malformed"]``) and dropped. The pose a robot gets
-is the latest the service could give: when the camera loses it, ``sonpi_pose`` keeps the last one and ``fresh`` says
-it is not current (the service sends no pose rather than a wrong one); the others' list holds only those the service
-saw in its latest broadcast.
+is the latest the service could give: when the camera loses it (the service sends no pose rather than a wrong one),
+``sonpi_pose`` carries the last one on by the robot's own odometry (when it has an ``sonpi_odometry`` face; else it
+keeps the last one) and ``fresh`` says it is not the camera's; the others' list holds only those the service saw in its
+latest broadcast.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,16 +55,18 @@ class _OwnPose:
         self.dev = dev
 
     def read(self) -> AgentPose:
-        """This robot's latest pose estimate (waiting up to ``first_pose_timeout_s`` for the first one)."""
+        """This robot's latest pose estimate (waiting up to ``first_pose_timeout_s`` for the first one). While the
+        camera has lost it, the last broadcast pose carried on by the robot's own odometry when it has some."""
         d = self.dev
         if d.own is None:
             d.wait_first_pose()
         assert d.own is not None
-        return d.own
+        return d.own if d.own_fresh else d.dead_reckoned()
 
     @property
     def fresh(self) -> bool:
-        """The latest broadcast had this robot's pose (False: the camera lost it, ``read`` gives the last one)."""
+        """The latest broadcast had this robot's pose (False: the camera lost it, ``read`` gives the last one
+        carried on by odometry, or the last one as it was without odometry)."""
         return self.dev.own_fresh
 
 
@@ -123,6 +127,7 @@ class SonpiWifi:
             "status_sent": 0,
         }
         self._odom_face: Any = None
+        self._odom_at_own: tuple[float, float, float] | None = None  # the odometry's pose when the last own pose came
         self._odom_looked = False
         self._next_odom = 0.0
         self._next_status = 0.0
@@ -152,6 +157,10 @@ class SonpiWifi:
                 pose = AgentPose(e.id, e.x_m, e.y_m, e.yaw_rad, e.vx_mps, e.vy_mps)
                 if e.id == me:
                     self.own, fresh = pose, True
+                    odom = self._odometry()
+                    if odom is not None:
+                        o = odom.read()
+                        self._odom_at_own = (o.x_m, o.y_m, o.yaw_rad)
                 else:
                     others.append(pose)
             self.own_fresh = fresh
@@ -180,6 +189,30 @@ class SonpiWifi:
             got = self.link.recv(left)
             if got is not None:
                 self._take(got[0])
+
+    def dead_reckoned(self) -> AgentPose:
+        """The last broadcast own pose moved by the odometry's displacement since it arrived (in the robot's own
+        frame, so the odometry frame's offset does not matter); the pose as it was without odometry."""
+        own, o0 = self.own, self._odom_at_own
+        odom = self._odometry()
+        assert own is not None
+        if o0 is None or odom is None:
+            return own
+        o1 = odom.read()
+        x0, y0, yaw0 = o0
+        c0, s0 = math.cos(yaw0), math.sin(yaw0)
+        dx, dy = o1.x_m - x0, o1.y_m - y0
+        fwd, left = c0 * dx + s0 * dy, -s0 * dx + c0 * dy
+        c, s = math.cos(own.yaw_rad), math.sin(own.yaw_rad)
+        yaw = math.remainder(own.yaw_rad + (o1.yaw_rad - yaw0), math.tau)
+        return AgentPose(
+            own.id,
+            own.x_m + fwd * c - left * s,
+            own.y_m + fwd * s + left * c,
+            yaw,
+            o1.v_mps * math.cos(yaw),
+            o1.v_mps * math.sin(yaw),
+        )
 
     # -- sending -----------------------------------------------------------------------------------------------
     def _odometry(self) -> Any:

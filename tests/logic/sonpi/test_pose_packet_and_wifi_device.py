@@ -66,11 +66,10 @@ class Clock:
 def test_the_device_serves_poses_sends_odometry_and_status_and_drops_malformed() -> None:
     service = UdpLink("udp://127.0.0.1:0")
     sent: list[tuple[str, dict]] = []
-    odometry = SimpleNamespace(
-        read=lambda: SimpleNamespace(
-            t_s=0.5, x_m=0.1, y_m=0.2, yaw_rad=0.3, v_mps=0.4, w_rps=0.5, left_counts=10, right_counts=12
-        )
+    reading = SimpleNamespace(
+        t_s=0.5, x_m=0.1, y_m=0.2, yaw_rad=0.3, v_mps=0.4, w_rps=0.5, left_counts=10, right_counts=12
     )
+    odometry = SimpleNamespace(read=lambda: reading)
     robot = SimpleNamespace(
         id=1,
         clock=Clock(),
@@ -120,6 +119,13 @@ def test_the_device_serves_poses_sends_odometry_and_status_and_drops_malformed()
                 break
             robot.clock.t += 0.01
         assert faces[MISSION].read().run and not faces[POSE].fresh and faces[POSE].read().x_m == 2.0
+        # the camera lost it: its own odometry carries the last pose on (0.1 m ahead and 0.2 rad left in its frame)
+        reading.x_m += 0.1 * math.cos(0.3)
+        reading.y_m += 0.1 * math.sin(0.3)
+        reading.yaw_rad += 0.2
+        p = faces[POSE].read()
+        assert (p.x_m, p.y_m) == pytest.approx((2.0 + 0.1 * math.cos(0.5), 3.0 + 0.1 * math.sin(0.5)))
+        assert p.yaw_rad == pytest.approx(0.7) and p.vx_mps == pytest.approx(0.4 * math.cos(0.7))
         got = {pp.decode(service.recv(5.0)[0])[0].type for _ in range(2)}
         assert got == {pp.ODOMETRY, pp.STATUS}
         assert dev.counters["odometry_sent"] >= 1 and dev.counters["status_sent"] >= 1
