@@ -27,9 +27,10 @@ from pydantic import (
 )
 
 from bridge.core.profile import RobotProfile
-from bridge.core.registry import STUDIES, PluginError, default_robot, robot_profile, robot_spec
+from bridge.core.registry import SERVICES, STUDIES, PluginError, default_robot, robot_profile, robot_spec
 from bridge.media.radio import RadioCfg
 from bridge.media.uwb import UwbCfg
+from bridge.media.wifi import WifiCfg
 
 
 class ConfigError(Exception):
@@ -340,6 +341,15 @@ class VehicleCfg(_Model):
     timeout_s: float = Field(10.0, gt=0, description="how long the logic waits for the vehicle's first heartbeat")
 
 
+def _registered(get: Any, name: str, rename: tuple[str, str] = ("", "")) -> str:
+    """``name`` if a plugin registry knows it (``get(name)``), else a ValueError saying which there are."""
+    try:
+        get(name)
+    except PluginError as e:
+        raise ValueError(str(e).replace(*rename) if rename[0] else str(e)) from None
+    return name
+
+
 class _NoOptions(_Model):
     """The options of a robot model that declares none."""
 
@@ -371,6 +381,9 @@ class RobotGroup(_Model):
     vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
                                                          "over MAVLink (state the body's motion)")
     motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
+    devices: dict[str, dict[str, Any]] = Field(
+        {}, description="devices the robot program gets in a session beyond its model's, as HAL tables by device "
+                        "name (a swarm_sitl.devices plugin), e.g. { sonpi_wifi = { url = \"sitl://wifi\" } }")
     carried_by: int | None = Field(None, ge=0, description="index of the robot group whose robots carry these on "
                                                            "board (e.g. on a conveyor): they start on "
                                                            "board, filled carrier by carrier in robot order, and go "
@@ -473,14 +486,21 @@ class RobotGroup(_Model):
                                 ("can.device", self.can.device is not None), ("vehicle", self.vehicle is not None),
                                 ("logic", self.logic == "external")) if on]
 
+    @field_validator("devices")
+    @classmethod
+    def _known_devices(cls, v: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        from swarm_logic.devices import BUILT_IN, DEVICES, NOT_DEVICES
+
+        for name in v:
+            if name in BUILT_IN or name in NOT_DEVICES or name not in DEVICES.names():
+                raise ValueError(f"{name!r} is not a device the session can add; devices: "
+                                 f"{', '.join(DEVICES.names()) or 'none'}")
+        return v
+
     @field_validator("profile")
     @classmethod
     def _known_profile(cls, v: str) -> str:
-        try:
-            robot_spec(v)
-        except PluginError as e:
-            raise ValueError(str(e).replace("unknown robot", "unknown robot profile")) from None
-        return v
+        return _registered(robot_spec, v, ("unknown robot", "unknown robot profile"))
 
 
 class XBeeGatewayCfg(_Model):
@@ -577,6 +597,45 @@ class MavlinkCfg(_Model):
         return v
 
 
+RESERVED_SERVICE_NAMES = ("world", "radio", "session", "wifi", "mavlink", "svc")
+
+
+class ServiceCfg(_Model):
+    """A centralised program of the session (``[[services]]``), in a process of its own, on the Wi-Fi network
+    (``bridge.core.services``): a localisation service, a global controller."""
+
+    kind: str = Field(description="the service kind (swarm-sitl list services)")
+    name: str = Field(description="its name: its address on the Wi-Fi network, its process svc-NAME, its records "
+                                  "/svc/NAME/...")
+    options: dict[str, Any] = Field({}, description="the kind's own options")
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        ok = v.isidentifier() and v.isascii() and v == v.lower() and len(v) <= 32
+        if not ok or v in RESERVED_SERVICE_NAMES or (v[0] == "r" and v[1:].isdigit()):
+            raise ValueError(f"{v!r}: a service name is a lower-case identifier of up to 32 characters, not a robot's "
+                             f"address (rNNN) nor one of {', '.join(RESERVED_SERVICE_NAMES)}")
+        return v
+
+    @field_validator("kind")
+    @classmethod
+    def _known_kind(cls, v: str) -> str:
+        return _registered(SERVICES.get, v)
+
+    @model_validator(mode="after")
+    def _options(self) -> ServiceCfg:
+        """The kind's options model validates them; an error names the option."""
+        try:
+            SERVICES.get(self.kind).options.model_validate(self.options)
+        except ValidationError as e:
+            raise ValueError("; ".join(f"options.{_loc(x['loc'])}: {x['msg'].removeprefix('Value error, ')}"
+                                       for x in e.errors())) from None
+        except PluginError:
+            pass  # the kind's own error says why
+        return self
+
+
 class Config(_Model):
     # top-level sections beyond these are studies' own (Study.config)
     model_config = ConfigDict(extra="allow", frozen=False)
@@ -595,6 +654,8 @@ class Config(_Model):
     can: CanCfg = Field(CanCfg(), description="the robots' CAN buses")
     mavlink: MavlinkCfg = Field(MavlinkCfg(), description="the robots' MAVLink faces and the ground-station endpoint")
     xbee_gateways: list[XBeeGatewayCfg] = Field([], description="real XBees joined to the simulated radio channel")
+    wifi: WifiCfg = Field(WifiCfg(), description="the Wi-Fi network between the robots and the services")
+    services: list[ServiceCfg] = Field([], description="centralised programs, each in a process of its own")
 
     @model_validator(mode="after")
     def _quantum_fits_physics(self) -> Config:
@@ -641,6 +702,22 @@ class Config(_Model):
                     f"session.quantum_ms = {self.session.quantum_ms} is longer than the {g.profile} LLC loop "
                     f"period ({period_ms:g} ms): a board cannot run its loop more than once per quantum"
                 )
+        return self
+
+    @model_validator(mode="after")
+    def _services(self) -> Config:
+        """Service names are unique (each is an address); each kind checks its options against the whole config."""
+        seen: set[str] = set()
+        for i, sc in enumerate(self.services):
+            if sc.name in seen:
+                raise ValueError(f"services[{i}].name: {sc.name!r} names another service already")
+            seen.add(sc.name)
+            spec = SERVICES.get(sc.kind)
+            if spec.check is not None:
+                try:
+                    spec.check(spec.options.model_validate(sc.options), self)
+                except ValueError as e:
+                    raise ValueError(f"services[{i}].options.{e}") from None
         return self
 
     @model_validator(mode="after")

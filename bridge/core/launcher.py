@@ -538,6 +538,9 @@ def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interr
         "per_robot": world_res.get("robots", []),
         "files": {},  # the outputs there are (below)
     }
+    for key in ("wifi", "services"):  # sessions with a Wi-Fi network and services (bridge.core.services)
+        if world_res.get(key) is not None:
+            summary[key] = world_res[key]
     return summary
 
 
