@@ -103,12 +103,24 @@ class Experiment:
     # cell keys left out of the trial seed: cells that differ only in these share their trials' seeds (common random
     # numbers: e.g. algorithms compared on the same deployments)
     seed_ignores: ClassVar[tuple[str, ...]] = ()
+    # trials of one cell handed to one worker at once (``run_batch``): for models that step many runs together; each
+    # trial's result must not depend on which others share its batch
+    batch: int = 1
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
         raise NotImplementedError
 
+    def cell_trials(self, cell: dict[str, Any], n: int) -> int:
+        """How many trials this cell runs when the experiment runs ``n`` per cell (``n`` by default; a costly cell
+        may run fewer)."""
+        return n
+
     def run(self, trial: Trial) -> TrialResult:
         raise NotImplementedError
+
+    def run_batch(self, trials: list[Trial]) -> list[TrialResult]:
+        """Several trials of one cell at once (``batch`` > 1); by default one after the other with ``run``."""
+        return [self.run(t) for t in trials]
 
     def targets(self) -> list[Target]:
         return []
@@ -247,6 +259,28 @@ def _clean(res: Any, trial: Trial) -> TrialResult:
     return TrialResult(metrics, curves, curve_x)
 
 
+def _run_trials(ref: _Ref, trials: list[Trial]) -> list[_Done]:
+    """A batch of trials of one cell (``Experiment.run_batch``); should it raise, each trial runs alone, so one bad
+    trial fails only itself. Each trial's wall time is its share of the batch's."""
+    if len(trials) == 1:
+        return [_run_trial(ref, trials[0])]
+    t0 = time.perf_counter()
+    try:
+        for t in trials:
+            Path(t.workdir).mkdir(parents=True, exist_ok=True)
+        results = _instance(ref).run_batch(trials)
+        if len(results) != len(trials):
+            raise ValueError(f"run_batch() returned {len(results)} results for {len(trials)} trials")
+        done = [(_clean(r, t), None) for r, t in zip(results, trials, strict=True)]
+    except Exception:
+        return [_run_trial(ref, t) for t in trials]
+    share = (time.perf_counter() - t0) / len(trials)
+    for t in trials:
+        with contextlib.suppress(OSError):
+            Path(t.workdir).rmdir()
+    return [(r, e, share) for r, e in done]
+
+
 def _run_trial(ref: _Ref, trial: Trial) -> _Done:
     t0 = time.perf_counter()
     wd = Path(trial.workdir)
@@ -346,45 +380,61 @@ def _terminate_as_interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt
 
 
-def _from_future(f: Future) -> _Done:
-    try:
-        return f.result()
-    except Exception as e:  # the worker died, or the result could not be sent back
-        return None, f"worker: {_error_text(e, frames=0)}", 0.0
+def _chunks(trials: list[Trial], size: int) -> list[list[int]]:
+    """Positions in ``trials`` grouped into runs of up to ``size`` consecutive trials of one cell."""
+    out: list[list[int]] = []
+    for k, t in enumerate(trials):
+        if out and len(out[-1]) < size and trials[out[-1][0]].cell == t.cell:
+            out[-1].append(k)
+        else:
+            out.append([k])
+    return out
 
 
-def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress) -> tuple[dict[int, _Done], bool]:
-    """Run the trials; returns what finished by position in `trials`, and whether Ctrl-C cut the run short."""
+def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress, batch: int = 1,
+             ) -> tuple[dict[int, _Done], bool]:
+    """Run the trials (``batch`` of one cell per task); returns what finished by position in `trials`, and whether
+    Ctrl-C cut the run short."""
     done: dict[int, _Done] = {}
+    groups = _chunks(trials, max(1, batch))
     if jobs == 1:
         # in-process, a trial's session may catch the interrupt to shut down cleanly and end as a failed trial:
         # the flag stops the run all the same, and that trial, cut short, is not kept
         try:
-            for k, t in enumerate(trials):
-                res = _run_trial(ref, t)
+            for g in groups:
+                res = _run_trials(ref, [trials[k] for k in g])
                 if _STOP.is_set():
                     return done, True
-                done[k] = res
-                bar.advance(done[k][1] is not None)
+                for k, r in zip(g, res, strict=True):
+                    done[k] = r
+                    bar.advance(r[1] is not None)
         except KeyboardInterrupt:
             return done, True
         return done, False
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(trials)), initializer=_worker_init,
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(groups)), initializer=_worker_init,
                                mp_context=multiprocessing.get_context(_start_method()))
-    futures: dict[Future, int] = {}
+    futures: dict[Future, list[int]] = {}
     try:
-        for k, t in enumerate(trials):
-            futures[pool.submit(_run_trial, ref, t)] = k
+        for g in groups:
+            futures[pool.submit(_run_trials, ref, [trials[k] for k in g])] = g
         for f in as_completed(futures):
-            done[futures[f]] = _from_future(f)
-            bar.advance(done[futures[f]][1] is not None)
+            g = futures[f]
+            try:
+                res = f.result()
+            except Exception as e:  # the worker died, or the result could not be sent back
+                res = [(None, f"worker: {_error_text(e, frames=0)}", 0.0)] * len(g)
+            for k, r in zip(g, res, strict=True):
+                done[k] = r
+                bar.advance(r[1] is not None)
     except BaseException as e:
         _abort(pool)
         if not isinstance(e, KeyboardInterrupt):
             raise
-        for f, k in futures.items():  # finished as the interrupt came; a trial the interrupt cut short is not kept
-            if k not in done and f.done() and not f.cancelled() and f.exception() is None and f.result()[1] is None:
-                done[k] = f.result()
+        for f, g in futures.items():  # finished as the interrupt came; a trial the interrupt cut short is not kept
+            if g[0] not in done and f.done() and not f.cancelled() and f.exception() is None:
+                for k, r in zip(g, f.result(), strict=True):
+                    if r[1] is None:
+                        done[k] = r
         return done, True
     pool.shutdown(wait=True)
     return done, False
@@ -683,12 +733,15 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     out_dir = Path(out) if out is not None else default_out
     _clear_outputs(out_dir)
     work = (out_dir / "work").absolute()
+    counts = [exp.cell_trials(c, n) for c in cells]
     plan = [Trial(name, dict(c), i, trial_seed(seed, name, {k: v for k, v in c.items() if k not in cls.seed_ignores},
                                                i), smoke, str(work / _slug(c) / str(i)))
-            for c in cells for i in range(n)]
+            for c, m in zip(cells, counts, strict=True) for i in range(m)]
+    cell_of = [j for j, m in enumerate(counts) for _ in range(m)]
     ref = _ref(cls)
     _INSTANCES.setdefault(ref, exp)
-    done, interrupted = _execute_interruptible(ref, plan, jobs, _Progress(name, len(plan), progress))
+    done, interrupted = _execute_interruptible(ref, plan, jobs, _Progress(name, len(plan), progress),
+                                               max(1, int(getattr(cls, "batch", 1))))
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
             d.rmdir()
@@ -696,7 +749,7 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     outcomes = [Outcome(plan[k], done[k][0], done[k][1]) for k in sorted(done)]
     by_cell: list[list[Outcome]] = [[] for _ in cells]
     for k, o in zip(sorted(done), outcomes, strict=True):
-        by_cell[k // n].append(o)  # plan is cell-major
+        by_cell[cell_of[k]].append(o)  # plan is cell-major
     metric_keys = _write_tables(out_dir, plan, done, cells, outcomes, by_cell)
     plot_lines: list[str] = []
     if exp.curves or exp.boxes or exp.means:
@@ -713,7 +766,8 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
              f"Reproduce: `{_command(name, trials, out, default_out, smoke, seed, only)}` (any `--jobs` gives the "
              f"same trials.csv).", "",
              f"- experiment `{name}`{' (smoke run)' if smoke else ''}: {_count(len(cells), 'cell')} x "
-             f"{_count(n, 'trial')}, seed {seed}{chosen}",
+             f"{_count(n, 'trial')}{'' if len(set(counts)) <= 1 else ' (fewer in some: see each cell)'}, seed "
+             f"{seed}{chosen}",
              f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"]
     if interrupted:
         lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
@@ -746,7 +800,7 @@ def _clear_outputs(out_dir: Path) -> None:
 
 
 def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: int,
-                           bar: _Progress) -> tuple[dict[int, tuple], bool]:
+                           bar: _Progress, batch: int = 1) -> tuple[dict[int, tuple], bool]:
     """``_execute`` with SIGTERM ending the run as Ctrl-C does (no orphans), the handlers restored after."""
     old_term = old_int = None
     _STOP.clear()
@@ -754,7 +808,7 @@ def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: i
         old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
         old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
     try:
-        return _execute(ref, plan, jobs, bar)
+        return _execute(ref, plan, jobs, bar, batch)
     finally:
         bar.close()
         if old_term is not None:

@@ -311,3 +311,45 @@ def test_a_mean_and_its_95_percent_confidence_interval() -> None:
     m, h = ex.mean_ci95(np.array([1.0, 2.0, 3.0]))
     assert m == 2.0 and h == pytest.approx(4.302653 / math.sqrt(3), rel=1e-6)
     assert ex.mean_ci95(np.array([5.0])) == (5.0, 0.0) and math.isnan(ex.mean_ci95(np.zeros(0))[0])
+
+
+BATCH_CALLS: list[int] = []
+
+
+@register
+class Batched(Experiment):
+    name = "test-batched"
+    title = "batched"
+    description = "batched trials"
+    trials = 5
+    batch = 3
+
+    def cells(self, smoke: bool) -> list[dict]:
+        return [{"c": 1}, {"c": 2}]
+
+    def cell_trials(self, cell: dict, n: int) -> int:
+        return n if cell["c"] == 1 else 2
+
+    def run(self, trial: Trial) -> TrialResult:
+        return TrialResult({"v": trial.seed % 1000 + trial.cell["c"]})
+
+    def run_batch(self, trials: list[Trial]) -> list[TrialResult]:
+        BATCH_CALLS.append(len(trials))
+        return [self.run(t) for t in trials]
+
+
+def test_batched_trials_and_per_cell_counts_keep_the_rows_and_seeds(tmp_path: Path) -> None:
+    """``batch`` hands a cell's trials to a worker together (``run_batch``) and ``cell_trials`` lets a cell run
+    fewer: trials.csv holds the same rows, seeds and results whatever the jobs."""
+    import csv as _csv
+
+    from bridge.experiments.runner import execute_experiment
+
+    rows = []
+    for jobs in (1, 2):
+        run = execute_experiment("test-batched", jobs=jobs, out=tmp_path / str(jobs), progress=False)
+        assert run.total == 7 and run.failed == 0
+        with open(tmp_path / str(jobs) / "trials.csv") as f:
+            rows.append(list(_csv.reader(f)))
+    assert rows[0] == rows[1] and len(rows[0]) == 8
+    assert BATCH_CALLS == [3, 2, 2]  # in-process: cell 1 in batches of 3 and 2, cell 2's two trials together

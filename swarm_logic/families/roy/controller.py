@@ -14,11 +14,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from swarm_logic.controller import Controller
-from swarm_logic.families.roy import potential
-from swarm_logic.families.roy.bat import BAT_MODES, bat
-from swarm_logic.families.roy.bfo import bfo
-from swarm_logic.families.roy.objective import MODES, AgentState, theta
-from swarm_logic.families.roy.pso import pso
+from swarm_logic.families.roy.bat import BAT_MODES
+from swarm_logic.families.roy.objective import MODES, AgentState, observe
+from swarm_logic.families.roy.potential import OA_LAWS
+from swarm_logic.families.roy.tuning import command, deadlocked, draw, kind, tune
 from swarm_logic.robot import Robot
 from swarm_logic.robots.sonpi.interfaces import (
     LOCALISATION,
@@ -38,7 +37,31 @@ COUNT = "[1, 10000]"
 UNIT = "[0, 1]"
 
 
-class RoyApf(Controller):
+class SonpiAgent(Controller):
+    """A chapter 3 agent on the SonPI's four devices: ``init`` binds them, ``destroy`` commands zero velocity."""
+
+    pose: OwnPose
+    localisation: Localisation
+    sonar: Sonar
+    velocity: HolonomicVelocity
+
+    def bind(self, robot: Robot, p: dict[str, Any]) -> None:
+        """Keep the resolved parameters ``p`` and the period, and look up the devices."""
+        self.p = p
+        self.period_s = float(p["period_s"])
+        self.pose = robot.device(POSE)
+        self.localisation = robot.device(LOCALISATION)
+        self.sonar = robot.device(SONAR)
+        self.velocity = robot.device(VELOCITY)
+
+    def destroy(self) -> None:
+        """Command zero velocity."""
+        vel = getattr(self, "velocity", None)
+        if vel is not None:
+            vel.set_velocity(0.0, 0.0)
+
+
+class RoyApf(SonpiAgent):
     """Attraction + repulsion + obstacle avoidance with per-step gain tuning (Roy 2022, ch.3)."""
 
     period_s = 0.05
@@ -49,11 +72,14 @@ class RoyApf(Controller):
         "delta": 4.0,  # Table 3.3 (sqrt(delta) r_s = 2 r_s, Theorem 1)
         "target_x": 35.0,  # Table 3.3, T = (35, 35) units
         "target_y": 35.0,
-        "v_max": 0.3,  # digest §5.3 [R], units/s
+        "v_max": 0.25,  # digest §5.3 [R], units/s: calibrated, BAT arrives near 200 s in roy-ch3-v2 (docs/roy.md)
         "d_max": 5.0,  # sensor range, units (digest §0 item 5): d in Theta when nothing echoes (erratum #3)
         "optimiser": "bat",  # the thesis' choice
         "objective": "lookahead",  # erratum #3: "literal" or "lookahead"
         "oa_mode": "per_sensor",  # digest §2.1.6 [R]: one OA term per reading within r_s, or the nearest only
+        "oa_law": "bounded",  # [R] not vanishing at contact; "literal": eq. 3.21 as printed
+        "lookahead_s": 1.0,  # erratum #3 [R]: the look-ahead's horizon, s; 0 = one period_s (the one-step reading)
+        "progress": "swarm",  # erratum #3 [R]: look-ahead target term n |x_bar' - T|; "centroid": |x_bar' - T|
         "neighbour_radius": 0.0,  # erratum #4: 0 = all agents (hardware broadcasts all poses); else units
         "target_term": "saturated",  # erratum #2: "saturated" target term, or "none" (the law as printed)
         "k_target": 1.0,  # erratum #2 [R]
@@ -96,7 +122,8 @@ class RoyApf(Controller):
     }
     ranges: ClassVar[dict[str, str]] = {
         "period_s": "(0, 10]", "unit_m": POS, "r_s": POS, "delta": POS, "target_x": "(-inf, inf)",
-        "target_y": "(-inf, inf)", "v_max": POS, "d_max": POS, "neighbour_radius": "[0, inf)", "k_target": "[0, inf)",
+        "target_y": "(-inf, inf)", "v_max": POS, "lookahead_s": "[0, 60]", "d_max": POS,
+        "neighbour_radius": "[0, inf)", "k_target": "[0, inf)",
         "target_sat": "[0, inf)", "target_damping": "[0, inf)", "gain_min": POS, "gain_max": POS, "k_a": POS,
         "k_v": POS, "k_r": POS, "k_oa": POS, "retune_every": COUNT, "pso_particles": COUNT, "pso_iters": "[0, 10000]",
         "pso_c1": "[0, 10]", "pso_c2": "[0, 10]", "pso_w": "[0, 2]", "bfo_bacteria": "[2, 10000]", "bfo_nc": COUNT,
@@ -107,15 +134,11 @@ class RoyApf(Controller):
         "deadlock_move": "[0, inf)", "goal_tol": "[0, inf)",
     }
     choices: ClassVar[dict[str, tuple[str, ...]]] = {
-        "optimiser": OPTIMISERS, "objective": MODES, "oa_mode": ("per_sensor", "nearest"),
+        "optimiser": OPTIMISERS, "objective": MODES, "oa_mode": ("per_sensor", "nearest"), "oa_law": OA_LAWS,
+        "progress": ("swarm", "centroid"),
         "target_term": ("saturated", "none"), "bat_mode": BAT_MODES,
     }
     static_params = frozenset({"period_s", "deadlock_window_s"})  # both size state built by ``init``
-
-    pose: OwnPose
-    localisation: Localisation
-    sonar: Sonar
-    velocity: HolonomicVelocity
 
     @classmethod
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
@@ -132,12 +155,7 @@ class RoyApf(Controller):
 
     def init(self, robot: Robot) -> None:
         super().init(robot)
-        self.p = self.resolve(robot.params)
-        self.period_s = float(self.p["period_s"])
-        self.pose = robot.device(POSE)
-        self.localisation = robot.device(LOCALISATION)
-        self.sonar = robot.device(SONAR)
-        self.velocity = robot.device(VELOCITY)
+        self.bind(robot, self.resolve(robot.params))
         self.reset()
 
     def reset(self) -> None:
@@ -149,108 +167,39 @@ class RoyApf(Controller):
         self.u = np.zeros(2)
 
     def state(self) -> AgentState:
-        """What this agent knows now, in thesis units."""
-        p = self.p
-        unit = float(p["unit_m"])
+        """What this agent knows now, in thesis units (a batch of one)."""
+        unit = float(self.p["unit_m"])
         me = self.pose.read()
-        x_i = np.array([me.x_m, me.y_m]) / unit
-        v_i = np.array([me.vx_mps, me.vy_mps]) / unit
+        x_i = np.array([[me.x_m, me.y_m]]) / unit
+        v_i = np.array([[me.vx_mps, me.vy_mps]]) / unit
         poses = self.localisation.poses()
-        xs = np.array([[q.x_m, q.y_m] for q in poses], float).reshape(-1, 2) / unit
-        vs = np.array([[q.vx_mps, q.vy_mps] for q in poses], float).reshape(-1, 2) / unit
-        n = len(xs) + 1
-        x_bar = (xs.sum(axis=0) + x_i) / n
-        v_bar = (vs.sum(axis=0) + v_i) / n
-        others = xs
-        if p["neighbour_radius"] > 0 and len(xs):
-            others = xs[np.hypot(*(xs - x_i[None, :]).T) <= p["neighbour_radius"]]
+        xs = np.array([[q.x_m, q.y_m] for q in poses], float).reshape(1, -1, 2) / unit
+        vs = np.array([[q.vx_mps, q.vy_mps] for q in poses], float).reshape(1, -1, 2) / unit
         readings = self.sonar.readings()
-        ranges = np.array([r.range_m for r in readings], float) / unit
+        ranges = np.array([[r.range_m for r in readings]], float) / unit
         angles = np.array([r.angle_rad for r in readings], float)
-        points = potential.obstacle_points(x_i, me.yaw_rad, ranges, angles)
-        dists = ranges[np.isfinite(ranges)]
-        r_s, delta = float(p["r_s"]), float(p["delta"])
-        oa = potential.obstacle_avoidance(x_i, points, dists, r_s, p["oa_mode"])
-        target = np.array([p["target_x"], p["target_y"]], float)
-        if p["target_term"] == "saturated":
-            extra = potential.target_term(x_i, v_i, target, p["k_target"], p["target_sat"], p["target_damping"])
-        else:
-            extra = np.zeros(2)
-        basis = potential.law_basis(x_i, v_i, x_bar, v_bar, others, oa, r_s, delta)
-        d_near = float(min(dists.min(), p["d_max"])) if len(dists) else float(p["d_max"])
-        return AgentState(x_i, v_i, x_bar, v_bar, n, others, points, max(d_near, 1e-6), basis, extra, target, r_s,
-                          self.period_s, float(p["d_max"]), float(p["v_max"]))
-
-    def deadlocked(self, s: AgentState) -> bool:
-        """Erratum #7: the centroid moved less than ``deadlock_move`` r_s over the last ``deadlock_window_s``,
-        away from the target."""
-        self.centroids.append(s.x_bar)
-        if len(self.centroids) < self.centroids.maxlen:  # type: ignore[operator]
-            return False
-        moved = float(np.hypot(*(self.centroids[-1] - self.centroids[0])))
-        far = float(np.hypot(*(s.x_bar - s.target))) > self.p["goal_tol"]
-        return far and moved < self.p["deadlock_move"] * s.r_s
-
-    def tune(self, s: AgentState) -> np.ndarray:
-        """The gains the chosen optimiser finds for Theta at state ``s``, warm-started at the last ones."""
-        p, rng = self.p, self.robot.rng
-        name = p["optimiser"]
-        deadlock = self.deadlocked(s)
-        if name == "fixed":
-            return self.gains
-        lo = np.full(4, float(p["gain_min"]))
-        hi = np.full(4, float(p["gain_max"]))
-        mode = p["objective"]
-
-        def f(k: np.ndarray) -> np.ndarray:
-            return theta(k, s, mode)
-
-        def run_pso(init: np.ndarray | None = None) -> np.ndarray:
-            return pso(f, lo, hi, rng, int(p["pso_particles"]), int(p["pso_iters"]), p["pso_c1"], p["pso_c2"],
-                       p["pso_w"], x0=self.gains, init=init)[0]
-
-        def run_bfo() -> tuple[np.ndarray, float, np.ndarray]:
-            return bfo(f, lo, hi, rng, int(p["bfo_bacteria"]), int(p["bfo_nc"]), int(p["bfo_ns"]), int(p["bfo_nre"]),
-                       int(p["bfo_ned"]), p["bfo_ped"], p["bfo_step"], p["bfo_d_att"], p["bfo_w_att"],
-                       p["bfo_h_rep"], p["bfo_w_rep"], x0=self.gains)
-
-        if name == "bat":
-            return bat(f, lo, hi, rng, int(p["bat_pop"]), int(p["bat_iters"]), p["bat_f_min"], p["bat_f_max"],
-                       p["bat_a0"], p["bat_alpha"], p["bat_gamma"], p["bat_mode"], x0=self.gains)[0]
-        if name == "pso":
-            return run_pso()
-        if name == "bfo":
-            return run_bfo()[0]
-        if name == "bgpso":  # Fig. 3.8: PSO after BFO's elimination-dispersal, from its population
-            return run_pso(init=run_bfo()[2])
-        self.using_pso = deadlock  # psoabg (Fig. 3.9): BFO, PSO while the swarm is stuck
-        return run_pso() if deadlock else run_bfo()[0]
+        return observe(x_i, v_i, xs, vs, np.array([me.yaw_rad]), ranges, angles, self.p)
 
     def step(self) -> None:
         s = self.state()
-        if self.steps % int(self.p["retune_every"]) == 0:
-            self.gains = np.asarray(self.tune(s), float)
-        elif self.p["optimiser"] == "psoabg":
-            self.deadlocked(s)
+        p = self.p
+        deadlock = False
+        if p["optimiser"] == "psoabg":
+            self.centroids.append(s.x_bar[0])
+            full = len(self.centroids) == self.centroids.maxlen
+            deadlock = full and bool(deadlocked(self.centroids[0], self.centroids[-1], s.x_bar[0], s.target, p))
+        if self.steps % int(p["retune_every"]) == 0:
+            k = kind(p, deadlock)
+            self.using_pso = k == "pso" and p["optimiser"] == "psoabg"
+            u = {c: a[None, :] for c, a in draw(p, k, self.robot.rng).items()}
+            self.gains = tune(p, k, s, self.gains[None, :], u)[0]
         self.steps += 1
-        self.u = potential.control(self.gains, s.basis, s.extra)
-        v = s.v_i + self.u * self.period_s
-        speed = float(np.hypot(v[0], v[1]))
-        if speed > s.v_max:
-            v *= s.v_max / speed
-        unit = float(self.p["unit_m"])
-        self.velocity.set_velocity(float(v[0]) * unit, float(v[1]) * unit)
+        u, v = command(self.gains[None, :], s)
+        self.u = u[0]
+        unit = float(p["unit_m"])
+        self.velocity.set_velocity(float(v[0, 0]) * unit, float(v[0, 1]) * unit)
 
     def telemetry(self) -> dict[str, float | int]:
         k = self.gains
         return {"k_a": float(k[0]), "k_v": float(k[1]), "k_r": float(k[2]), "k_oa": float(k[3]),
                 "pso_on": int(self.using_pso)}
-
-    def destroy(self) -> None:
-        """Command zero velocity."""
-        vel = getattr(self, "velocity", None)
-        if vel is not None:
-            vel.set_velocity(0.0, 0.0)
-
-
-

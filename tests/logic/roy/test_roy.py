@@ -12,7 +12,7 @@ from swarm_logic.families.roy import potential
 from swarm_logic.families.roy.bat import bat
 from swarm_logic.families.roy.bfo import bfo
 from swarm_logic.families.roy.controller import RoyApf
-from swarm_logic.families.roy.objective import AgentState, theta
+from swarm_logic.families.roy.objective import AgentState, observe, theta
 from swarm_logic.families.roy.pso import pso
 
 LO, HI = np.full(4, 0.1), np.full(4, 10.0)
@@ -42,15 +42,39 @@ def test_a2_obstacle_term_is_zero_beyond_r_s_and_points_away_within() -> None:
     angles = np.radians([-90.0, -45.0, 0.0, 45.0, 90.0])
     far = np.array([1.01, 2.0, math.inf, 4.9, 1.5])
     pts = potential.obstacle_points(x, 0.3, far, angles)
-    assert np.all(potential.obstacle_avoidance(x, pts, far[np.isfinite(far)], 1.0) == 0.0)
+    assert np.all(potential.obstacle_avoidance(x, pts, far, 1.0) == 0.0)
+    assert np.all(np.isinf(pts[2]))  # no echo: no point
     near = np.array([math.inf, math.inf, 0.6, math.inf, math.inf])
     pts = potential.obstacle_points(x, 0.3, near, angles)
-    assert np.allclose(pts[0], x + 0.6 * np.array([math.cos(0.3), math.sin(0.3)]))  # eq. 3.20
+    assert np.allclose(pts[2], x + 0.6 * np.array([math.cos(0.3), math.sin(0.3)]))  # eq. 3.20
     k_oa = 2.5
-    u = k_oa * potential.obstacle_avoidance(x, pts, np.array([0.6]), 1.0)
-    away = (x - pts[0]) / np.linalg.norm(x - pts[0])
+    u = k_oa * potential.obstacle_avoidance(x, pts, near, 1.0)
+    away = (x - pts[2]) / np.linalg.norm(x - pts[2])
     assert np.allclose(u / np.linalg.norm(u), away)
     assert np.linalg.norm(u) == pytest.approx(k_oa * math.exp(-0.36) * 0.6, rel=1e-12)
+    bounded = k_oa * potential.obstacle_avoidance(x, pts, near, 1.0, law="bounded")
+    assert np.allclose(bounded / np.linalg.norm(bounded), away)
+    assert np.linalg.norm(bounded) == pytest.approx(k_oa * math.exp(-0.36), rel=1e-12)
+
+
+def test_the_bounded_obstacle_term_grows_to_contact_where_the_literal_one_vanishes() -> None:
+    """Erratum-style resolution of eq. 3.21: the printed term's size d e^(-d^2/r_s^2) is 0 at contact; the bounded
+    reading's e^(-d^2/r_s^2) r_s grows monotonically to r_s, and both agree at the trigger d = r_s."""
+    x = np.zeros(2)
+    angles = np.array([0.0])
+    sizes = {}
+    for law in potential.OA_LAWS:
+        out = []
+        for d in (1.0, 0.5, 0.1, 1e-4):
+            r = np.array([d])
+            out.append(np.linalg.norm(potential.obstacle_avoidance(x, potential.obstacle_points(x, 0.0, r, angles),
+                                                                     r, 1.0, law=law)))
+        sizes[law] = out
+    assert sizes["literal"][0] == pytest.approx(sizes["bounded"][0])
+    assert sizes["literal"][-1] < 1e-3 and sizes["bounded"][-1] == pytest.approx(1.0, abs=1e-6)
+    assert np.all(np.diff(sizes["bounded"]) > 0)
+    with pytest.raises(ValueError, match="oa_law"):
+        potential.obstacle_avoidance(x, np.zeros((1, 2)), np.array([0.5]), 1.0, law="soft")
 
 
 @pytest.mark.parametrize("name", ["pso", "bfo", "bat_literal", "bat_standard"])
@@ -69,34 +93,43 @@ def test_each_optimiser_improves_on_a_toy_problem(name: str) -> None:
     assert val < 0.05 * float(sphere(x0)[0])
 
 
-def state(mode_points: bool = True) -> AgentState:
-    x_i, v_i = np.array([5.0, 5.0]), np.array([0.1, 0.0])
-    others = np.array([[6.0, 5.0], [5.0, 6.5], [4.0, 4.0]])
-    x_bar = (others.sum(axis=0) + x_i) / 4
-    v_bar = np.array([0.05, 0.05])
-    pts = np.array([[5.0, 4.3]]) if mode_points else np.zeros((0, 2))
-    oa = potential.obstacle_avoidance(x_i, pts, np.array([0.7]), 1.0) if mode_points else np.zeros(2)
-    basis = potential.law_basis(x_i, v_i, x_bar, v_bar, others, oa, 1.0, 4.0)
-    return AgentState(x_i, v_i, x_bar, v_bar, 4, others, pts, 0.7, basis, np.zeros(2), np.array([35.0, 35.0]), 1.0,
-                      0.05, 5.0, 0.3)
+def state() -> AgentState:
+    """One agent with three others and a wall point 0.7 below it (its right-hand sonar, heading +x)."""
+    p = RoyApf.resolve({"oa_law": "literal"})
+    x_i, v_i = np.array([[5.0, 5.0]]), np.array([[0.1, 0.0]])
+    xs = np.array([[[6.0, 5.0], [5.0, 6.5], [4.0, 4.0]]])
+    vs = np.array([[[0.0, 0.1], [0.1, 0.1], [0.0, 0.0]]])
+    ranges = np.array([[0.7, math.inf, math.inf, math.inf, math.inf]])
+    return observe(x_i, v_i, xs, vs, np.zeros(1), ranges, np.radians([-90.0, -45.0, 0.0, 45.0, 90.0]), p)
+
+
+def test_observe_gathers_the_means_the_obstacle_point_and_the_basis() -> None:
+    s = state()
+    assert s.n == 4 and np.allclose(s.x_bar, [[5.0, 5.125]]) and np.allclose(s.v_bar, [[0.05, 0.05]])
+    assert np.allclose(s.points[0, 0], [5.0, 4.3]) and np.all(np.isinf(s.points[0, 1:]))
+    assert s.d_near[0] == pytest.approx(0.7)
+    assert np.allclose(s.basis[0, 3], math.exp(-0.49) * np.array([0.0, 0.7]))
 
 
 @pytest.mark.parametrize("mode", ["literal", "lookahead"])
 def test_optimisers_improve_theta_in_both_modes(mode: str) -> None:
     s = state()
     x0 = np.array([4.4, 0.31, 6.64, 2.5])
-    start = float(theta(x0, s, mode)[0])
-    for run in (lambda r: pso(lambda k: theta(k, s, mode), LO, HI, r, 20, 20, x0=x0)[1],
-                lambda r: bat(lambda k: theta(k, s, mode), LO, HI, r, 15, 20, x0=x0)[1],
-                lambda r: bfo(lambda k: theta(k, s, mode), LO, HI, r, bacteria=20, x0=x0)[1]):
+    start = float(theta(x0[None, None], s, mode)[0, 0])
+
+    def f(k: np.ndarray) -> np.ndarray:
+        return theta(k[None], s, mode)[0]
+
+    for run in (lambda r: pso(f, LO, HI, r, 20, 20, x0=x0)[1], lambda r: bat(f, LO, HI, r, 15, 20, x0=x0)[1],
+                lambda r: bfo(f, LO, HI, r, bacteria=20, x0=x0)[1]):
         assert run(np.random.default_rng(1)) < start
 
 
 def test_literal_theta_is_linear_in_the_gains() -> None:
     """The degeneracy the digest notes (§2.1.7): Theta's first three terms are linear in k_a, k_v, k_r."""
     s = state()
-    k = np.array([[1.0, 1.0, 1.0, 1.0], [2.0, 1.0, 1.0, 1.0], [3.0, 1.0, 1.0, 1.0]])
-    t = theta(k, s, "literal")
+    k = np.array([[[1.0, 1.0, 1.0, 1.0], [2.0, 1.0, 1.0, 1.0], [3.0, 1.0, 1.0, 1.0]]])
+    t = theta(k, s, "literal")[0]
     assert t[2] - t[1] == pytest.approx(t[1] - t[0])
     with pytest.raises(ValueError, match="objective"):
         theta(k, s, "quadratic")
