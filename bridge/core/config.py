@@ -378,6 +378,11 @@ class RobotGroup(_Model):
                                "another computer, joining over zenoh (session.listen, swarm-sitl join), still in "
                                "simulated time")
     can: RobotCanCfg = RobotCanCfg()
+    wifi_udp: str | None = Field(
+        None, description="with logic = \"external\": the robot's node on the session's Wi-Fi network as a UDP socket "
+                          "bound at HOST:PORT (port 0: any free one, reported when the session starts), e.g. "
+                          "\"127.0.0.1:0\": what the network delivers to the robot goes to whoever last sent to it, "
+                          "what it receives enters the network as the robot's broadcasts")
     vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
                                                          "over MAVLink (state the body's motion)")
     motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
@@ -425,6 +430,16 @@ class RobotGroup(_Model):
             if self.uwb:
                 raise ValueError("uwb: a UWB module cannot be reached from an external logic (it has no port); "
                                  "drop it")
+        if self.wifi_udp is not None:
+            from swarm_logic.drivers.wifi import split_host_port
+
+            _, port = split_host_port(self.wifi_udp, "wifi_udp")
+            if self.logic != "external":
+                raise ValueError("wifi_udp: the session's own logic is the robot's node on the Wi-Fi network; a UDP "
+                                 "port is for a program outside the session (logic = \"external\")")
+            if port and self.count > 1:
+                raise ValueError(f"wifi_udp: {self.count} robots cannot share port {port}: give port 0 (each its own "
+                                 "free port) or the robot a group of its own")
         if self.vehicle is not None:
             if self.can.device is not None:
                 raise ValueError("vehicle: a MAVLink vehicle has no LLC on a CAN bus: drop can.device")
@@ -484,6 +499,7 @@ class RobotGroup(_Model):
                                 ("xbee.device", bool(self.xbee and self.xbee.device)),
                                 ("can.slcan_pty", bool(self.can.slcan_pty)),
                                 ("can.device", self.can.device is not None), ("vehicle", self.vehicle is not None),
+                                ("wifi_udp", self.wifi_udp is not None),
                                 ("logic", self.logic == "external")) if on]
 
     @field_validator("devices")

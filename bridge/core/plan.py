@@ -45,6 +45,7 @@ class RobotPlan:
     payload: tuple[int, ...] = ()  # a carrier: the robots on board, by slot
     options: dict = field(default_factory=dict)  # its robot model's options (the group's extra fields)
     devices: dict = field(default_factory=dict)  # the devices the session adds to its program (RobotGroup.devices)
+    wifi_udp: str | None = None  # its Wi-Fi node as a UDP socket for an outside program (RobotGroup.wifi_udp)
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
@@ -159,7 +160,8 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
                                     group.logic, group.can.slcan_pty, group.can.device,
                                     group.vehicle.model_dump() if group.vehicle else None,
                                     group.motion.model_dump(mode="json"), carrier=carrier, slot=slot,
-                                    options=dict(group.model_extra or {}), devices=dict(group.devices)))
+                                    options=dict(group.model_extra or {}), devices=dict(group.devices),
+                                    wifi_udp=group.wifi_udp))
     for i, rp in enumerate(robots):  # a carried robot starts where its carrier is
         if rp.carrier is not None:
             robots[i] = replace(rp, pose=robots[rp.carrier].pose)
