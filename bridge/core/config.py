@@ -143,6 +143,13 @@ class BoxObstacle(_Model):
     size: tuple[float, float, float] = Field(description="full extents x, y, z in metres")
     yaw_deg: float = 0.0
 
+    def overlaps(self, x: float, y: float, clearance: float = 0.0) -> bool:
+        """The disc of radius ``clearance`` at (x, y) reaches into the box."""
+        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
+        dx, dy = x - self.x, y - self.y
+        lx, ly = c * dx + s * dy, -s * dx + c * dy
+        return abs(lx) < self.size[0] / 2 + clearance and abs(ly) < self.size[1] / 2 + clearance
+
     @field_validator("size")
     @classmethod
     def _positive(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -157,6 +164,10 @@ class CylinderObstacle(_Model):
     y: float
     radius: float = Field(gt=0)
     height: float = Field(0.5, gt=0)
+
+    def overlaps(self, x: float, y: float, clearance: float = 0.0) -> bool:
+        """The disc of radius ``clearance`` at (x, y) reaches into the cylinder."""
+        return math.hypot(x - self.x, y - self.y) < self.radius + clearance
 
 
 Obstacle = Annotated[BoxObstacle | CylinderObstacle, Field(discriminator="type")]
@@ -743,9 +754,7 @@ class Config(_Model):
         extra = self.model_extra or {}
         if extra:
             _study_sections_model().model_validate(extra)
-        for _, study in STUDIES.items():
-            if study.check is not None and any(name in extra for name in study.config):
-                study.check(self)
+        _study_checks(self)
         return self
 
     def section(self, name: str) -> Any:
@@ -763,6 +772,17 @@ class Config(_Model):
     def profile(self, group: RobotGroup) -> RobotProfile:
         """The group's robot profile, as its robot model's options make it."""
         return robot_profile(group.profile, group.model_extra)
+
+
+def _study_checks(cfg: Config) -> None:
+    """Each study's check across the config, when the config has one of its sections or a group runs one of its
+    behaviours (``Study.check``, ``Study.behaviours``)."""
+    extra = cfg.model_extra or {}
+    for _, study in STUDIES.items():
+        if study.check is not None and (
+            any(name in extra for name in study.config) or any(g.behaviour in study.behaviours for g in cfg.robots)
+        ):
+            study.check(cfg)
 
 
 def study_section(name: str) -> Any:
@@ -795,7 +815,10 @@ def _format(path: str, err: ValidationError) -> str:
     lines = []
     for e in err.errors():
         msg = e["msg"].removeprefix("Value error, ")
-        lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+        if e["loc"]:
+            lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+        else:  # a check across the whole config: its message names the field
+            lines.append(f"{path}: {msg}")
     return "\n".join(lines)
 
 
@@ -843,6 +866,11 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
         except Exception as e:
             raise ConfigError(f"{p}: arena.map: cannot read {mp.name} as an image: {e}") from None
     expand_random_obstacles(str(p), cfg)
+    if cfg.random_obstacles is not None:  # the studies' checks again, on the boxes just drawn too
+        try:
+            _study_checks(cfg)
+        except ValueError as e:
+            raise ConfigError(f"{p}: {e} (random_obstacles drew it: keep the place clear with keep_clear)") from None
     _check_geometry(str(p), cfg)
     _check_behaviours(str(p), cfg)
     return cfg

@@ -15,7 +15,7 @@ import numpy as np
 
 from bridge.core.arena_map import blocked as map_blocked
 from bridge.core.arena_map import occupancy
-from bridge.core.config import Config, ConfigError, CylinderObstacle
+from bridge.core.config import Config, ConfigError
 from bridge.core.entities import entity
 from bridge.core.registry import robot_spec
 from bridge.core.rng import stream
@@ -195,17 +195,7 @@ def _blocked(cfg: Config, x: float, y: float, clearance: float, occ: np.ndarray 
         return True
     if occ is not None and map_blocked(occ, a.map_resolution_m, x, y, clearance):
         return True
-    for ob in cfg.obstacles:
-        if isinstance(ob, CylinderObstacle):
-            if math.hypot(x - ob.x, y - ob.y) < ob.radius + clearance:
-                return True
-        else:
-            c, s = math.cos(math.radians(ob.yaw_deg)), math.sin(math.radians(ob.yaw_deg))
-            dx, dy = x - ob.x, y - ob.y
-            lx, ly = c * dx + s * dy, -s * dx + c * dy
-            if abs(lx) < ob.size[0] / 2 + clearance and abs(ly) < ob.size[1] / 2 + clearance:
-                return True
-    return False
+    return any(ob.overlaps(x, y, clearance) for ob in cfg.obstacles)
 
 
 def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, float, float]]:
