@@ -24,8 +24,8 @@ A robot whose logic runs outside the session (``logic = "external"``) is a node 
 ``started`` status and ``summary.json``'s ``wifi.udp``). Every datagram waiting on it at the start of a quantum enters
 the network as that robot's broadcast, as a real SonPI broadcasts on the shared port (an empty or over-long one is
 counted ``malformed`` and dropped); what the network delivers to the robot is sent from the socket to whoever last
-sent to it (``no_peer`` counts those that came before anyone did). The outside program runs in wall time: what it
-sends is not reproducible, and is recorded like the rest.
+sent to it (``unsent`` counts those that came before anyone did, or that the system refused). The outside program
+runs in wall time: what it sends is not reproducible, and is recorded like the rest.
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ class WifiNetwork(Medium):
             elif rp.wifi_udp:
                 e = self.nodes[robot_address(r)] = entity(r, "wifi_udp")
                 self.outside[e] = self._open(robot_address(r), rp.wifi_udp)
-                self.outside_counts[e] = dict.fromkeys(("received", "sent", "no_peer", "malformed", "dead"), 0)
+                self.outside_counts[e] = dict.fromkeys(("received", "sent", "unsent", "malformed", "dead"), 0)
         self.nodes.update({s: e for s, e in hub.service_entities.items()})
         self.address = {e: a for a, e in self.nodes.items()}
         self._rng: dict[tuple[str, str], np.random.Generator] = {}
@@ -232,7 +232,7 @@ class WifiNetwork(Medium):
             if port is None:
                 self.hub.inbox[e].append([KIND, [src, data]])
             else:
-                self.outside_counts[e]["sent" if port.send(data) else "no_peer"] += 1
+                self.outside_counts[e]["sent" if port.send(data) else "unsent"] += 1
 
     def report(self, result: dict[str, Any]) -> None:
         result["wifi"] = {

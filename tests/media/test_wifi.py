@@ -253,7 +253,7 @@ def test_an_outside_programs_node_is_a_udp_port() -> None:
         rep = b.report()
         udp = rep["udp"]["r002"]
         assert udp["endpoint"] == b.medium.started()["wifi_udp"]["r002"]
-        assert (udp["received"], udp["sent"], udp["no_peer"], udp["malformed"]) == (1, 2, 1, 0)
+        assert (udp["received"], udp["sent"], udp["unsent"], udp["malformed"]) == (1, 2, 1, 0)
         assert rep["per_node"]["r002"] == {"sent": 1, "received": 3, "lost": 0}
         assert [r[2]["src"] for r in b.rec.records] == ["ctl", "r002", "ctl", "r000"]  # recorded as the rest
     finally:
