@@ -9,6 +9,11 @@ from __future__ import annotations
 from bridge.core.registry import Study
 from bridge.studies.roy.checks import BEHAVIOURS, check
 
-STUDY = Study("roy", "Roy: formation control with attraction-repulsion potentials and metaheuristic gain tuning",
-              experiments=("bridge.studies.roy.experiments",), bench="bridge.studies.roy.bench:bench",
-              check=check, behaviours=BEHAVIOURS)
+STUDY = Study(
+    "roy",
+    "Roy: formation control with attraction-repulsion potentials and metaheuristic gain tuning",
+    experiments=("bridge.studies.roy.experiments",),
+    bench="bridge.studies.roy.bench:bench",
+    check=check,
+    behaviours=BEHAVIOURS,
+)
