@@ -143,6 +143,13 @@ class BoxObstacle(_Model):
     size: tuple[float, float, float] = Field(description="full extents x, y, z in metres")
     yaw_deg: float = 0.0
 
+    def overlaps(self, x: float, y: float, clearance: float = 0.0) -> bool:
+        """The disc of radius ``clearance`` at (x, y) reaches into the box."""
+        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
+        dx, dy = x - self.x, y - self.y
+        lx, ly = c * dx + s * dy, -s * dx + c * dy
+        return abs(lx) < self.size[0] / 2 + clearance and abs(ly) < self.size[1] / 2 + clearance
+
     @field_validator("size")
     @classmethod
     def _positive(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -157,6 +164,10 @@ class CylinderObstacle(_Model):
     y: float
     radius: float = Field(gt=0)
     height: float = Field(0.5, gt=0)
+
+    def overlaps(self, x: float, y: float, clearance: float = 0.0) -> bool:
+        """The disc of radius ``clearance`` at (x, y) reaches into the cylinder."""
+        return math.hypot(x - self.x, y - self.y) < self.radius + clearance
 
 
 Obstacle = Annotated[BoxObstacle | CylinderObstacle, Field(discriminator="type")]
@@ -378,6 +389,11 @@ class RobotGroup(_Model):
                                "another computer, joining over zenoh (session.listen, swarm-sitl join), still in "
                                "simulated time")
     can: RobotCanCfg = RobotCanCfg()
+    wifi_udp: str | None = Field(
+        None, description="with logic = \"external\": the robot's node on the session's Wi-Fi network as a UDP socket "
+                          "bound at HOST:PORT (port 0: any free one, reported when the session starts), e.g. "
+                          "\"127.0.0.1:0\": what the network delivers to the robot goes to whoever last sent to it, "
+                          "what it receives enters the network as the robot's broadcasts")
     vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
                                                          "over MAVLink (state the body's motion)")
     motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
@@ -425,6 +441,16 @@ class RobotGroup(_Model):
             if self.uwb:
                 raise ValueError("uwb: a UWB module cannot be reached from an external logic (it has no port); "
                                  "drop it")
+        if self.wifi_udp is not None:
+            from swarm_logic.drivers.wifi import split_host_port
+
+            _, port = split_host_port(self.wifi_udp, "wifi_udp")
+            if self.logic != "external":
+                raise ValueError("wifi_udp: the session's own logic is the robot's node on the Wi-Fi network; a UDP "
+                                 "port is for a program outside the session (logic = \"external\")")
+            if port and self.count > 1:
+                raise ValueError(f"wifi_udp: {self.count} robots cannot share port {port}: give port 0 (each its own "
+                                 "free port) or the robot a group of its own")
         if self.vehicle is not None:
             if self.can.device is not None:
                 raise ValueError("vehicle: a MAVLink vehicle has no LLC on a CAN bus: drop can.device")
@@ -484,6 +510,7 @@ class RobotGroup(_Model):
                                 ("xbee.device", bool(self.xbee and self.xbee.device)),
                                 ("can.slcan_pty", bool(self.can.slcan_pty)),
                                 ("can.device", self.can.device is not None), ("vehicle", self.vehicle is not None),
+                                ("wifi_udp", self.wifi_udp is not None),
                                 ("logic", self.logic == "external")) if on]
 
     @field_validator("devices")
@@ -727,9 +754,7 @@ class Config(_Model):
         extra = self.model_extra or {}
         if extra:
             _study_sections_model().model_validate(extra)
-        for _, study in STUDIES.items():
-            if study.check is not None and any(name in extra for name in study.config):
-                study.check(self)
+        _study_checks(self)
         return self
 
     def section(self, name: str) -> Any:
@@ -747,6 +772,17 @@ class Config(_Model):
     def profile(self, group: RobotGroup) -> RobotProfile:
         """The group's robot profile, as its robot model's options make it."""
         return robot_profile(group.profile, group.model_extra)
+
+
+def _study_checks(cfg: Config) -> None:
+    """Each study's check across the config, when the config has one of its sections or a group runs one of its
+    behaviours (``Study.check``, ``Study.behaviours``)."""
+    extra = cfg.model_extra or {}
+    for _, study in STUDIES.items():
+        if study.check is not None and (
+            any(name in extra for name in study.config) or any(g.behaviour in study.behaviours for g in cfg.robots)
+        ):
+            study.check(cfg)
 
 
 def study_section(name: str) -> Any:
@@ -779,7 +815,10 @@ def _format(path: str, err: ValidationError) -> str:
     lines = []
     for e in err.errors():
         msg = e["msg"].removeprefix("Value error, ")
-        lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+        if e["loc"]:
+            lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+        else:  # a check across the whole config: its message names the field
+            lines.append(f"{path}: {msg}")
     return "\n".join(lines)
 
 
@@ -827,6 +866,11 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
         except Exception as e:
             raise ConfigError(f"{p}: arena.map: cannot read {mp.name} as an image: {e}") from None
     expand_random_obstacles(str(p), cfg)
+    if cfg.random_obstacles is not None:  # the studies' checks again, on the boxes just drawn too
+        try:
+            _study_checks(cfg)
+        except ValueError as e:
+            raise ConfigError(f"{p}: {e} (random_obstacles drew it: keep the place clear with keep_clear)") from None
     _check_geometry(str(p), cfg)
     _check_behaviours(str(p), cfg)
     return cfg

@@ -15,7 +15,7 @@ import numpy as np
 
 from bridge.core.arena_map import blocked as map_blocked
 from bridge.core.arena_map import occupancy
-from bridge.core.config import Config, ConfigError, CylinderObstacle
+from bridge.core.config import Config, ConfigError
 from bridge.core.entities import entity
 from bridge.core.registry import robot_spec
 from bridge.core.rng import stream
@@ -45,6 +45,7 @@ class RobotPlan:
     payload: tuple[int, ...] = ()  # a carrier: the robots on board, by slot
     options: dict = field(default_factory=dict)  # its robot model's options (the group's extra fields)
     devices: dict = field(default_factory=dict)  # the devices the session adds to its program (RobotGroup.devices)
+    wifi_udp: str | None = None  # its Wi-Fi node as a UDP socket for an outside program (RobotGroup.wifi_udp)
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
@@ -159,7 +160,8 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
                                     group.logic, group.can.slcan_pty, group.can.device,
                                     group.vehicle.model_dump() if group.vehicle else None,
                                     group.motion.model_dump(mode="json"), carrier=carrier, slot=slot,
-                                    options=dict(group.model_extra or {}), devices=dict(group.devices)))
+                                    options=dict(group.model_extra or {}), devices=dict(group.devices),
+                                    wifi_udp=group.wifi_udp))
     for i, rp in enumerate(robots):  # a carried robot starts where its carrier is
         if rp.carrier is not None:
             robots[i] = replace(rp, pose=robots[rp.carrier].pose)
@@ -193,17 +195,7 @@ def _blocked(cfg: Config, x: float, y: float, clearance: float, occ: np.ndarray 
         return True
     if occ is not None and map_blocked(occ, a.map_resolution_m, x, y, clearance):
         return True
-    for ob in cfg.obstacles:
-        if isinstance(ob, CylinderObstacle):
-            if math.hypot(x - ob.x, y - ob.y) < ob.radius + clearance:
-                return True
-        else:
-            c, s = math.cos(math.radians(ob.yaw_deg)), math.sin(math.radians(ob.yaw_deg))
-            dx, dy = x - ob.x, y - ob.y
-            lx, ly = c * dx + s * dy, -s * dx + c * dy
-            if abs(lx) < ob.size[0] / 2 + clearance and abs(ly) < ob.size[1] / 2 + clearance:
-                return True
-    return False
+    return any(ob.overlaps(x, y, clearance) for ob in cfg.obstacles)
 
 
 def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, float, float]]:

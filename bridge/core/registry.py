@@ -150,8 +150,10 @@ class Study:
     # its own top-level config sections: name -> their type (a pydantic model, or e.g. list[Model] for [[name]])
     config: dict[str, Any] = field(default_factory=dict)
     # checks across sections once a config is whole (a particle inside an obstacle): (config) -> None, raising
-    # ValueError naming the field
+    # ValueError naming the field; run when the config has one of its sections or a robot group runs one of its
+    # ``behaviours``
     check: Callable[[Any], None] | None = None
+    behaviours: tuple[str, ...] = ()  # the behaviours whose groups its check covers (a target inside an obstacle)
     # its speed figures for ``swarm-sitl bench --study NAME``: "module:function", called as
     # function(quick=bool, duration=float | None, out_dir=str) -> exit code (imported only when asked for)
     bench: str = ""

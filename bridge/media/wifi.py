@@ -18,6 +18,14 @@ link's draws:
 An item that is not a datagram (a destination that is no node, a payload that is not bytes or is too long) is
 counted ``malformed`` and dropped. Recorded: ``/wifi/tx`` per datagram (sender, destination, length, payload, who
 got it and who lost it). ``summary.json``: ``wifi`` (sent, delivered, lost, malformed, per node).
+
+A robot whose logic runs outside the session (``logic = "external"``) is a node too when its group sets
+``wifi_udp = "HOST:PORT"``: the session binds a UDP socket there (port 0: any free one; the bound address is in the
+``started`` status and ``summary.json``'s ``wifi.udp``). Every datagram waiting on it at the start of a quantum enters
+the network as that robot's broadcast, as a real SonPI broadcasts on the shared port (an empty or over-long one is
+counted ``malformed`` and dropped); what the network delivers to the robot is sent from the socket to whoever last
+sent to it (``unsent`` counts those that came before anyone did, or that the system refused). The outside program
+runs in wall time: what it sends is not reproducible, and is recorded like the rest.
 """
 
 from __future__ import annotations
@@ -29,10 +37,12 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from bridge.core.endpoints import UdpPort
 from bridge.core.entities import entity
 from bridge.core.medium import Medium
 from bridge.core.recorder import register_schema
 from bridge.core.rng import stream
+from swarm_logic.drivers.wifi import split_host_port
 
 if TYPE_CHECKING:
     from bridge.core.hub import Hub
@@ -103,21 +113,57 @@ class WifiNetwork(Medium):
 
     @classmethod
     def wanted(cls, hub: Hub) -> bool:
-        return bool(hub.cfg.services) or hub.cfg.wifi.enabled
+        return bool(hub.cfg.services) or hub.cfg.wifi.enabled or any(rp.wifi_udp for rp in hub.plan.robots)
 
     def __init__(self, hub: Hub) -> None:
         super().__init__(hub)
         self.cfg: WifiCfg = hub.cfg.wifi
         self.seed = hub.cfg.session.seed
-        # address -> entity, in a fixed order: the robots', then the services'
-        self.nodes: dict[str, str] = {
-            robot_address(r): entity(r, "logic") for r, rp in enumerate(hub.plan.robots) if rp.has_logic
-        }
+        # address -> entity, in a fixed order: the robots' (an outside program's node: a UDP port), then the services'
+        self.nodes: dict[str, str] = {}
+        self.outside: dict[str, UdpPort] = {}  # entity rNNN/wifi_udp -> the UDP port of a robot whose logic is outside
+        self.outside_counts: dict[str, dict[str, int]] = {}  # by entity
+        for r, rp in enumerate(hub.plan.robots):
+            if rp.has_logic:
+                self.nodes[robot_address(r)] = entity(r, "logic")
+            elif rp.wifi_udp:
+                e = self.nodes[robot_address(r)] = entity(r, "wifi_udp")
+                self.outside[e] = self._open(robot_address(r), rp.wifi_udp)
+                self.outside_counts[e] = dict.fromkeys(("received", "sent", "unsent", "malformed", "dead"), 0)
         self.nodes.update({s: e for s, e in hub.service_entities.items()})
         self.address = {e: a for a, e in self.nodes.items()}
         self._rng: dict[tuple[str, str], np.random.Generator] = {}
         self.totals = dict.fromkeys(("sent", "broadcasts", "delivered", "lost", "malformed", "bytes"), 0)
         self.per_node: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(("sent", "received", "lost"), 0))
+
+    def _open(self, address: str, where: str) -> UdpPort:
+        host, port = split_host_port(where, f"{address} wifi_udp")
+        try:
+            return UdpPort(host, port)
+        except OSError as e:
+            self.close()
+            raise OSError(f"{address} wifi_udp {where}: cannot open the UDP socket: {e}") from None
+
+    def started(self) -> dict[str, Any]:
+        """The outside programs' ports as bound (``HOST:PORT`` per robot address)."""
+        return {"wifi_udp": self.endpoints()} if self.outside else {}
+
+    def endpoints(self) -> dict[str, str]:
+        return {self.address[e]: f"{p.bound[0]}:{p.bound[1]}" for e, p in self.outside.items()}
+
+    def start_quantum(self, t: int) -> None:
+        """What the outside programs sent since the last quantum: their robots' broadcasts, sent now."""
+        for e, port in self.outside.items():
+            counts = self.outside_counts[e]
+            for data in port.recv_all():
+                counts["received"] += 1
+                if self.hub.is_dead(e):
+                    counts["dead"] += 1
+                    continue
+                try:
+                    self._send(self.address[e], None, data, t)
+                except ValueError:  # empty or too long: counted (here and in the totals) and dropped
+                    counts["malformed"] += 1
 
     def _stream(self, src: str, dst: str) -> np.random.Generator:
         g = self._rng.get((src, dst))
@@ -130,9 +176,15 @@ class WifiNetwork(Medium):
         src = self.address.get(e)
         dest = item[1] if len(item) == 3 else 0
         data = item[2] if len(item) == 3 else None
+        if src is None:
+            self.totals["malformed"] += 1
+            raise ValueError("not a node")
+        self._send(src, dest, data, t)
+
+    def _send(self, src: str, dest: Any, data: Any, t: int) -> None:
+        """A datagram from node ``src`` at ``t``: its fate per receiver drawn, its deliveries scheduled, recorded."""
         if (
-            src is None
-            or not isinstance(data, bytes)
+            not isinstance(data, bytes)
             or not 0 < len(data) <= self.cfg.max_datagram
             or not (dest is None or (isinstance(dest, str) and dest in self.nodes and dest != src))
         ):
@@ -171,11 +223,16 @@ class WifiNetwork(Medium):
         hub.rec.write(t, "/wifi/tx", "swarm_sitl.WifiTx", rec)
 
     def _arrive(self, t: int, e: str, src: str, data: bytes) -> None:
-        """A delivery: the datagram into the receiver's inbox (nothing for a dead robot)."""
-        if e in self.hub.inbox and not self.hub.is_dead(e):
+        """A delivery: the datagram into the receiver's inbox, or out of an outside program's port (nothing for a
+        dead robot)."""
+        port = self.outside.get(e)
+        if (port is not None or e in self.hub.inbox) and not self.hub.is_dead(e):
             self.totals["delivered"] += 1
             self.per_node[self.address[e]]["received"] += 1
-            self.hub.inbox[e].append([KIND, [src, data]])
+            if port is None:
+                self.hub.inbox[e].append([KIND, [src, data]])
+            else:
+                self.outside_counts[e]["sent" if port.send(data) else "unsent"] += 1
 
     def report(self, result: dict[str, Any]) -> None:
         result["wifi"] = {
@@ -183,4 +240,18 @@ class WifiNetwork(Medium):
             "nodes": len(self.nodes),
             **self.totals,
             "per_node": {a: dict(self.per_node[a]) for a in self.nodes if a in self.per_node},
+            **(
+                {
+                    "udp": {
+                        self.address[e]: {"endpoint": f"{p.bound[0]}:{p.bound[1]}", **self.outside_counts[e]}
+                        for e, p in self.outside.items()
+                    }
+                }
+                if self.outside
+                else {}
+            ),
         }
+
+    def close(self) -> None:
+        for port in self.outside.values():
+            port.close()

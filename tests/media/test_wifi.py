@@ -3,6 +3,7 @@ in a robot thread as the logic host runs it, and the real UDP link on loopback."
 
 from __future__ import annotations
 
+import socket
 from collections import defaultdict
 from typing import Any
 
@@ -29,11 +30,13 @@ class Recorder:
 class WifiBench:
     """The medium under a stand-in hub: three robots' logic and one service (``ctl``)."""
 
-    def __init__(self, wifi: dict[str, Any] | None = None, seed: int = 1) -> None:
+    def __init__(
+        self, wifi: dict[str, Any] | None = None, seed: int = 1, robots: list[dict[str, Any]] | None = None
+    ) -> None:
         self.cfg = Config.model_validate(
             {
-                "session": {"seed": seed},
-                "robots": [{"profile": "eswarbot", "count": 3}],
+                "session": {"seed": seed, **({"speed": 1} if robots else {})},
+                "robots": robots or [{"profile": "eswarbot", "count": 3}],
                 "services": [{"kind": "global_controller", "name": "ctl"}],
                 "wifi": wifi or {},
             }
@@ -43,7 +46,7 @@ class WifiBench:
         self.service_entities = {"ctl": service_entity("ctl")}
         self.dead: set[int] = set()
         self.inbox: dict[str, list] = defaultdict(list)
-        for e in ("r000/logic", "r001/logic", "r002/logic", "svc/ctl"):
+        for e in [f"r{rp.id:03d}/logic" for rp in self.plan.robots if rp.has_logic] + ["svc/ctl"]:
             self.inbox[e] = []
         self.deliveries: dict[int, list[tuple]] = defaultdict(list)
         self.rec = Recorder()
@@ -73,6 +76,27 @@ class WifiBench:
     def take(self, e: str) -> list:
         out, self.inbox[e] = self.inbox[e], []
         return out
+
+    def report(self) -> dict[str, Any]:
+        rep: dict[str, Any] = {}
+        self.medium.report(rep)
+        return rep["wifi"]
+
+
+OUTSIDE_ROBOTS = [
+    {"profile": "sonpi", "count": 2},
+    {"profile": "sonpi", "logic": "external", "i2c_pty": "r{id}-i2c", "wifi_udp": "127.0.0.1:0"},
+]
+
+
+def _outside_program(b: WifiBench) -> socket.socket:
+    """A program outside the session on loopback, and where the session bound robot 2's node."""
+    host, port = b.medium.started()["wifi_udp"]["r002"].split(":")
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.connect((host, int(port)))
+    s.settimeout(5.0)  # a guard: loopback datagrams are there when sendto returns
+    return s
 
 
 def test_ideal_unicast_and_broadcast_arrive_one_quantum_later() -> None:
@@ -206,3 +230,74 @@ def test_the_udp_link_unicasts_and_broadcasts_on_loopback() -> None:
     for url in ("udp://nohost", "udp://127.0.0.1:0/path", "wifi0", "nope://x"):
         with pytest.raises(Exception, match=r"udp://|URL|unknown"):
             open_link(url)
+
+
+def test_an_outside_programs_node_is_a_udp_port() -> None:
+    """Robot 2's logic runs outside: its node is a UDP port on loopback. What the program sends enters the network as
+    the robot's broadcasts; what the network delivers to the robot goes out to the program once it has spoken."""
+    b = WifiBench(robots=OUTSIDE_ROBOTS)
+    prog = _outside_program(b)
+    try:
+        assert b.medium.nodes["r002"] == "r002/wifi_udp" and "r002/logic" not in b.inbox
+        b.send("svc/ctl", "r002", b"too early")  # nobody has spoken from outside yet: no peer to send it to
+        b.step()
+        prog.send(b"odometry")
+        b.medium.start_quantum(b.t)
+        b.step()
+        assert b.take("svc/ctl") == [["wifi", ["r002", b"odometry"]]]
+        assert b.take("r000/logic") == b.take("r001/logic") == [["wifi", ["r002", b"odometry"]]]
+        b.send("svc/ctl", "r002", b"pose")
+        b.send("r000/logic", None, b"hello all")
+        b.step()
+        assert {prog.recv(2048), prog.recv(2048)} == {b"pose", b"hello all"}
+        rep = b.report()
+        udp = rep["udp"]["r002"]
+        assert udp["endpoint"] == b.medium.started()["wifi_udp"]["r002"]
+        assert (udp["received"], udp["sent"], udp["unsent"], udp["malformed"]) == (1, 2, 1, 0)
+        assert rep["per_node"]["r002"] == {"sent": 1, "received": 3, "lost": 0}
+        assert [r[2]["src"] for r in b.rec.records] == ["ctl", "r002", "ctl", "r000"]  # recorded as the rest
+    finally:
+        prog.close()
+        b.medium.close()
+
+
+def test_a_malformed_datagram_on_the_udp_port_is_counted_and_dropped() -> None:
+    b = WifiBench(robots=OUTSIDE_ROBOTS)
+    prog = _outside_program(b)
+    try:
+        prog.send(b"")  # UDP carries an empty datagram; the network does not
+        prog.send(b"x" * 1473)  # longer than [wifi] max_datagram
+        prog.send(b"fine")
+        b.medium.start_quantum(b.t)
+        b.step()
+        assert b.take("svc/ctl") == [["wifi", ["r002", b"fine"]]]
+        rep = b.report()
+        assert rep["malformed"] == 2 and rep["sent"] == 1
+        assert rep["udp"]["r002"]["malformed"] == 2 and rep["udp"]["r002"]["received"] == 3
+        b.dead.add(2)  # a dead robot's program is not heard, nor sent to
+        prog.send(b"late")
+        b.medium.start_quantum(b.t)
+        b.send("svc/ctl", None, b"all")
+        b.step()
+        assert b.take("svc/ctl") == [] and b.report()["udp"]["r002"]["dead"] == 1
+        prog.settimeout(0.05)
+        with pytest.raises(TimeoutError):
+            prog.recv(2048)
+    finally:
+        prog.close()
+        b.medium.close()
+
+
+def test_a_udp_node_is_for_an_outside_logic_and_a_fixed_port_for_one_robot() -> None:
+    def cfg(**group: Any) -> None:
+        Config.model_validate(
+            {"session": {"speed": 1}, "robots": [{"profile": "sonpi", "i2c_pty": "r{id}-i2c", **group}]}
+        )
+
+    cfg(logic="external", wifi_udp="127.0.0.1:0", count=3)
+    with pytest.raises(ValueError, match="wifi_udp: the session's own logic"):
+        cfg(wifi_udp="127.0.0.1:0")
+    with pytest.raises(ValueError, match="wifi_udp: 2 robots cannot share port 47801"):
+        cfg(logic="external", wifi_udp="127.0.0.1:47801", count=2)
+    with pytest.raises(ValueError, match="wifi_udp: HOST:PORT expected"):
+        cfg(logic="external", wifi_udp="localhost")

@@ -72,6 +72,36 @@ def test_odometry_is_fused_and_bad_packets_are_counted_and_dropped(mode: str) ->
         svc.close()
 
 
+def _odometry_run(clock_s: float) -> tuple[list[bytes], dict]:
+    """Robot 0 sends its odometry stamped on a clock ``clock_s`` ahead of the session's."""
+    svc, _ = _service("noise", fps=10)
+    try:
+        sent = []
+        for k in range(20):
+            t_s = k * 0.1
+            odo = pp.encode_odometry(k, t_s + clock_s, pp.Odometry(0, 0.55 * t_s, 0.0, 0.0, 0.55, 0.0, 10 * k, 10 * k))
+            res = svc.run(round(t_s * 1e9), {"in": [["wifi", ["r000", odo]]], "sens": _truth(t_s)})
+            sent += [item[2] for item in res["out"] if item[0] == "wifi"]
+        return sent, svc.summary()
+    finally:
+        svc.close()
+
+
+def test_odometry_on_a_robots_own_clock_is_fused_as_on_the_sessions() -> None:
+    """A program outside the session (or a real Pi) stamps its odometry on its own clock: its first reading gives the
+    offset, and the camera fuses its readings as if they were on the session's clock."""
+    same, s0 = _odometry_run(0.0)
+    own, s1 = _odometry_run(45_000.0)
+    assert s0["clock_offsets_s"] == {} and s1["clock_offsets_s"] == {"0": -45_000.0}
+    assert s0["fused_by_robot"] == s1["fused_by_robot"] and s1["fused_by_robot"]["0"] >= 18
+    assert s1["fused_by_robot"]["1"] == 0  # robot 1 sent none
+    for a, b in zip(same, own, strict=True):
+        (_, pa), (_, pb) = pp.decode(a), pp.decode(b)
+        assert [v for p in pa for v in (p.x_m, p.y_m, p.yaw_rad, p.vx_mps)] == pytest.approx(
+            [v for p in pb for v in (p.x_m, p.y_m, p.yaw_rad, p.vx_mps)], abs=1e-5
+        )
+
+
 def test_the_global_controller_broadcasts_the_mission_and_collects_status() -> None:
     _, plan = _service("noise")
     spec, ctx = service_context(plan, "ctl")

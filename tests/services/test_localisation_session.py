@@ -185,7 +185,7 @@ length_m = 3
 count = 3
 profile = "sonpi"
 behaviour = "roy_apf"
-params = { optimiser = "fixed" }
+params = { optimiser = "fixed", target_x = 25.0, target_y = 25.0 }  # the controller's target, inside the 3 m arena
 placement = { kind = "explicit", poses = [[0.6, 0.6, 0.0], [1.2, 0.6, 0.0], [0.6, 1.2, 0.0]] }
 [robots.devices.sonpi_wifi]
 url = "sitl://wifi"

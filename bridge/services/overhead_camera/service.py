@@ -103,6 +103,11 @@ class OverheadCameraService(Service):
             PoseFilter(o.position_gain, o.heading_gain, o.odometry_timeout_s, o.velocity_smoothing) for _ in ctx.robots
         ]
         self.counts = {"frames": 0, "pose_packets": 0, "odometry": 0, "ignored": 0, "malformed": 0, "fused": 0}
+        # per robot, what to add to its readings' times to put them on the session's clock: 0 for a robot whose clock
+        # is the session's; for one that runs on its own (a program outside the session on the wall clock, a real
+        # SonPI's Pi), how far behind the session its first reading was when it was taken in
+        self.clock_offset: list[float | None] = [None] * len(ctx.robots)
+        self.fused_by_robot = [0] * len(ctx.robots)
         self.pos_err: list[float] = []
         self.yaw_err: list[float] = []
         self.fix_pos_err: list[float] = []
@@ -112,22 +117,29 @@ class OverheadCameraService(Service):
         self.hidden = 0
         self.cost_s: list[float] = []
 
-    def _datagram(self, src: str, data: bytes) -> None:
-        """A robot's odometry; another SonPI packet is ignored; what is not one, or odometry naming another robot than
-        its sender, is malformed (counted, dropped)."""
+    def _datagram(self, src: str, data: bytes, t_s: float) -> None:
+        """A robot's odometry (taken in at ``t_s``, the service's time); another SonPI packet is ignored; what is not
+        one, or odometry naming another robot than its sender, is malformed (counted, dropped)."""
         verdict, head, content = pp.accept(data, pp.Odometry, self.address.get(src))
         if verdict != "ok":
             self.counts[verdict] += 1
             return
         assert isinstance(content, pp.Odometry) and head is not None
         self.counts["odometry"] += 1
-        self.filters[self.index[content.id]].odometry(
-            OdometryReading(head.t_s, content.x_m, content.y_m, content.yaw_rad, content.v_mps, content.w_radps)
+        k = self.index[content.id]
+        offset = self.clock_offset[k]
+        if offset is None:  # its first reading says whether the robot's clock is the session's
+            gap = t_s - head.t_s
+            offset = self.clock_offset[k] = gap if abs(gap) > self.o.odometry_timeout_s else 0.0
+        self.filters[k].odometry(
+            OdometryReading(
+                head.t_s + offset, content.x_m, content.y_m, content.yaw_rad, content.v_mps, content.w_radps
+            )
         )
 
     def step(self, t_ns: int, datagrams: list[tuple[str, bytes]], sensed: dict[str, Any]) -> int | None:
         for src, data in datagrams:
-            self._datagram(src, data)
+            self._datagram(src, data, t_ns / 1e9)
         due = self.frame * self.period_ns
         if t_ns < due:
             return due
@@ -155,6 +167,7 @@ class OverheadCameraService(Service):
             est = self.filters[k].update(t_s, fixes[k] if alive[k] else None)
             if est is not None and self.filters[k].odom_used is not None:
                 self.counts["fused"] += 1
+                self.fused_by_robot[k] += 1
             valid = est is not None
             entries.append(
                 pp.PoseEntry(rid, True, est.x, est.y, est.yaw, est.vx, est.vy)
@@ -203,6 +216,11 @@ class OverheadCameraService(Service):
             "fix_position_error_m": _stats(self.fix_pos_err),
             "fix_heading_error_deg": _stats(self.fix_yaw_err, 180 / math.pi),
             "tracker": dict(self.tracker.counts) if self.tracker is not None else None,
+            "fused_by_robot": {str(rid): n for rid, n in zip(self.ids, self.fused_by_robot, strict=True)},
+            # the robots whose odometry came on a clock of their own, and how far it was from the session's (s)
+            "clock_offsets_s": {
+                str(rid): round(off, 3) for rid, off in zip(self.ids, self.clock_offset, strict=True) if off
+            },
             # wall-clock cost of a frame in this process (render, track, fuse, encode): a speed figure, not simulated
             "frame_cost_ms": {"mean": round(float(cost.mean()), 3), "p95": round(float(np.quantile(cost, 0.95)), 3)}
             if len(cost)
