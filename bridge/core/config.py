@@ -27,9 +27,10 @@ from pydantic import (
 )
 
 from bridge.core.profile import RobotProfile
-from bridge.core.registry import STUDIES, PluginError, default_robot, robot_profile, robot_spec
+from bridge.core.registry import SERVICES, STUDIES, PluginError, default_robot, robot_profile, robot_spec
 from bridge.media.radio import RadioCfg
 from bridge.media.uwb import UwbCfg
+from bridge.media.wifi import WifiCfg
 
 
 class ConfigError(Exception):
@@ -142,6 +143,13 @@ class BoxObstacle(_Model):
     size: tuple[float, float, float] = Field(description="full extents x, y, z in metres")
     yaw_deg: float = 0.0
 
+    def overlaps(self, x: float, y: float, clearance: float = 0.0) -> bool:
+        """The disc of radius ``clearance`` at (x, y) reaches into the box."""
+        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
+        dx, dy = x - self.x, y - self.y
+        lx, ly = c * dx + s * dy, -s * dx + c * dy
+        return abs(lx) < self.size[0] / 2 + clearance and abs(ly) < self.size[1] / 2 + clearance
+
     @field_validator("size")
     @classmethod
     def _positive(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -156,6 +164,10 @@ class CylinderObstacle(_Model):
     y: float
     radius: float = Field(gt=0)
     height: float = Field(0.5, gt=0)
+
+    def overlaps(self, x: float, y: float, clearance: float = 0.0) -> bool:
+        """The disc of radius ``clearance`` at (x, y) reaches into the cylinder."""
+        return math.hypot(x - self.x, y - self.y) < self.radius + clearance
 
 
 Obstacle = Annotated[BoxObstacle | CylinderObstacle, Field(discriminator="type")]
@@ -340,6 +352,15 @@ class VehicleCfg(_Model):
     timeout_s: float = Field(10.0, gt=0, description="how long the logic waits for the vehicle's first heartbeat")
 
 
+def _registered(get: Any, name: str, rename: tuple[str, str] = ("", "")) -> str:
+    """``name`` if a plugin registry knows it (``get(name)``), else a ValueError saying which there are."""
+    try:
+        get(name)
+    except PluginError as e:
+        raise ValueError(str(e).replace(*rename) if rename[0] else str(e)) from None
+    return name
+
+
 class _NoOptions(_Model):
     """The options of a robot model that declares none."""
 
@@ -368,9 +389,17 @@ class RobotGroup(_Model):
                                "another computer, joining over zenoh (session.listen, swarm-sitl join), still in "
                                "simulated time")
     can: RobotCanCfg = RobotCanCfg()
+    wifi_udp: str | None = Field(
+        None, description="with logic = \"external\": the robot's node on the session's Wi-Fi network as a UDP socket "
+                          "bound at HOST:PORT (port 0: any free one, reported when the session starts), e.g. "
+                          "\"127.0.0.1:0\": what the network delivers to the robot goes to whoever last sent to it, "
+                          "what it receives enters the network as the robot's broadcasts")
     vehicle: VehicleCfg | None = Field(None, description="the robot is a MAVLink vehicle: no LLC, the logic drives it "
                                                          "over MAVLink (state the body's motion)")
     motion: MotionCfg = Field(MotionCfg(), description="how the body moves when the session does not drive it")
+    devices: dict[str, dict[str, Any]] = Field(
+        {}, description="devices the robot program gets in a session beyond its model's, as HAL tables by device "
+                        "name (a swarm_sitl.devices plugin), e.g. { sonpi_wifi = { url = \"sitl://wifi\" } }")
     carried_by: int | None = Field(None, ge=0, description="index of the robot group whose robots carry these on "
                                                            "board (e.g. on a conveyor): they start on "
                                                            "board, filled carrier by carrier in robot order, and go "
@@ -412,6 +441,16 @@ class RobotGroup(_Model):
             if self.uwb:
                 raise ValueError("uwb: a UWB module cannot be reached from an external logic (it has no port); "
                                  "drop it")
+        if self.wifi_udp is not None:
+            from swarm_logic.drivers.wifi import split_host_port
+
+            _, port = split_host_port(self.wifi_udp, "wifi_udp")
+            if self.logic != "external":
+                raise ValueError("wifi_udp: the session's own logic is the robot's node on the Wi-Fi network; a UDP "
+                                 "port is for a program outside the session (logic = \"external\")")
+            if port and self.count > 1:
+                raise ValueError(f"wifi_udp: {self.count} robots cannot share port {port}: give port 0 (each its own "
+                                 "free port) or the robot a group of its own")
         if self.vehicle is not None:
             if self.can.device is not None:
                 raise ValueError("vehicle: a MAVLink vehicle has no LLC on a CAN bus: drop can.device")
@@ -471,16 +510,24 @@ class RobotGroup(_Model):
                                 ("xbee.device", bool(self.xbee and self.xbee.device)),
                                 ("can.slcan_pty", bool(self.can.slcan_pty)),
                                 ("can.device", self.can.device is not None), ("vehicle", self.vehicle is not None),
+                                ("wifi_udp", self.wifi_udp is not None),
                                 ("logic", self.logic == "external")) if on]
+
+    @field_validator("devices")
+    @classmethod
+    def _known_devices(cls, v: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        from swarm_logic.devices import BUILT_IN, DEVICES, NOT_DEVICES
+
+        for name in v:
+            if name in BUILT_IN or name in NOT_DEVICES or name not in DEVICES.names():
+                raise ValueError(f"{name!r} is not a device the session can add; devices: "
+                                 f"{', '.join(DEVICES.names()) or 'none'}")
+        return v
 
     @field_validator("profile")
     @classmethod
     def _known_profile(cls, v: str) -> str:
-        try:
-            robot_spec(v)
-        except PluginError as e:
-            raise ValueError(str(e).replace("unknown robot", "unknown robot profile")) from None
-        return v
+        return _registered(robot_spec, v, ("unknown robot", "unknown robot profile"))
 
 
 class XBeeGatewayCfg(_Model):
@@ -577,6 +624,45 @@ class MavlinkCfg(_Model):
         return v
 
 
+RESERVED_SERVICE_NAMES = ("world", "radio", "session", "wifi", "mavlink", "svc")
+
+
+class ServiceCfg(_Model):
+    """A centralised program of the session (``[[services]]``), in a process of its own, on the Wi-Fi network
+    (``bridge.core.services``): a localisation service, a global controller."""
+
+    kind: str = Field(description="the service kind (swarm-sitl list services)")
+    name: str = Field(description="its name: its address on the Wi-Fi network, its process svc-NAME, its records "
+                                  "/svc/NAME/...")
+    options: dict[str, Any] = Field({}, description="the kind's own options")
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        ok = v.isidentifier() and v.isascii() and v == v.lower() and len(v) <= 32
+        if not ok or v in RESERVED_SERVICE_NAMES or (v[0] == "r" and v[1:].isdigit()):
+            raise ValueError(f"{v!r}: a service name is a lower-case identifier of up to 32 characters, not a robot's "
+                             f"address (rNNN) nor one of {', '.join(RESERVED_SERVICE_NAMES)}")
+        return v
+
+    @field_validator("kind")
+    @classmethod
+    def _known_kind(cls, v: str) -> str:
+        return _registered(SERVICES.get, v)
+
+    @model_validator(mode="after")
+    def _options(self) -> ServiceCfg:
+        """The kind's options model validates them; an error names the option."""
+        try:
+            SERVICES.get(self.kind).options.model_validate(self.options)
+        except ValidationError as e:
+            raise ValueError("; ".join(f"options.{_loc(x['loc'])}: {x['msg'].removeprefix('Value error, ')}"
+                                       for x in e.errors())) from None
+        except PluginError:
+            pass  # the kind's own error says why
+        return self
+
+
 class Config(_Model):
     # top-level sections beyond these are studies' own (Study.config)
     model_config = ConfigDict(extra="allow", frozen=False)
@@ -595,6 +681,8 @@ class Config(_Model):
     can: CanCfg = Field(CanCfg(), description="the robots' CAN buses")
     mavlink: MavlinkCfg = Field(MavlinkCfg(), description="the robots' MAVLink faces and the ground-station endpoint")
     xbee_gateways: list[XBeeGatewayCfg] = Field([], description="real XBees joined to the simulated radio channel")
+    wifi: WifiCfg = Field(WifiCfg(), description="the Wi-Fi network between the robots and the services")
+    services: list[ServiceCfg] = Field([], description="centralised programs, each in a process of its own")
 
     @model_validator(mode="after")
     def _quantum_fits_physics(self) -> Config:
@@ -644,15 +732,29 @@ class Config(_Model):
         return self
 
     @model_validator(mode="after")
+    def _services(self) -> Config:
+        """Service names are unique (each is an address); each kind checks its options against the whole config."""
+        seen: set[str] = set()
+        for i, sc in enumerate(self.services):
+            if sc.name in seen:
+                raise ValueError(f"services[{i}].name: {sc.name!r} names another service already")
+            seen.add(sc.name)
+            spec = SERVICES.get(sc.kind)
+            if spec.check is not None:
+                try:
+                    spec.check(spec.options.model_validate(sc.options), self)
+                except ValueError as e:
+                    raise ValueError(f"services[{i}].options.{e}") from None
+        return self
+
+    @model_validator(mode="after")
     def _study_sections(self) -> Config:
         """Top-level sections beyond the core's are the studies' (``Study.config``): each study validates its own,
         and a section no study declares is refused as an unknown field."""
         extra = self.model_extra or {}
         if extra:
             _study_sections_model().model_validate(extra)
-        for _, study in STUDIES.items():
-            if study.check is not None and any(name in extra for name in study.config):
-                study.check(self)
+        _study_checks(self)
         return self
 
     def section(self, name: str) -> Any:
@@ -670,6 +772,17 @@ class Config(_Model):
     def profile(self, group: RobotGroup) -> RobotProfile:
         """The group's robot profile, as its robot model's options make it."""
         return robot_profile(group.profile, group.model_extra)
+
+
+def _study_checks(cfg: Config) -> None:
+    """Each study's check across the config, when the config has one of its sections or a group runs one of its
+    behaviours (``Study.check``, ``Study.behaviours``)."""
+    extra = cfg.model_extra or {}
+    for _, study in STUDIES.items():
+        if study.check is not None and (
+            any(name in extra for name in study.config) or any(g.behaviour in study.behaviours for g in cfg.robots)
+        ):
+            study.check(cfg)
 
 
 def study_section(name: str) -> Any:
@@ -702,7 +815,10 @@ def _format(path: str, err: ValidationError) -> str:
     lines = []
     for e in err.errors():
         msg = e["msg"].removeprefix("Value error, ")
-        lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+        if e["loc"]:
+            lines.append(f"{path}: {_loc(e['loc'])}: {msg}")
+        else:  # a check across the whole config: its message names the field
+            lines.append(f"{path}: {msg}")
     return "\n".join(lines)
 
 
@@ -750,6 +866,11 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
         except Exception as e:
             raise ConfigError(f"{p}: arena.map: cannot read {mp.name} as an image: {e}") from None
     expand_random_obstacles(str(p), cfg)
+    if cfg.random_obstacles is not None:  # the studies' checks again, on the boxes just drawn too
+        try:
+            _study_checks(cfg)
+        except ValueError as e:
+            raise ConfigError(f"{p}: {e} (random_obstacles drew it: keep the place clear with keep_clear)") from None
     _check_geometry(str(p), cfg)
     _check_behaviours(str(p), cfg)
     return cfg

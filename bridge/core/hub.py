@@ -40,7 +40,8 @@ from bridge.core.loop_functions import LoopFunctions
 from bridge.core.medium import Medium, route_table
 from bridge.core.plan import Plan, plan_offer
 from bridge.core.recorder import Recorder
-from bridge.core.registry import MEDIA, STUDIES, robot_spec
+from bridge.core.registry import MEDIA, SERVICES, STUDIES, robot_spec
+from bridge.core.services import SENSES, SERVICE_ROLE
 from bridge.core.world import World
 
 LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
@@ -61,6 +62,7 @@ class Hub:
                                                         "robots": str(len(plan.robots))})
         self.n = len(plan.robots)
         self._entities(plan)
+        self._sensed_robots = [r for r, rp in enumerate(plan.robots) if rp.gateway is None]
         self._failure_state(cfg)
         self._wiring(plan)
         self._plugins(cfg)
@@ -73,6 +75,16 @@ class Hub:
             for e in p.entities(plan.robots):
                 self.proc_of[e] = p.name
         self.ents = sorted(self.proc_of)
+        # the session's services (bridge.core.services): name -> entity, and each one's senses
+        self.service_entities = {p.service: e for p in plan.procs if p.kind == "service"
+                                 for e in p.entities(plan.robots)}
+        self.service_of = {e: name for name, e in self.service_entities.items()}
+        kinds = {s["name"]: s["kind"] for s in plan.config.get("services", [])}
+        self.service_senses = {e: SERVICES.get(kinds[name]).senses for name, e in self.service_entities.items()}
+        self.dead_services: set[str] = set()
+        # each entity's robot (-1: a service) and role, as its id says
+        self.ent_robot = {e: -1 if e in self.service_of else robot_of(e) for e in self.ents}
+        self.ent_role = {e: SERVICE_ROLE if e in self.service_of else e[e.index("/") + 1:] for e in self.ents}
         # every entity of a robot: its firmware's, and its logic when the session runs it
         self.roles = {r: rp.modules() + (("logic",) if rp.has_logic else ()) for r, rp in enumerate(plan.robots)}
         self.next_wake: dict[str, int | None] = dict.fromkeys(self.ents, 0)
@@ -148,6 +160,7 @@ class Hub:
         self._media = list(self.media.values())
         self.routes = route_table(self._media)
         self.routes[("log", "logic")] = self._log
+        self.routes[("log", SERVICE_ROLE)] = self._service_log
         self._log_hooks = self._media + self.loop_functions
 
     def robot_spec(self, r: int) -> Any:
@@ -164,8 +177,15 @@ class Hub:
 
     def to_inbox(self, t: int, e: str, msg: list) -> None:
         """A delivery: ``msg`` into entity ``e``'s inbox (nothing for a dead robot)."""
-        if robot_of(e) not in self.dead:
+        if not self.is_dead(e):
             self.inbox[e].append(msg)
+
+    def is_dead(self, e: str) -> bool:
+        """Entity ``e``'s robot is dead, or ``e`` is a service that failed."""
+        r = self.ent_robot.get(e)
+        if r is None:  # not one of this session's entities: its id names its robot
+            r = robot_of(e)
+        return r in self.dead if r >= 0 else e in self.dead_services
 
     def record(self, t: int, topic: str, schema: str, payload: Any) -> None:
         """A delivery: a message to the recording at its time."""
@@ -277,6 +297,33 @@ class Hub:
             self.failed_stop = True
             self.stop_reason = f"robot {r} failed ({kind}) and on_robot_failure = stop"
 
+    def service_failed(self, e: str, t_ns: int, kind: str, detail: str) -> None:
+        """Service entity ``e`` raised, hung or lost its process: it runs no more (the robots no longer hear from
+        it), recorded and reported as a robot's failure is; with ``on_robot_failure = "stop"`` the session ends."""
+        if e in self.dead_services:
+            return
+        self.dead_services.add(e)
+        self.next_wake[e] = None
+        self.wom[e] = False
+        self.inbox[e].clear()
+        name = self.service_of[e]
+        rec = {"service": name, "t_s": t_ns / 1e9, "kind": kind, "detail": detail[-2000:]}
+        self.rec.write(t_ns, "/session/events", "swarm_sitl.Event", {"kind": kind, "service": name,
+                                                                      "detail": rec["detail"]})
+        self.failures.append(rec)
+        last = detail.strip().splitlines()[-1] if detail.strip() else ""
+        self.status(op="notice", text=f"service {name} failed at sim t={t_ns / 1e9:.2f} s: {kind} ({last})")
+        if self.cfg.session.on_robot_failure == "stop":
+            self.failed_stop = True
+            self.stop_reason = f"service {name} failed ({kind}) and on_robot_failure = stop"
+
+    def _entity_failed(self, e: str, r: int, t_ns: int, kind: str, detail: str) -> None:
+        """Entity ``e`` failed: its robot (``r``) or, for a service (``r`` < 0), the service."""
+        if r >= 0:
+            self.robot_failed(r, t_ns, kind, detail)
+        else:
+            self.service_failed(e, t_ns, kind, detail)
+
     def proc_failed(self, proc: str, t_ns: int, kind: str, detail: str) -> None:
         if proc not in self.live_procs:
             return
@@ -287,6 +334,9 @@ class Hub:
                 os.kill(pid, signal.SIGKILL)
         for r in self.procs[proc].robots:
             self.robot_failed(r, t_ns, kind, detail, proc)
+        if self.procs[proc].kind == "service":
+            for e in self.procs[proc].entities(self.plan.robots):
+                self.service_failed(e, t_ns, kind, detail)
 
     # -- one quantum ---------------------------------------------------------------------------------
     def _deliver(self, t: int) -> None:
@@ -386,13 +436,13 @@ class Hub:
                 else:
                     self.counts["malformed_done"] += 1
         for e in sorted(merged):
-            r = robot_of(e)
-            if r in self.dead:
+            r = self.ent_robot[e]
+            if self.is_dead(e):
                 continue
             res = merged[e]
             if not _valid_reply(res):
                 self.counts["malformed_done"] += 1
-                self.robot_failed(r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
+                self._entity_failed(e, r, t, "malformed", f"unusable reply from {e}: {str(res)[:300]}")
                 continue
             pins = res.get("pins")
             wiring = self.wiring.get(e)
@@ -403,7 +453,7 @@ class Hub:
                     pins_io.update(pins)
                 self.rec.write(t, self._pins_topics[e], wiring.schema, pins_io)
             if res.get("err"):
-                self.robot_failed(r, t, "raised", res["err"])
+                self._entity_failed(e, r, t, "raised", res["err"])
                 continue
             w = res.get("wake")
             self.next_wake[e] = None if w is None else max(t + q, -(-w // q) * q)
@@ -426,7 +476,7 @@ class Hub:
         """One output item to the medium that carries it, by (kind, sender role), then (kind, any role); an item no
         medium carries, or one its medium finds malformed, is counted and dropped."""
         kind = item[0]
-        handler = self.routes.get((kind, e[e.index("/") + 1:])) if isinstance(kind, str) else None
+        handler = self.routes.get((kind, self.ent_role[e])) if isinstance(kind, str) else None
         if handler is None and isinstance(kind, str):
             handler = self.routes.get((kind, "*"))
         if handler is None:
@@ -447,6 +497,14 @@ class Hub:
         self.rec.write(t, f"/r{r:03d}/log/{topic}", "swarm_sitl.Log", values)
         for hook in self._log_hooks:
             hook.on_log(r, topic, values, t)
+
+    def _service_log(self, e: str, r: int, t: int, item: list) -> None:
+        """``["log", topic, {values}]`` from a service (``Service.log``): recorded under ``/svc/<name>/log/<topic>``."""
+        _, topic, values = item
+        if not (isinstance(topic, str) and topic.isidentifier() and isinstance(values, dict)):
+            raise ValueError
+        json.dumps(values, allow_nan=False)
+        self.rec.write(t, f"/{e}/log/{topic}", "swarm_sitl.Log", values)
 
     def run(self) -> dict[str, Any]:
         q = self.q_ns
@@ -512,9 +570,12 @@ class Hub:
         for p in sorted(due):
             run: dict[str, Any] = {}
             for e in due[p]:
-                self.wakeups[e[e.index("/") + 1:]] += 1
+                self.wakeups[self.ent_role[e]] += 1
                 entry: dict[str, Any] = {"in": self.inbox[e]}
                 self.inbox[e] = []
+                senses = self.service_senses.get(e)
+                if senses:  # a service: the ground truth its kind is entitled to, at t
+                    entry["sens"] = {k: SENSES[k](self.world, self._sensed_robots) for k in senses}
                 wiring = self.wiring.get(e)
                 if wiring is not None:
                     r = robot_of(e)
@@ -540,6 +601,13 @@ class Hub:
             self.deliver_at(ev["t_ns"], self.record, "/world/releases", "swarm_sitl.Release", rel)
             self.releases.append({"t_s": ev["t_ns"] / 1e9, **rel})
         world.released.clear()
+
+    def service_report(self) -> dict[str, Any]:
+        """Each service's entry of ``summary.json``'s ``services``: its kind, whether it ran to the end, and its own
+        figures (its ``summary()``). After ``shutdown``: the service processes report them then."""
+        kinds = {s["name"]: s["kind"] for s in self.plan.config.get("services", [])}
+        return {name: {"kind": kinds[name], "failed": e in self.dead_services, **self.module_stats.get(e, {})}
+                for name, e in self.service_entities.items()}
 
     def firmware_report(self, robots: list[dict[str, Any]]) -> None:
         """Each robot model's own firmware entities' counters into its ``robots`` entry (``firmware``: role ->

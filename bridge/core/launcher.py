@@ -314,6 +314,8 @@ def _on_status(cfg, w: _Watch, msg: dict[str, Any], prog: _Progress, ports: list
         if msg.get("mavlink"):
             prog.note(f"[{cfg.session.name}] MAVLink: " + ", ".join(
                 f"{who} {ep}" for who, ep in msg["mavlink"].items()))
+        for who, ep in (msg.get("wifi_udp") or {}).items():
+            prog.note(f"[{cfg.session.name}] port: {who} Wi-Fi (UDP): {ep}")
     elif op == "progress" and w.t_started is not None and msg["t"] >= 1.0:
         w.last_sim = msg["t"]
         prog.update(msg["t"], msg["t"] / max(time.monotonic() - w.t_started, 1e-9), msg["alive"],
@@ -538,6 +540,9 @@ def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interr
         "per_robot": world_res.get("robots", []),
         "files": {},  # the outputs there are (below)
     }
+    for key in ("wifi", "services"):  # sessions with a Wi-Fi network and services (bridge.core.services)
+        if world_res.get(key) is not None:
+            summary[key] = world_res[key]
     return summary
 
 

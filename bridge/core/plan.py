@@ -15,10 +15,11 @@ import numpy as np
 
 from bridge.core.arena_map import blocked as map_blocked
 from bridge.core.arena_map import occupancy
-from bridge.core.config import Config, ConfigError, CylinderObstacle
+from bridge.core.config import Config, ConfigError
 from bridge.core.entities import entity
 from bridge.core.registry import robot_spec
 from bridge.core.rng import stream
+from bridge.core.services import service_entity, service_proc
 from swarm_logic.geometry import theodorus_spiral
 
 
@@ -43,6 +44,8 @@ class RobotPlan:
     slot: int = 0  # ... in this slot, 1 being the first to drop off
     payload: tuple[int, ...] = ()  # a carrier: the robots on board, by slot
     options: dict = field(default_factory=dict)  # its robot model's options (the group's extra fields)
+    devices: dict = field(default_factory=dict)  # the devices the session adds to its program (RobotGroup.devices)
+    wifi_udp: str | None = None  # its Wi-Fi node as a UDP socket for an outside program (RobotGroup.wifi_udp)
 
     def modules(self) -> tuple[str, ...]:
         """The firmware entities' roles of this robot: its LLC (or the bridge to its real LLC's CAN bus), the radio
@@ -98,11 +101,14 @@ class RobotPlan:
 @dataclass(frozen=True)
 class ProcPlan:
     name: str
-    kind: str  # "firmware" | "logic"
+    kind: str  # "firmware" | "logic" | "service"
     robots: tuple[int, ...]
     remote: bool = False  # it joins from another computer (swarm-sitl join); the launcher does not start it
+    service: str | None = None  # a service's process: the service's name (its one entity, svc/NAME)
 
     def entities(self, robots: list[RobotPlan]) -> list[str]:
+        if self.kind == "service":
+            return [service_entity(str(self.service))]
         if self.kind == "logic":
             return [entity(r, "logic") for r in self.robots]
         return [entity(r, role) for r in self.robots for role in robots[r].modules()]
@@ -122,7 +128,8 @@ class Plan:
     def from_json(cls, d: dict) -> Plan:
         robots = [RobotPlan(**{**r, "pose": tuple(r["pose"]), "payload": tuple(r.get("payload", ()))})
                   for r in d["robots"]]
-        procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"]), p.get("remote", False)) for p in d["procs"]]
+        procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"]), p.get("remote", False), p.get("service"))
+                 for p in d["procs"]]
         return cls(d["config"], robots, procs)
 
 
@@ -153,7 +160,8 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
                                     group.logic, group.can.slcan_pty, group.can.device,
                                     group.vehicle.model_dump() if group.vehicle else None,
                                     group.motion.model_dump(mode="json"), carrier=carrier, slot=slot,
-                                    options=dict(group.model_extra or {})))
+                                    options=dict(group.model_extra or {}), devices=dict(group.devices),
+                                    wifi_udp=group.wifi_udp))
     for i, rp in enumerate(robots):  # a carried robot starts where its carrier is
         if rp.carrier is not None:
             robots[i] = replace(rp, pose=robots[rp.carrier].pose)
@@ -177,6 +185,7 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
     procs += [ProcPlan(f"lg{j}", "logic", c) for j, c in enumerate(chunks)]
     # a remote logic is its robot's own process, started by swarm-sitl join on the other computer
     procs += [ProcPlan(f"remote{r.id}", "logic", (r.id,), remote=True) for r in robots if r.logic == "remote"]
+    procs += [ProcPlan(service_proc(s.name), "service", (), service=s.name) for s in cfg.services]
     return Plan(cfg.model_dump(mode="json"), robots, procs)
 
 
@@ -186,17 +195,7 @@ def _blocked(cfg: Config, x: float, y: float, clearance: float, occ: np.ndarray 
         return True
     if occ is not None and map_blocked(occ, a.map_resolution_m, x, y, clearance):
         return True
-    for ob in cfg.obstacles:
-        if isinstance(ob, CylinderObstacle):
-            if math.hypot(x - ob.x, y - ob.y) < ob.radius + clearance:
-                return True
-        else:
-            c, s = math.cos(math.radians(ob.yaw_deg)), math.sin(math.radians(ob.yaw_deg))
-            dx, dy = x - ob.x, y - ob.y
-            lx, ly = c * dx + s * dy, -s * dx + c * dy
-            if abs(lx) < ob.size[0] / 2 + clearance and abs(ly) < ob.size[1] / 2 + clearance:
-                return True
-    return False
+    return any(ob.overlaps(x, y, clearance) for ob in cfg.obstacles)
 
 
 def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, float, float]]:

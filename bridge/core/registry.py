@@ -1,5 +1,5 @@
-"""What a session can be made of, found by name: robots, media and studies (swarm behaviours are found the same way
-on the robot's side, ``swarm_logic.behaviours``).
+"""What a session can be made of, found by name: robots, media, services and studies (swarm behaviours are found the
+same way on the robot's side, ``swarm_logic.behaviours``).
 
 Every plugin, swarm-sitl's own included, comes from an entry point of an installed package (``pyproject.toml``:
 ``[project.entry-points."swarm_sitl.robots"]`` and so on) or from a ``register_*`` call in the process; ``swarm-sitl
@@ -20,11 +20,13 @@ if TYPE_CHECKING:
     from bridge.core.loop_functions import LoopFunctions
     from bridge.core.medium import Medium
     from bridge.core.profile import RobotProfile
+    from bridge.core.services import ServiceSpec
 
 __all__ = [
     "MEDIA",
     "PREFLIGHT",
     "ROBOTS",
+    "SERVICES",
     "STUDIES",
     "PluginError",
     "RobotSpec",
@@ -148,8 +150,10 @@ class Study:
     # its own top-level config sections: name -> their type (a pydantic model, or e.g. list[Model] for [[name]])
     config: dict[str, Any] = field(default_factory=dict)
     # checks across sections once a config is whole (a particle inside an obstacle): (config) -> None, raising
-    # ValueError naming the field
+    # ValueError naming the field; run when the config has one of its sections or a robot group runs one of its
+    # ``behaviours``
     check: Callable[[Any], None] | None = None
+    behaviours: tuple[str, ...] = ()  # the behaviours whose groups its check covers (a target inside an obstacle)
     # its speed figures for ``swarm-sitl bench --study NAME``: "module:function", called as
     # function(quick=bool, duration=float | None, out_dir=str) -> exit code (imported only when asked for)
     bench: str = ""
@@ -166,6 +170,13 @@ Preflight = Callable[[Any, str], None]  # (config, its path): raise ConfigError 
 ROBOTS: Registry[RobotSpec] = Registry("swarm_sitl.robots", "robot", lambda o: isinstance(o, RobotSpec))
 MEDIA: Registry[type[Medium]] = Registry("swarm_sitl.media", "medium", _is_medium)
 STUDIES: Registry[Study] = Registry("swarm_sitl.studies", "study", lambda o: isinstance(o, Study))
+def _is_service(obj: Any) -> bool:
+    from bridge.core.services import ServiceSpec
+
+    return isinstance(obj, ServiceSpec)
+
+
+SERVICES: Registry[ServiceSpec] = Registry("swarm_sitl.services", "service", _is_service)
 # checks the launcher runs before it starts anything (the hardware bridges: does each real device answer?)
 PREFLIGHT: Registry[Preflight] = Registry("swarm_sitl.preflight", "preflight check", callable)
 

@@ -250,7 +250,7 @@ class SessionDevice:
     device it uses (``real``: it must answer before the session starts)."""
 
     field: str  # the config field, e.g. "robots[1].xbee.device (r005)"
-    kind: str  # "xbee", "can", "mavlink", "pty" (a robot model's own port), "logic"
+    kind: str  # "xbee", "can", "mavlink", "pty" (a robot model's own port), "wifi", "logic"
     target: str  # a path, a device or an endpoint
     real: bool
     note: str
@@ -303,6 +303,10 @@ def session_devices(cfg: Any, out_dir: str = "runs/<config name>") -> list[Sessi
                     f"robots[{i}].vehicle ({who})", "mavlink", v.url, True,
                     f"a MAVLink vehicle (system {v.target_system}) the robot's {g.behaviour} logic drives",
                     lambda v=v: probe_mavlink(v.url, baudrate=v.baudrate)))
+            if g.wifi_udp is not None:
+                found.append(SessionDevice(f"robots[{i}].wifi_udp ({who})", "wifi", g.wifi_udp, False,
+                                           "UDP: the robot's node on the session's Wi-Fi network (port 0: any free "
+                                           "one, printed when the session starts)"))
             if g.logic == "external":
                 found.append(SessionDevice(f"robots[{i}].logic ({who})", "logic", "(outside the session)", False,
                                            f"the robot's {g.behaviour} logic runs outside, in wall time, through "

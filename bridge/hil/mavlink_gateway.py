@@ -24,52 +24,25 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink2
 
-from bridge.core.endpoints import Endpoint, is_loopback, parse_endpoint
-
-MAX_DATAGRAM = 65535
+from bridge.core.endpoints import Endpoint, UdpPort, is_loopback, parse_endpoint
 
 
-class _Port:
+class _Port(UdpPort):
     """One UDP socket and the ground station it talks to."""
 
     def __init__(self, ep: Endpoint) -> None:
-        family = socket.AF_INET6 if ":" in ep.host else socket.AF_INET
-        self.sock = socket.socket(family, socket.SOCK_DGRAM)
-        self.sock.setblocking(False)
+        v6 = ":" in ep.host
         if ep.mode == "udpin":
-            self.sock.bind((ep.host, ep.port))
-            self.peer: tuple | None = None  # answers whoever spoke last
+            super().__init__(ep.host, ep.port)  # answers whoever spoke last
         else:
-            self.sock.bind(("::1" if family == socket.AF_INET6 else "127.0.0.1", 0) if is_loopback(ep.host)
-                           else ("", 0))
-            self.peer = socket.getaddrinfo(ep.host, ep.port, family, socket.SOCK_DGRAM)[0][4]
-        host, port = self.sock.getsockname()[:2]
+            family = socket.AF_INET6 if v6 else socket.AF_INET
+            peer = socket.getaddrinfo(ep.host, ep.port, family, socket.SOCK_DGRAM)[0][4]
+            super().__init__(("::1" if v6 else "127.0.0.1") if is_loopback(ep.host) else ("::" if v6 else ""), 0, peer)
+        host, port = self.bound
         self.endpoint = Endpoint(ep.mode, ep.host, port) if ep.mode == "udpin" else ep
         self.local = f"{host}:{port}"
         self.parser = mavlink2.MAVLink(None)
         self.parser.robust_parsing = True
-
-    def send(self, data: bytes) -> bool:
-        if self.peer is None:
-            return False
-        try:
-            self.sock.sendto(data, self.peer)
-        except OSError:  # nobody listens (ICMP port unreachable) or the buffer is full: UDP drops it
-            return False
-        return True
-
-    def recv_all(self) -> list[bytes]:
-        out = []
-        while True:
-            try:
-                data, addr = self.sock.recvfrom(MAX_DATAGRAM)
-            except (BlockingIOError, InterruptedError):
-                break
-            except OSError:  # e.g. ICMP port unreachable reported on a later call
-                continue
-            self.peer = addr
-            out.append(data)
-        return out
 
 
 class MavlinkGateway:

@@ -50,6 +50,7 @@ def sitl_hal(rp: RobotPlan, cfg: Config) -> dict[str, Any]:
             hal["mavlink"]["rates"] = dict(m.rates)
     if spec.hal is not None:  # the robot model's own devices, on their simulated buses and ports
         hal.update(spec.hal(rp, cfg))
+    hal.update({name: dict(table) for name, table in rp.devices.items()})  # the ones the session's config adds
     hal["start_pose"] = list(rp.pose)  # where the robot was put down, as an operator would tell it
     if rp.payload:  # a carrier: who rides on its conveyor, as its operator loaded it
         hal["payload"] = list(rp.payload)

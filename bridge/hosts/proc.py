@@ -1,6 +1,7 @@
 """Entry point of every child process of a session: ``python -m bridge.hosts.proc ROLE ...``.
 
-Roles: ``world`` (the hub: clock, physics, router, recorder), ``firmware`` and ``logic`` (participants).
+Roles: ``world`` (the hub: clock, physics, router, recorder), ``firmware``, ``logic`` and ``service``
+(participants).
 Children never read the terminal's signals (the launcher owns Ctrl-C); they die with the launcher.
 """
 
@@ -53,6 +54,8 @@ def _world(args: argparse.Namespace, plan) -> int:
                 hub.shutdown()
             result["radio"] = hub.radio_report()
             hub.firmware_report(result.get("robots", []))
+            if hub.service_entities:
+                result["services"] = hub.service_report()
         finally:
             hub.close()
     result["digest"] = hub.rec.digest
@@ -77,6 +80,10 @@ def _participant(args: argparse.Namespace, plan) -> int:
         from bridge.hosts.firmware import FirmwareHost
 
         host = FirmwareHost(plan, proc.robots)
+    elif proc.kind == "service":
+        from bridge.hosts.service import ServiceHost
+
+        host = ServiceHost(plan, str(proc.service))
     else:
         from bridge.hosts.logic import LogicHost
 
@@ -86,7 +93,7 @@ def _participant(args: argparse.Namespace, plan) -> int:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="bridge.hosts.proc")
-    ap.add_argument("role", choices=["world", "firmware", "logic"])
+    ap.add_argument("role", choices=["world", "firmware", "logic", "service"])
     ap.add_argument("--plan", required=True)
     ap.add_argument("--session-dir", required=True)
     ap.add_argument("--namespace", required=True)

@@ -1,6 +1,7 @@
-"""Ultrasonic range finders (MaxBotix-class): one batched ray test for every robot's sonars, a cone of rays
-per sonar, at the sensors' rate; the nearest echo in the cone is the range, with range-proportional noise, spurious
-echoes while the robot drives, and the minimum range inside the blind zone."""
+"""Ultrasonic range finders (MaxBotix-class): a cone of rays per sonar, each robot's sonars at their own rate (its
+part's ``rate_hz``), the robots due at one time in one batched ray test; the nearest echo in the cone is the range,
+with range-proportional noise, spurious echoes while the robot drives, and the minimum range inside the blind
+zone."""
 
 from __future__ import annotations
 
@@ -34,8 +35,8 @@ class Sonars(WorldModel):
         n, p = len(robots), parts
         self.ranges = [np.full(len(q.angles_deg), q.max_range_m) for q in p]  # each robot's sonars, front first
         self._rng = [stream(world.seed, "robot", r, "sonar") for r in robots]
-        self._period_ns = round(1e9 / max(q.rate_hz for q in p)) if n else 0
-        self._next_ns = 0
+        self._period_ns = np.array([round(1e9 / q.rate_hz) for q in p], dtype=np.int64)
+        self._next_ns = np.zeros(n, dtype=np.int64)  # each robot's next sample time (taken at the quantum end after)
         # a cone per sonar; ``_ray_sonar`` numbers every robot's sonars consecutively (robot k's first is
         # ``_base[k]``), ``_ray_owner`` is the robot's row
         cones = [np.linspace(-1, 1, q.rays) * math.radians(q.half_beam_deg) if q.rays > 1 else np.zeros(1) for q in p]
@@ -43,9 +44,16 @@ class Sonars(WorldModel):
         counts = [len(q.angles_deg) for q in p]
         self._base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int) if n else np.zeros(0, int)
         self._ray_owner = np.concatenate([np.full(len(o), k) for k, o in enumerate(offsets)]) if n else np.zeros(0, int)
-        self._ray_sonar = (np.concatenate([self._base[k] + np.repeat(np.arange(m), len(c))
-                                           for k, (m, c) in enumerate(zip(counts, cones, strict=True))])
-                           if n else np.zeros(0, int))
+        self._ray_sonar = (
+            np.concatenate(
+                [
+                    self._base[k] + np.repeat(np.arange(m), len(c))
+                    for k, (m, c) in enumerate(zip(counts, cones, strict=True))
+                ]
+            )
+            if n
+            else np.zeros(0, int)
+        )
         self._count = int(sum(counts))
         self._ray_angle = np.concatenate(offsets) if n else np.zeros(0)
         prof = [world.profiles[r] for r in robots]
@@ -56,15 +64,16 @@ class Sonars(WorldModel):
         self._ray_z = np.array([q.height_m * 0.6 for q in prof])
 
     def sample(self, t_end_ns: int) -> None:
-        if len(self.robots) and t_end_ns >= self._next_ns:
-            self._update()
-            while self._next_ns <= t_end_ns:
-                self._next_ns += self._period_ns
+        due = self._next_ns <= t_end_ns
+        if due.any():
+            self._update(due)
+            nxt = self._next_ns[due]
+            self._next_ns[due] = nxt + ((t_end_ns - nxt) // self._period_ns[due] + 1) * self._period_ns[due]
 
-    def _update(self) -> None:
-        """One ray batch for every live robot's sonar cones."""
+    def _update(self, due: np.ndarray) -> None:
+        """One ray batch for the sonar cones of every live robot that is due."""
         w = self.world
-        alive = w.alive[self.ids]
+        alive = w.alive[self.ids] & due
         live = np.flatnonzero(alive)
         if not len(live):
             return

@@ -1,5 +1,5 @@
-"""``swarm-sitl list``: the robots, behaviours, robot devices, media, studies and experiments this installation
-found, and where each comes from (an entry point's ``module:attr``, or ``registered`` in the process)."""
+"""``swarm-sitl list``: the robots, behaviours, robot devices, media, services, studies and experiments this
+installation found, and where each comes from (an entry point's ``module:attr``, or ``registered`` in the process)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import argparse
 import json
 from typing import Any
 
-from bridge.core.registry import MEDIA, ROBOTS, STUDIES
+from bridge.core.registry import MEDIA, ROBOTS, SERVICES, STUDIES
 from swarm_logic.behaviours import BEHAVIOURS
 from swarm_logic.devices import DEVICES
 from swarm_logic.plugins import PluginError
@@ -21,6 +21,7 @@ def catalogue() -> dict[str, list[dict[str, Any]]]:
             ("behaviours", BEHAVIOURS, _first_sentence),
             ("devices", DEVICES, _first_sentence),
             ("media", MEDIA, _first_sentence),
+            ("services", SERVICES, lambda s: s.title),
             ("studies", STUDIES, lambda s: s.title)):
         rows = []
         for name in reg.names():
@@ -61,8 +62,9 @@ def cmd_list(a: argparse.Namespace) -> int:
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("list", help="the robots, behaviours, media, studies and experiments found (built in, by entry "
-                                    "point or registered), and where each comes from")
-    p.add_argument("kind", nargs="?", choices=["robots", "behaviours", "devices", "media", "studies", "experiments"])
+    p = sub.add_parser("list", help="the robots, behaviours, media, services, studies and experiments found (built "
+                                    "in, by entry point or registered), and where each comes from")
+    p.add_argument("kind", nargs="?", choices=["robots", "behaviours", "devices", "media", "services", "studies",
+                                                  "experiments"])
     p.add_argument("--json", action="store_true", help="as JSON")
     p.set_defaults(fn=cmd_list)

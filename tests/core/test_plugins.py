@@ -227,7 +227,7 @@ def test_plugins_not_installed_are_unknown(tmp_path: Path) -> None:
     r = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "validate", str(cfg)], capture_output=True,
                        text=True, timeout=600, cwd=ROOT)
     assert r.returncode == 2
-    known = "known: decizebro, eswarbot, footbot, traxbot"
+    known = "known: decizebro, eswarbot, footbot, sonpi, traxbot"
     assert f"robots[0].profile: unknown robot profile 'minibot'; {known}" in r.stderr, r.stderr
 
 

@@ -1,4 +1,4 @@
-"""The pybullet world: walls stop robots, obstacles from a bitmap, the light field, battery drain."""
+"""The pybullet world: walls stop robots, obstacles from a bitmap, the light field, battery drain, sonar rates."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pybullet as pb
 import pytest
 from PIL import Image
 
@@ -41,8 +42,9 @@ def test_wall_stops_a_robot_and_wheels_keep_counting() -> None:
 
 
 def test_robots_collide_with_each_other() -> None:
-    c = Config.model_validate({"robots": [{"count": 2, "placement": {
-        "kind": "explicit", "poses": [[2.0, 2.0, 0.0], [3.0, 2.0, 180.0]]}}]})
+    c = Config.model_validate(
+        {"robots": [{"count": 2, "placement": {"kind": "explicit", "poses": [[2.0, 2.0, 0.0], [3.0, 2.0, 180.0]]}}]}
+    )
     w = World(c, make_plan(c).robots)
     drive = w.model("differential_drive")
     drive.gain[:] = 1.0  # ideal drive trains: exactly head-on along one line
@@ -62,7 +64,8 @@ def test_bitmap_map_becomes_obstacles(tmp_path: Path) -> None:
     Image.fromarray(img).save(tmp_path / "m.png")
     (tmp_path / "c.toml").write_text(
         "[arena]\nwidth_m = 2\nlength_m = 2\nmap = 'm.png'\nmap_resolution_m = 0.05\n"
-        "[[robots]]\n[robots.placement]\nkind = 'explicit'\nposes = [[1.0, 0.4, 90]]\n")
+        "[[robots]]\n[robots.placement]\nkind = 'explicit'\nposes = [[1.0, 0.4, 90]]\n"
+    )
     cfg = load_config(tmp_path / "c.toml")
     w = World(cfg, make_plan(cfg).robots)
     assert len(w.static_rects) == 5  # 4 arena walls + 1 merged rectangle
@@ -89,3 +92,53 @@ def test_battery_drains_faster_with_motors_on() -> None:
     run(busy, 5, (255, -255))
     assert busy.soc[0] < idle.soc[0] < 1.0
     assert busy.battery_v[0] < idle.battery_v[0]
+
+
+def test_each_robot_kind_samples_its_sonars_at_its_own_rate(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An eSwarBot (20 Hz), a TraxBot (10 Hz) and a SonPI (100 Hz) in one arena: each robot's sonars are sampled at
+    its own part's rate, and the robots due at one quantum's end share one ray batch."""
+
+    def at(x: float, y: float, profile: str) -> dict:
+        return {"profile": profile, "count": 1, "placement": {"kind": "explicit", "poses": [[x, y, 0.0]]}}
+
+    # walls within every sonar's reach in any direction: every reading is an echo, noisy where the part has noise
+    w = world(
+        arena={"width_m": 3, "length_m": 3},
+        robots=[at(1.0, 1.0, "eswarbot"), at(2.0, 1.0, "traxbot"), at(1.5, 2.0, "sonpi")],
+    )
+    real = pb.rayTestBatch
+    now = [0]
+    batches: list[tuple[int, int]] = []
+
+    def counted(*args, **kw):  # the real ray test, counted
+        batches.append((now[0], len(args[0])))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(pb, "rayTestBatch", counted)
+    sonar = w.model("sonar")
+    rates = {0: 20, 1: 10, 2: 100}
+    rays = {0: 5, 1: 3 * 5, 2: 5 * 5}  # sonars x rays per cone
+    q = 10_000_000
+    seen: dict[int, list[int]] = {r: [] for r in rates}  # the quantum ends where a robot's readings changed
+    last = {r: sonar.ranges[sonar.local[r]].copy() for r in rates}
+    try:
+        for k in range(100):
+            now[0] = (k + 1) * q
+            w.step_quantum(k * q, q)
+            for r in rates:
+                cur = sonar.ranges[sonar.local[r]]
+                if not np.array_equal(cur, last[r]):
+                    seen[r].append(now[0])
+                last[r] = cur.copy()
+    finally:
+        w.close()
+    # a robot samples at the first quantum end at or after each of its periods (0, 1/rate, 2/rate, ...)
+    due = {
+        r: [(k + 1) * q for k in range(100) if k == 0 or (k + 1) * q * rate % 1_000_000_000 == 0]
+        for r, rate in rates.items()
+    }
+    assert [len(d) for d in due.values()] == [21, 11, 100]
+    assert seen[0] == due[0] and seen[1] == due[1]  # their noise is drawn afresh at each sample, and only then
+    assert seen[2] == due[2][:1]  # the SonPI's cones have no noise: standing still, its ranges never change
+    expected = [(t, sum(n for r, n in rays.items() if t in due[r])) for t in due[2]]
+    assert batches == expected  # one ray batch per quantum end with a robot due, holding exactly those robots' rays

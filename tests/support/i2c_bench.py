@@ -1,7 +1,8 @@
 """A one-robot lock-step bench for the I2C medium, without processes: the medium under a stand-in hub, DeciZebro leg
 modules run as the firmware host runs them (on their wake times and on bus traffic), each on a first-order leg motor
 as the world's legs model has it, a robot program in a ``RobotRuntime`` thread as the logic host runs it, and
-optionally an adapter entity that is another master of the bus (a USB-ISS on a pseudo-terminal). One
+optionally other slaves (a SonPI's Arduino) and an adapter entity that is another master of the bus (a USB-ISS on a
+pseudo-terminal). One
 ``step()`` is one quantum, in the hub's order: deliveries, the entities that are due, their outputs to the medium
 (sorted by entity), the medium's ``end_outputs`` and ``advance``."""
 
@@ -23,8 +24,15 @@ ADAPTER = "r000/i2c_adapter"
 
 
 class I2cBench:
-    def __init__(self, program: Callable[[RobotRuntime, SessionClock], None] | None = None, legs: int = 6,
-                 boot_ns: int = 0, q_ns: int = Q, adapter: Any = None) -> None:
+    def __init__(
+        self,
+        program: Callable[[RobotRuntime, SessionClock], None] | None = None,
+        legs: int = 6,
+        boot_ns: int = 0,
+        q_ns: int = Q,
+        adapter: Any = None,
+        slaves: dict[str, Any] | None = None,
+    ) -> None:
         self.q_ns, self.n = q_ns, 1
         self.plan = SimpleNamespace(robots=[None])
         self.dead: set[int] = set()
@@ -34,6 +42,7 @@ class I2cBench:
         self.inbox: dict[str, list] = defaultdict(list)
         self.medium = I2cBuses(self)  # type: ignore[arg-type]
         self.modules: dict[str, Any] = {f"r000/leg{i}": LegModule(i) for i in range(legs)}
+        self.modules.update(slaves or {})  # other slaves on the bus (entity -> firmware), powered up with the legs
         self.next_wake: dict[str, int | None] = dict.fromkeys(self.modules, boot_ns)
         self.angle = [0.0] * 6
         self.omega = [0.0] * 6
@@ -72,13 +81,14 @@ class I2cBench:
             w = self.next_wake[e]
             if not ((w is not None and w <= t) or any(item[0] == "i2c" for item in self.inbox[e])):
                 continue
-            i = int(e[-1])
-            sens = {"angle": self.angle[i] % (2 * math.pi), "omega": self.omega[i], "battery_v": 14.4}
+            leg = e.startswith("r000/leg")  # other slaves (a test's own, a SonPI board) sense nothing here
+            i = int(e[-1]) if leg else -1
+            sens = {"angle": self.angle[i] % (2 * math.pi), "omega": self.omega[i], "battery_v": 14.4} if leg else {}
             res = self.modules[e].run(t, {"in": self.inbox.pop(e, []), "sens": sens})
             w = res.get("wake")
             self.next_wake[e] = None if w is None else max(t + q, -(-w // q) * q)
             outputs += [(e, item) for item in res["out"]]
-            if "pins" in res:
+            if "pins" in res and leg:
                 self.deliver_at(t + q, self._duty, i, res["pins"]["duty"])
         rt = self.rt
         if rt is not None:

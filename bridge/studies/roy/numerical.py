@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from bridge.core.rng import stream
+from bridge.studies.roy.checks import scenario_target_error
 from swarm_logic.clock import SteppedClock
 from swarm_logic.controller import Controller
 from swarm_logic.families.roy.controller import RoyApf
@@ -107,6 +108,9 @@ class Ch3Scenario:
             raise ValueError(f"n: at least one agent, got {self.n}")
         if not self.side > 0:
             raise ValueError(f"side: must be > 0, got {self.side}")
+        why = scenario_target_error(self.target, self.goal_radius, self.side, self.lines, self.movers)
+        if why is not None:
+            raise ValueError(f"{self.version}: target {self.target} {why}: the swarm cannot reach it")
 
     @property
     def segments(self) -> tuple[Segment, ...]:

@@ -12,6 +12,8 @@ counter-clockwise); sonar angles are relative to the robot's heading (+ = left).
 - ``sonpi_sonar`` (``Sonar``): the 5 HC-SR04 sonars, 45 degrees apart over the front 180 degrees (digest §3.2).
 - ``sonpi_velocity`` (``HolonomicVelocity``): the holonomic velocity the tracking layer is to follow (the thesis'
   point-agent command; the differential-drive mapping lies below this protocol, digest §5.1 item 4).
+- ``sonpi_odometry`` (``Odometry``): the pose dead-reckoned from the wheel encoders (from the robot's start pose when
+  it is known), its speeds and the raw encoder counts.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ POSE = "sonpi_pose"
 LOCALISATION = "sonpi_localisation"
 SONAR = "sonpi_sonar"
 VELOCITY = "sonpi_velocity"
-DEVICE_NAMES = (POSE, LOCALISATION, SONAR, VELOCITY)
+ODOMETRY = "sonpi_odometry"
+DEVICE_NAMES = (POSE, LOCALISATION, SONAR, VELOCITY, ODOMETRY)
 
 # 5 sonars, -90..+90 degrees step 45 (digest §0 item 5, §3.2)
 SONAR_ANGLES_RAD = tuple(math.radians(a) for a in (-90.0, -45.0, 0.0, 45.0, 90.0))
@@ -49,6 +52,21 @@ class SonarReading:
 
     range_m: float
     angle_rad: float
+
+
+@dataclass(frozen=True, slots=True)
+class OdometryReading:
+    """The encoders' dead reckoning at ``t_s`` (the robot's clock): pose (m, rad), forward speed (m/s) and turn rate
+    (rad/s, + = left), and the raw encoder counts since the board powered up."""
+
+    t_s: float
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    v_mps: float
+    w_rps: float
+    left_counts: int
+    right_counts: int
 
 
 @runtime_checkable
@@ -80,4 +98,11 @@ class HolonomicVelocity(Protocol):
 
     def set_velocity(self, vx_mps: float, vy_mps: float) -> None:
         """Track this world-frame velocity (m/s, clipped to ``max_speed_mps``) until told otherwise."""
+        ...
+
+
+@runtime_checkable
+class Odometry(Protocol):
+    def read(self) -> OdometryReading:
+        """The latest dead-reckoned pose and speeds."""
         ...
