@@ -90,15 +90,15 @@ def formation_metrics(run: Ch3Run, r_s: float = 1.0) -> dict[str, Any]:
 
 
 def run_metrics(run: Ch3Run) -> dict[str, Any]:
+    """One run's trials.csv row: Table 3.5's figures, the gains' moments (Table 3.4), B1's and B2's."""
     m: dict[str, Any] = {"success": run.success, "mission_s": run.mission_s, "path_length": round(run.path_length, 4),
                          "ci_mean": run.ci_mean, "ci_cov": run.ci_cov, "collisions": run.collisions,
                          "sim_s": round(run.ticks * 0.05, 2), "pso_share": run.pso_share}
     n = run.gain_n
-    for k, g, mu, sd in zip(range(4), GAINS, run.gain_mean, run.gain_std, strict=True):
+    for g, mu, sd in zip(GAINS, run.gain_mean, run.gain_std, strict=True):
         m[f"{g}_mean"] = float(mu)
-        m[f"{g}_sd"] = float(sd * math.sqrt(n / (n - 1))) if n > 1 else 0.0
+        m[f"{g}_sd"] = float(sd * math.sqrt(n / (n - 1))) if n > 1 else 0.0  # the sample sd (``pooled_mean_sd``)
         m[f"{g}_n"] = n
-        del k
     return {**m, **formation_metrics(run)}
 
 
@@ -128,6 +128,7 @@ def _f(x: float, nd: int = 2) -> str:
 
 
 def grid(outcomes: list[Outcome], method: str) -> list[TrialResult]:
+    """A method's runs in roy-ch3-v2 with 6 agents."""
     return ok(outcomes, kind="numerical", scenario="roy-ch3-v2", n=6, method=method)
 
 

@@ -187,12 +187,6 @@ def crosses(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nd
     return np.any(hit, axis=-1)
 
 
-def segments_cross(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
-    """Whether the move p -> q crosses (or touches) segment ab."""
-    return bool(crosses(np.asarray(p, float), np.asarray(q, float), np.asarray(a, float)[None],
-                        np.asarray(b, float)[None]))
-
-
 def track(v: np.ndarray, max_speed: float) -> np.ndarray:
     """The ideal tracking layer: the commanded velocity (..., 2), scaled down to ``max_speed`` where faster."""
     s = np.hypot(v[..., 0], v[..., 1])
