@@ -142,3 +142,36 @@ def test_each_robot_kind_samples_its_sonars_at_its_own_rate(monkeypatch: pytest.
     assert seen[2] == due[2][:1]  # the SonPI's cones have no noise: standing still, its ranges never change
     expected = [(t, sum(n for r, n in rays.items() if t in due[r])) for t in due[2]]
     assert batches == expected  # one ray batch per quantum end with a robot due, holding exactly those robots' rays
+
+
+def test_a_board_s_sonar_schedule_casts_only_the_cones_it_fires(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A SonPI whose board fires one sensor per 60 ms slot (``Sonars.schedule``): each quantum end casts only the
+    cones due (5 rays each), each at the first quantum end at or after its firing time; a malformed schedule is an
+    error."""
+    one = {"profile": "sonpi", "count": 1, "placement": {"kind": "explicit", "poses": [[1.5, 1.5, 0]]}}
+    w = world(arena={"width_m": 3, "length_m": 3}, robots=[one])
+    real = pb.rayTestBatch
+    now = [0]
+    batches: list[tuple[int, int]] = []
+
+    def counted(*args, **kw):
+        batches.append((now[0], len(args[0])))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(pb, "rayTestBatch", counted)
+    sonar = w.model("sonar")
+    ms = 1_000_000
+    nxt = [25 * ms + j * 60 * ms for j in range(5)]  # part order; one per slot, the first between quanta
+    sonar.schedule(0, nxt, [300 * ms] * 5)
+    with pytest.raises(ValueError, match="5 times"):
+        sonar.schedule(0, nxt[:4], [300 * ms] * 4)
+    q = 10 * ms
+    try:
+        for k in range(70):
+            now[0] = (k + 1) * q
+            w.step_quantum(k * q, q)
+    finally:
+        w.close()
+    times = [n + i * 300 * ms for n in nxt for i in range(3)]
+    expected = sorted((-(-t // q) * q, 5) for t in times if t <= 700 * ms)
+    assert batches == expected and batches[0] == (30 * ms, 5)
