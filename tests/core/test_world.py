@@ -175,3 +175,31 @@ def test_a_board_s_sonar_schedule_casts_only_the_cones_it_fires(monkeypatch: pyt
     times = [n + i * 300 * ms for n in nxt for i in range(3)]
     expected = sorted((-(-t // q) * q, 5) for t in times if t <= 700 * ms)
     assert batches == expected and batches[0] == (30 * ms, 5)
+
+
+def test_a_moving_obstacle_follows_its_path_and_the_sonars_see_it() -> None:
+    """A cylinder shuttling on a repeated path (a toy car): where its waypoints say at each time, looping; a SonPI's
+    front sonar sees it come and go; a path that does not close its loop, or goes back in time, is refused."""
+    car = {"type": "cylinder", "x": 1.0, "y": 1.5, "radius": 0.1, "height": 0.08,
+           "motion": {"waypoints": [[2.0, 2.6, 1.5], [4.0, 1.0, 1.5]], "repeat": True}}
+    one = {"profile": "sonpi", "count": 1, "placement": {"kind": "explicit", "poses": [[2.5, 0.5, 90]]}}
+    w = world(arena={"width_m": 3, "length_m": 3}, obstacles=[car], robots=[one])
+    body, _, period, _ = w.movers[0]
+    assert period == 4.0 and not w.cylinders  # not a static obstacle
+    q = 10_000_000
+    seen = []
+    try:
+        for k in range(800):
+            w.step_quantum(k * q, q)
+            if (k + 1) % 25 == 0:
+                (x, y, _), _ = pb.getBasePositionAndOrientation(body, physicsClientId=w.cid)
+                t = (k + 1) / 100 % 4.0
+                assert (x, y) == pytest.approx((1.0 + 0.8 * min(t, 4.0 - t), 1.5), abs=0.01)
+                seen.append(float(w.model("sonar").ranges[0][0]))  # the front sonar, looking along x = 2.5
+    finally:
+        w.close()
+    assert min(seen) < 1.0 and max(seen) > 2.0  # the car crosses the sonar's line (x = 2.5) and leaves it
+    for bad, why in (({"waypoints": [[2.0, 2.0, 1.5]], "repeat": True}, "last waypoint"),
+                     ({"waypoints": [[2.0, 2.0, 1.5], [1.0, 1.0, 1.5]]}, "increasing")):
+        with pytest.raises(ValueError, match=why):
+            Config.model_validate({"obstacles": [{**car, "motion": bad}], "robots": [one]})
