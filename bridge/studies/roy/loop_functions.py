@@ -67,7 +67,7 @@ def arrived(xy: np.ndarray, target: np.ndarray, r_s: float, tol: float) -> bool:
 class RoyLoopFunctions(LoopFunctions):
     @classmethod
     def wanted(cls, cfg: Config) -> bool:
-        return cfg.section("formation") is not None
+        return "formation" in (cfg.model_extra or {})
 
     def __init__(self, hub: Hub) -> None:
         super().__init__(hub)

@@ -123,3 +123,18 @@ def test_a_short_session_of_each_profile_is_scored(tmp_path: Path) -> None:
     assert sim["loc_err_mm"] == 0.0 and sim["sonar_hz"] == pytest.approx(200, rel=0.01) and sim["wifi_lost"] == 0
     assert 0.0 < hw["loc_err_mm"] < 5.0 and hw["sonar_hz"] == pytest.approx(3.33, rel=0.01)
     assert hw["sonar_err_mm"] is not None and abs(hw["sonar_err_mm"]) < 10 and hw["alive"] == 4
+
+
+def test_the_bench_s_camera_sessions_are_valid_configs(tmp_path: Path) -> None:
+    """``bench --study roy``'s sessions: six SonPIs tracked, thirty in noise mode; a session without ``[formation]``
+    is not the study's to score."""
+    from bridge.studies.roy.bench import SWARM_N, camera_sessions
+    from bridge.studies.roy.loop_functions import RoyLoopFunctions
+
+    (m1, six), (m2, many) = camera_sessions(5.0)
+    assert (m1, m2) == ("tracking", "noise") and many["robots"][0]["count"] == SWARM_N
+    for raw in (six, many):
+        path = tmp_path / "b.toml"
+        path.write_text(to_toml(raw))
+        cfg = load_config(path)
+        assert cfg.session.duration_s == 5.0 and not RoyLoopFunctions.wanted(cfg)
