@@ -171,6 +171,7 @@ def session_metrics(s: dict[str, Any]) -> dict[str, Any]:
     fpos, fhead = cam.get("fix_position_error_m") or {}, cam.get("fix_heading_error_deg") or {}
     return {
         "success": bool(f["arrived"]), "mission_s": f["mission_s"], "fe_mean": f["fe_mean"], "fe_sd": f["fe_sd"],
+        "fe_close": f["fe_close"], "fe_far": f["fe_far"],
         "path_m": f["path_m"], "nn_min_m": f["nn_min_m"], "sim_s": s["sim_time_s"],
         "loc_err_mm": _mm(_stat(pos, "mean")), "loc_err_p95_mm": _mm(_stat(pos, "p95")),
         "loc_head_deg": _stat(head, "mean"), "fix_err_mm": _mm(_stat(fpos, "mean")),

@@ -44,15 +44,21 @@ class FormationCfg(Section):
                                                                      "arrives (none: run to duration_s)")
 
 
-def formation_error(xy: np.ndarray, r_s: float) -> float:
-    """Eq. 7.1, repaired (digest §4.5.1): 1 - #{ordered pairs i != j with 2 r_s <= x_ij <= 3 r_s} / (N (N - 1))."""
+def pair_shares(xy: np.ndarray, r_s: float) -> tuple[float, float]:
+    """The shares of the ordered pairs i != j closer than 2 r_s and farther than 3 r_s (0, 0 for fewer than 2)."""
     n = len(xy)
     if n < 2:
-        return 0.0
+        return 0.0, 0.0
     d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
-    good = (d >= 2 * r_s) & (d <= 3 * r_s)
-    np.fill_diagonal(good, False)
-    return 1.0 - float(good.sum()) / (n * (n - 1))
+    off = ~np.eye(n, dtype=bool)
+    pairs = n * (n - 1)
+    return float((off & (d < 2 * r_s)).sum()) / pairs, float((off & (d > 3 * r_s)).sum()) / pairs
+
+
+def formation_error(xy: np.ndarray, r_s: float) -> float:
+    """Eq. 7.1, repaired (digest §4.5.1): 1 - #{ordered pairs i != j with 2 r_s <= x_ij <= 3 r_s} / (N (N - 1))."""
+    close, far = pair_shares(xy, r_s)
+    return close + far
 
 
 def arrived(xy: np.ndarray, target: np.ndarray, r_s: float, tol: float) -> bool:
@@ -76,6 +82,8 @@ class RoyLoopFunctions(LoopFunctions):
         self.tick_ns = round(self.cfg.sample_s * 1e9)
         self.next_tick = 0
         self.fe: list[float] = []  # per sample until arrival
+        self.close: list[float] = []  # its two parts: pairs closer than 2 r_s, farther than 3 r_s
+        self.far: list[float] = []
         self.nn_min = math.inf
         self.arrived_s: float | None = None
         self.path_m: float | None = None  # the mean odometer at arrival
@@ -86,7 +94,8 @@ class RoyLoopFunctions(LoopFunctions):
         self.next_tick += self.tick_ns
         w = self.hub.world
         xy = w.pos[w.alive]
-        fe = formation_error(xy, self.cfg.r_s_m)
+        close, far = pair_shares(xy, self.cfg.r_s_m)
+        fe = close + far
         d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) if len(xy) > 1 else np.zeros((1, 1))
         np.fill_diagonal(d, math.inf)
         nn = float(d.min()) if len(xy) > 1 else math.inf
@@ -99,6 +108,8 @@ class RoyLoopFunctions(LoopFunctions):
         if self.arrived_s is not None:
             return
         self.fe.append(fe)
+        self.close.append(close)
+        self.far.append(far)
         self.nn_min = min(self.nn_min, nn)
         if at:
             self.arrived_s = t / 1e9
@@ -109,7 +120,8 @@ class RoyLoopFunctions(LoopFunctions):
                 self.hub.end_ns = min(self.hub.end_ns, max(t + q, -(-end // q) * q))
 
     def summary(self) -> dict[str, Any]:
-        """``formation``: FE's mean and sd over the mission's samples, the mission time (None: not arrived), the
+        """``formation``: FE's mean and sd over the mission's samples (and its parts: the pairs too close, too far),
+        the mission time (None: not arrived), the
         mean path length (m; at arrival, else at the end), the closest pair (m)."""
         w = self.hub.world
         fe = np.array(self.fe)
@@ -118,6 +130,8 @@ class RoyLoopFunctions(LoopFunctions):
             "r_s_m": self.cfg.r_s_m, "target": list(self.cfg.target), "samples": len(fe),
             "fe_mean": round(float(fe.mean()), 4) if len(fe) else None,
             "fe_sd": round(float(fe.std(ddof=1)), 4) if len(fe) > 1 else None,
+            "fe_close": round(float(np.mean(self.close)), 4) if self.close else None,
+            "fe_far": round(float(np.mean(self.far)), 4) if self.far else None,
             "arrived": self.arrived_s is not None, "mission_s": self.arrived_s,
             "path_m": round(path, 4), "nn_min_m": round(self.nn_min, 4) if math.isfinite(self.nn_min) else None,
         }}

@@ -13,7 +13,7 @@ from bridge.core.config import load_config, to_toml
 from bridge.experiments.runner import Outcome, Trial, TrialResult, get_experiment, trial_seed
 from bridge.studies.roy import cosim
 from bridge.studies.roy.experiments import COSIM_CASES, RoyApfExperiment, cosim_sections
-from bridge.studies.roy.loop_functions import arrived, formation_error
+from bridge.studies.roy.loop_functions import arrived, formation_error, pair_shares
 
 R = 0.113
 
@@ -26,6 +26,7 @@ def test_the_formation_error_counts_pairs_between_2_and_3_r_s() -> None:
     assert formation_error(tri * 1.5 * R, R) == 1.0
     line = np.array([[0.0, 0.0], [2.5 * R, 0.0], [5.0 * R, 0.0]])
     assert formation_error(line, R) == pytest.approx(1 / 3)
+    assert pair_shares(line, R) == pytest.approx((0.0, 1 / 3)) and pair_shares(tri * R, R) == (1.0, 0.0)
     assert formation_error(line[:1], R) == 0.0
     t = np.array([3.0, 1.0])
     assert arrived(t + np.array([[0.05, 0.0], [-0.05, 0.0]]), t, R, 0.1)
