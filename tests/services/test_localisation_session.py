@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.config import to_toml
 from bridge.core.recorder import iter_messages
 from tests.core.test_session import _check_messages_match_their_schemas
 from tests.core.test_session import run as session_run
@@ -217,31 +218,17 @@ def test_sonpis_send_their_odometry_and_the_camera_fuses_it(tmp_path: Path) -> N
     assert all(r["alive"] for r in s["per_robot"])
 
 
-HIDDEN_SONPI = """
-[session]
-name = "sonpi-hidden"
-duration_s = 8
-seed = 4
-robots_per_process = 3
-[arena]
-width_m = 3
-length_m = 3
-[[robots]]
-count = 3
-profile = "sonpi"
-behaviour = "roy_apf"
-params = { optimiser = "fixed", v_max = 1.5 }
-placement = { kind = "explicit", poses = [[0.6, 0.6, 0.0], [1.2, 0.6, 0.0], [0.6, 2.2, 0.0]] }
-[robots.devices.sonpi_wifi]
-url = "sitl://wifi"
-localisation = "camera"
-first_pose_timeout_s = 1.0
-[[services]]
-kind = "overhead_camera"
-name = "camera"
-# a beam over robot 2's start: the camera has never seen it when its program starts
-options = { mode = "noise", occluders = [{ x = 0.6, y = 2.2, z = 0.6, size = [0.9, 0.9, 0.05] }] }
-"""
+HIDDEN_SONPI = {  # a beam over robot 2's start: the camera has never seen it when its program starts
+    "session": {"name": "sonpi-hidden", "duration_s": 8, "seed": 4, "robots_per_process": 3},
+    "arena": {"width_m": 3, "length_m": 3},
+    "robots": [{
+        "count": 3, "profile": "sonpi", "behaviour": "roy_apf", "params": {"optimiser": "fixed", "v_max": 1.5},
+        "placement": {"kind": "explicit", "poses": [[0.6, 0.6, 0.0], [1.2, 0.6, 0.0], [0.6, 2.2, 0.0]]},
+        "devices": {"sonpi_wifi": {"url": "sitl://wifi", "localisation": "camera", "first_pose_timeout_s": 1.0}},
+    }],
+    "services": [{"kind": "overhead_camera", "name": "camera", "options": {
+        "mode": "noise", "occluders": [{"x": 0.6, "y": 2.2, "z": 0.6, "size": [0.9, 0.9, 0.05]}]}}],
+}
 
 
 def test_a_sonpi_the_camera_has_never_seen_drives_on_its_odometry(tmp_path: Path) -> None:
@@ -249,7 +236,7 @@ def test_a_sonpi_the_camera_has_never_seen_drives_on_its_odometry(tmp_path: Path
     and tracking layer steer by its encoders meanwhile (no failure), it drives out from under the beam, and once the
     camera sees it, the camera's pose steers it again."""
     cfg = tmp_path / "hidden.toml"
-    cfg.write_text(HIDDEN_SONPI)
+    cfg.write_text(to_toml(HIDDEN_SONPI))
     out = tmp_path / "hidden"
     rc, s = session_run(cfg, out)
     assert rc == 0, s.get("error")

@@ -16,8 +16,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from bridge.core.config import to_toml
-from bridge.core.launcher import run_session
+from bridge.experiments.sessions import run_config
 from bridge.studies.roy.numerical import SCENARIOS, ch3_batch, ch3_trial
 
 RUNS = 100
@@ -47,14 +46,9 @@ def camera_sessions(duration: float) -> list[tuple[str, dict[str, Any]]]:
 
 
 def _session(name: str, raw: dict[str, Any], out_dir: str) -> dict[str, Any]:
-    out = Path(out_dir) / name
-    out.mkdir(parents=True, exist_ok=True)
-    cfg = out.parent / f"{name}.toml"
-    cfg.write_text(to_toml(raw))
-    res = run_session(str(cfg), None, str(out), progress=None, plot=False)
-    if res.code != 0:
-        raise RuntimeError(f"bench session {name} failed ({res.code}): {res.summary.get('error')}")
-    return res.summary
+    work = Path(out_dir) / name
+    work.mkdir(parents=True, exist_ok=True)
+    return run_config(raw, work, name)[0]
 
 
 def camera_figures(duration: float, out_dir: str) -> list[str]:

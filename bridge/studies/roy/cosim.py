@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bridge.core.config import to_toml
 from bridge.core.rng import stream
+from bridge.experiments.sessions import run_config
 
 UNIT_M = 0.1
 R_S_UNITS = 1.13
@@ -141,15 +141,7 @@ def session_config(case: str, n: int, profile: str, seed: int, workdir: Path, ma
 
 def run_session(cfg: dict[str, Any], workdir: Path) -> dict[str, Any]:
     """Write ``cfg``, run it in ``workdir``, return its summary (a failed session raises)."""
-    from bridge.core.launcher import run_session as launch
-
-    path = workdir / "roy.toml"
-    path.write_text(to_toml(cfg))
-    out = workdir / "session"
-    res = launch(str(path), None, str(out), progress=None, plot=False)
-    if res.code != 0:
-        raise RuntimeError(f"session failed ({res.code}): {res.summary.get('error')}")
-    return json.loads((out / "summary.json").read_text())
+    return run_config(cfg, workdir, "roy")[0]
 
 
 def _stat(d: dict[str, Any] | None, key: str) -> float | None:
