@@ -136,7 +136,38 @@ class ArenaCfg(_Model):
         return out
 
 
-class BoxObstacle(_Model):
+class ObstacleMotion(_Model):
+    """A kinematic path for an obstacle (a programmable toy car, a trolley): it starts at the obstacle's (x, y) and
+    moves in straight lines at constant speed to each waypoint in turn, keeping its yaw; nothing pushes it off its
+    path (it pushes what it meets). ``repeat``: the path starts over after its last waypoint, which must then be the
+    start."""
+
+    waypoints: list[tuple[float, float, float]] = Field(
+        description="[t_s, x, y]: where the obstacle is at t_s (increasing, > 0)", min_length=1
+    )
+    repeat: bool = Field(False, description="start over after the last waypoint (a loop back to the start)")
+
+    @field_validator("waypoints")
+    @classmethod
+    def _increasing(cls, v: list[tuple[float, float, float]]) -> list[tuple[float, float, float]]:
+        ts = [w[0] for w in v]
+        if ts[0] <= 0 or any(b <= a for a, b in itertools.pairwise(ts)):
+            raise ValueError("waypoint times must be > 0 and increasing")
+        return v
+
+
+class _Obstacle(_Model):
+    motion: ObstacleMotion | None = Field(None, description="a moving obstacle's path (none: it stays put)")
+
+    @model_validator(mode="after")
+    def _loop_closes(self) -> _Obstacle:
+        m = self.motion
+        if m is not None and m.repeat and math.hypot(m.waypoints[-1][1] - self.x, m.waypoints[-1][2] - self.y) > 1e-6:
+            raise ValueError("motion.repeat: the last waypoint must be the obstacle's start (x, y)")
+        return self
+
+
+class BoxObstacle(_Obstacle):
     type: Literal["box"]
     x: float
     y: float
@@ -158,7 +189,7 @@ class BoxObstacle(_Model):
         return v
 
 
-class CylinderObstacle(_Model):
+class CylinderObstacle(_Obstacle):
     type: Literal["cylinder"]
     x: float
     y: float

@@ -49,11 +49,20 @@ class World:
         self.static_rects: list[tuple[float, float, float, float, float]] = []  # cx, cy, sx, sy, yaw (plots)
         self.cylinders: list[tuple[float, float, float]] = []
         self._build_arena(cfg.arena)
+        # obstacles on a stated path (toy cars): (body, path rows (t_s, x, y, yaw), period_s or 0, half height)
+        self.movers: list[tuple[int, np.ndarray, float, float]] = []
         for ob in cfg.obstacles:
+            moving = ob.motion is not None
             if isinstance(ob, BoxObstacle):
-                self._box(ob.x, ob.y, ob.size, math.radians(ob.yaw_deg))
+                body = self._box(ob.x, ob.y, ob.size, math.radians(ob.yaw_deg), static=not moving)
+                half, yaw = ob.size[2] / 2, math.radians(ob.yaw_deg)
             else:
-                self._cylinder(ob.x, ob.y, ob.radius, ob.height)
+                body = self._cylinder(ob.x, ob.y, ob.radius, ob.height, static=not moving)
+                half, yaw = ob.height / 2, 0.0
+            if ob.motion is not None:
+                rows = [(0.0, ob.x, ob.y, yaw), *((t, x, y, yaw) for t, x, y in ob.motion.waypoints)]
+                period = ob.motion.waypoints[-1][0] if ob.motion.repeat else 0.0
+                self.movers.append((body, np.array(rows, dtype=float), period, half))
         if cfg.arena.map:
             self._load_map(cfg.arena)
         self._build_robots(robots)
@@ -65,17 +74,21 @@ class World:
         self.objects: dict[str, Any] = {}
 
     # -- scene ------------------------------------------------------------------------------------
-    def _box(self, x: float, y: float, size: tuple[float, float, float], yaw: float = 0.0) -> None:
+    def _box(self, x: float, y: float, size: tuple[float, float, float], yaw: float = 0.0, static: bool = True) -> int:
         half = [size[0] / 2, size[1] / 2, size[2] / 2]
         shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=self.cid)
         orn = pb.getQuaternionFromEuler([0, 0, yaw])
-        pb.createMultiBody(0, shape, basePosition=[x, y, half[2]], baseOrientation=orn, physicsClientId=self.cid)
-        self.static_rects.append((x, y, size[0], size[1], yaw))
+        body = pb.createMultiBody(0, shape, basePosition=[x, y, half[2]], baseOrientation=orn, physicsClientId=self.cid)
+        if static:
+            self.static_rects.append((x, y, size[0], size[1], yaw))
+        return body
 
-    def _cylinder(self, x: float, y: float, r: float, h: float) -> None:
+    def _cylinder(self, x: float, y: float, r: float, h: float, static: bool = True) -> int:
         shape = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=r, height=h, physicsClientId=self.cid)
-        pb.createMultiBody(0, shape, basePosition=[x, y, h / 2], physicsClientId=self.cid)
-        self.cylinders.append((x, y, r))
+        body = pb.createMultiBody(0, shape, basePosition=[x, y, h / 2], physicsClientId=self.cid)
+        if static:
+            self.cylinders.append((x, y, r))
+        return body
 
     def _build_arena(self, a: ArenaCfg) -> None:
         t, h = a.wall_thickness_m, a.wall_height_m
@@ -251,6 +264,8 @@ class World:
             self.steps_done += 1
             if self.paths:
                 self._follow_paths(self.steps_done / self.hz)
+            if self.movers:
+                self._move_obstacles(self.steps_done / self.hz)
             if self.carried:
                 self._ride()
             stepped = True
@@ -274,15 +289,23 @@ class World:
     def _follow_paths(self, t_s: float) -> None:
         """Put every body with a stated motion where its path says at ``t_s``, moving as the path moves (so what
         hits it feels its motion); nothing pushes it off its path."""
-        c = self.cid
         for i, path in self.paths.items():
-            x, y, yaw = path_pose(path, t_s)
-            x1, y1, yaw1 = path_pose(path, t_s + self.dt)
-            z = self.profiles[i].height_m / 2 + 1e-3
-            pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, z], pb.getQuaternionFromEuler([0, 0, yaw]),
-                                               physicsClientId=c)
-            pb.resetBaseVelocity(self.bodies[i], [(x1 - x) * self.hz, (y1 - y) * self.hz, 0.0],
-                                 [0.0, 0.0, wrap(yaw1 - yaw) * self.hz], physicsClientId=c)
+            self._put(self.bodies[i], path, t_s, self.profiles[i].height_m / 2 + 1e-3)
+
+    def _move_obstacles(self, t_s: float) -> None:
+        """Put every moving obstacle where its path says at ``t_s``, moving as the path moves (what it hits feels its
+        motion)."""
+        for body, path, period, half in self.movers:
+            self._put(body, path, (t_s % period) if period else t_s, half)
+
+    def _put(self, body: int, path: np.ndarray, t_s: float, z: float) -> None:
+        """A body on a stated path at ``t_s``, its velocity the path's over the next physics step."""
+        c = self.cid
+        x, y, yaw = path_pose(path, t_s)
+        x1, y1, yaw1 = path_pose(path, t_s + self.dt)
+        pb.resetBasePositionAndOrientation(body, [x, y, z], pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
+        pb.resetBaseVelocity(body, [(x1 - x) * self.hz, (y1 - y) * self.hz, 0.0],
+                             [0.0, 0.0, wrap(yaw1 - yaw) * self.hz], physicsClientId=c)
 
     def _ride(self) -> None:
         """Robots on board sit on their carrier's deck and move with it (their wheels turn in the air)."""

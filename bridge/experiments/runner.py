@@ -115,6 +115,11 @@ class Experiment:
         may run fewer)."""
         return n
 
+    def cell_batch(self, cell: dict[str, Any]) -> int:
+        """How many of this cell's trials one worker takes at once (``batch`` by default; 1 for a cell whose trials
+        are better spread over the workers, e.g. sessions in an experiment whose model cells batch)."""
+        return self.batch
+
     def run(self, trial: Trial) -> TrialResult:
         raise NotImplementedError
 
@@ -380,23 +385,25 @@ def _terminate_as_interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt
 
 
-def _chunks(trials: list[Trial], size: int) -> list[list[int]]:
-    """Positions in ``trials`` grouped into runs of up to ``size`` consecutive trials of one cell."""
+def _chunks(trials: list[Trial], size: int | Callable[[dict[str, Any]], int]) -> list[list[int]]:
+    """Positions in ``trials`` grouped into runs of up to ``size`` (or ``size(cell)``) consecutive trials of one
+    cell."""
     out: list[list[int]] = []
     for k, t in enumerate(trials):
-        if out and len(out[-1]) < size and trials[out[-1][0]].cell == t.cell:
+        n = max(1, size(t.cell)) if callable(size) else size
+        if out and len(out[-1]) < n and trials[out[-1][0]].cell == t.cell:
             out[-1].append(k)
         else:
             out.append([k])
     return out
 
 
-def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress, batch: int = 1,
-             ) -> tuple[dict[int, _Done], bool]:
+def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress,
+             batch: int | Callable[[dict[str, Any]], int] = 1) -> tuple[dict[int, _Done], bool]:
     """Run the trials (``batch`` of one cell per task); returns what finished by position in `trials`, and whether
     Ctrl-C cut the run short."""
     done: dict[int, _Done] = {}
-    groups = _chunks(trials, max(1, batch))
+    groups = _chunks(trials, batch if callable(batch) else max(1, batch))
     if jobs == 1:
         # in-process, a trial's session may catch the interrupt to shut down cleanly and end as a failed trial:
         # the flag stops the run all the same, and that trial, cut short, is not kept
@@ -741,7 +748,7 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     ref = _ref(cls)
     _INSTANCES.setdefault(ref, exp)
     done, interrupted = _execute_interruptible(ref, plan, jobs, _Progress(name, len(plan), progress),
-                                               max(1, int(getattr(cls, "batch", 1))))
+                                               lambda c: int(exp.cell_batch(c)))
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
             d.rmdir()
@@ -799,8 +806,8 @@ def _clear_outputs(out_dir: Path) -> None:
         shutil.rmtree(out_dir / d, ignore_errors=True)
 
 
-def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: int,
-                           bar: _Progress, batch: int = 1) -> tuple[dict[int, tuple], bool]:
+def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: int, bar: _Progress,
+                           batch: int | Callable[[dict[str, Any]], int] = 1) -> tuple[dict[int, tuple], bool]:
     """``_execute`` with SIGTERM ending the run as Ctrl-C does (no orphans), the handlers restored after."""
     old_term = old_int = None
     _STOP.clear()

@@ -1,7 +1,7 @@
 """Ultrasonic range finders (MaxBotix-class): a cone of rays per sonar, each robot's sonars at their own rate (its
-part's ``rate_hz``), the robots due at one time in one batched ray test; the nearest echo in the cone is the range,
-with range-proportional noise, spurious echoes while the robot drives, and the minimum range inside the blind
-zone."""
+part's ``rate_hz``, or the times its board fires them: ``Sonars.schedule``), the sonars due at one time in one batched
+ray test; the nearest echo in the cone is the range, with range-proportional noise, spurious echoes while the robot
+drives, and the minimum range inside the blind zone."""
 
 from __future__ import annotations
 
@@ -35,13 +35,15 @@ class Sonars(WorldModel):
         n, p = len(robots), parts
         self.ranges = [np.full(len(q.angles_deg), q.max_range_m) for q in p]  # each robot's sonars, front first
         self._rng = [stream(world.seed, "robot", r, "sonar") for r in robots]
-        self._period_ns = np.array([round(1e9 / q.rate_hz) for q in p], dtype=np.int64)
-        self._next_ns = np.zeros(n, dtype=np.int64)  # each robot's next sample time (taken at the quantum end after)
+        counts = [len(q.angles_deg) for q in p]
+        # per sonar (every robot's, consecutively): its cast period and next cast time (taken at the quantum end at
+        # or after it); the part's rate for all of a robot's sonars until its board sets their times (``schedule``)
+        self._period_ns = np.repeat(np.array([round(1e9 / q.rate_hz) for q in p], dtype=np.int64), counts)
+        self._next_ns = np.zeros(int(sum(counts)), dtype=np.int64)
         # a cone per sonar; ``_ray_sonar`` numbers every robot's sonars consecutively (robot k's first is
         # ``_base[k]``), ``_ray_owner`` is the robot's row
         cones = [np.linspace(-1, 1, q.rays) * math.radians(q.half_beam_deg) if q.rays > 1 else np.zeros(1) for q in p]
         offsets = [np.concatenate([c + math.radians(a) for a in q.angles_deg]) for c, q in zip(cones, p, strict=True)]
-        counts = [len(q.angles_deg) for q in p]
         self._base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int) if n else np.zeros(0, int)
         self._ray_owner = np.concatenate([np.full(len(o), k) for k, o in enumerate(offsets)]) if n else np.zeros(0, int)
         self._ray_sonar = (
@@ -55,6 +57,7 @@ class Sonars(WorldModel):
             else np.zeros(0, int)
         )
         self._count = int(sum(counts))
+        self._sonar_owner = np.repeat(np.arange(n), counts) if n else np.zeros(0, int)
         self._ray_angle = np.concatenate(offsets) if n else np.zeros(0)
         prof = [world.profiles[r] for r in robots]
         # rays start just outside the body: a cylinder's side, a box's front face (side sonars of a box: assumed at
@@ -63,21 +66,33 @@ class Sonars(WorldModel):
         self._ray_len = np.array([q.max_range_m for q in p])
         self._ray_z = np.array([q.height_m * 0.6 for q in prof])
 
+    def schedule(self, r: int, next_ns: list[int], period_ns: list[int]) -> None:
+        """Robot ``r``'s board fires its sonars at known times (an HC-SR04 board's slots): sonar j (the part's order)
+        is cast next at the first quantum end at or after ``next_ns[j]``, then every ``period_ns[j]``, in place of
+        the part's ``rate_hz``: the world casts only what the board will read. ValueError on a malformed schedule."""
+        k = self.local[r]
+        m = len(self.parts[k].angles_deg)
+        if len(next_ns) != m or len(period_ns) != m or not all(int(v) > 0 for v in period_ns):
+            raise ValueError(f"robot {r}: a sonar schedule needs {m} times and {m} positive periods")
+        b = int(self._base[k])
+        self._next_ns[b : b + m] = [int(v) for v in next_ns]
+        self._period_ns[b : b + m] = [int(v) for v in period_ns]
+
     def sample(self, t_end_ns: int) -> None:
         due = self._next_ns <= t_end_ns
         if due.any():
             self._update(due)
-            nxt = self._next_ns[due]
-            self._next_ns[due] = nxt + ((t_end_ns - nxt) // self._period_ns[due] + 1) * self._period_ns[due]
+            nxt, per = self._next_ns[due], self._period_ns[due]
+            self._next_ns[due] = nxt + ((t_end_ns - nxt) // per + 1) * per
 
     def _update(self, due: np.ndarray) -> None:
-        """One ray batch for the sonar cones of every live robot that is due."""
+        """One ray batch for the due sonar cones of every live robot."""
         w = self.world
-        alive = w.alive[self.ids] & due
-        live = np.flatnonzero(alive)
-        if not len(live):
+        due = due & w.alive[self.ids][self._sonar_owner]
+        if not due.any():
             return
-        rays = alive[self._ray_owner]
+        live = np.unique(self._sonar_owner[due])
+        rays = due[self._ray_sonar]
         owner = self._ray_owner[rays]
         robot = self.ids[owner]
         ang = w.yaw[robot] + self._ray_angle[rays]
@@ -95,8 +110,11 @@ class Sonars(WorldModel):
             rng = self._rng[k]
             moving = w.drive_speed[self.robots[k]] > 0.01
             out = self.ranges[k]
+            b = int(self._base[k])
             for j in range(len(out)):
-                frac = float(nearest[self._base[k] + j])
+                if not due[b + j]:
+                    continue
+                frac = float(nearest[b + j])
                 true_r = frac * q.max_range_m + 0.005
                 noise = rng.standard_normal()
                 outlier = rng.random() < q.outlier_p

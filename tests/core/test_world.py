@@ -142,3 +142,64 @@ def test_each_robot_kind_samples_its_sonars_at_its_own_rate(monkeypatch: pytest.
     assert seen[2] == due[2][:1]  # the SonPI's cones have no noise: standing still, its ranges never change
     expected = [(t, sum(n for r, n in rays.items() if t in due[r])) for t in due[2]]
     assert batches == expected  # one ray batch per quantum end with a robot due, holding exactly those robots' rays
+
+
+def test_a_board_s_sonar_schedule_casts_only_the_cones_it_fires(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A SonPI whose board fires one sensor per 60 ms slot (``Sonars.schedule``): each quantum end casts only the
+    cones due (5 rays each), each at the first quantum end at or after its firing time; a malformed schedule is an
+    error."""
+    one = {"profile": "sonpi", "count": 1, "placement": {"kind": "explicit", "poses": [[1.5, 1.5, 0]]}}
+    w = world(arena={"width_m": 3, "length_m": 3}, robots=[one])
+    real = pb.rayTestBatch
+    now = [0]
+    batches: list[tuple[int, int]] = []
+
+    def counted(*args, **kw):
+        batches.append((now[0], len(args[0])))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(pb, "rayTestBatch", counted)
+    sonar = w.model("sonar")
+    ms = 1_000_000
+    nxt = [25 * ms + j * 60 * ms for j in range(5)]  # part order; one per slot, the first between quanta
+    sonar.schedule(0, nxt, [300 * ms] * 5)
+    with pytest.raises(ValueError, match="5 times"):
+        sonar.schedule(0, nxt[:4], [300 * ms] * 4)
+    q = 10 * ms
+    try:
+        for k in range(70):
+            now[0] = (k + 1) * q
+            w.step_quantum(k * q, q)
+    finally:
+        w.close()
+    times = [n + i * 300 * ms for n in nxt for i in range(3)]
+    expected = sorted((-(-t // q) * q, 5) for t in times if t <= 700 * ms)
+    assert batches == expected and batches[0] == (30 * ms, 5)
+
+
+def test_a_moving_obstacle_follows_its_path_and_the_sonars_see_it() -> None:
+    """A cylinder shuttling on a repeated path (a toy car): where its waypoints say at each time, looping; a SonPI's
+    front sonar sees it come and go; a path that does not close its loop, or goes back in time, is refused."""
+    car = {"type": "cylinder", "x": 1.0, "y": 1.5, "radius": 0.1, "height": 0.08,
+           "motion": {"waypoints": [[2.0, 2.6, 1.5], [4.0, 1.0, 1.5]], "repeat": True}}
+    one = {"profile": "sonpi", "count": 1, "placement": {"kind": "explicit", "poses": [[2.5, 0.5, 90]]}}
+    w = world(arena={"width_m": 3, "length_m": 3}, obstacles=[car], robots=[one])
+    body, _, period, _ = w.movers[0]
+    assert period == 4.0 and not w.cylinders  # not a static obstacle
+    q = 10_000_000
+    seen = []
+    try:
+        for k in range(800):
+            w.step_quantum(k * q, q)
+            if (k + 1) % 25 == 0:
+                (x, y, _), _ = pb.getBasePositionAndOrientation(body, physicsClientId=w.cid)
+                t = (k + 1) / 100 % 4.0
+                assert (x, y) == pytest.approx((1.0 + 0.8 * min(t, 4.0 - t), 1.5), abs=0.01)
+                seen.append(float(w.model("sonar").ranges[0][0]))  # the front sonar, looking along x = 2.5
+    finally:
+        w.close()
+    assert min(seen) < 1.0 and max(seen) > 2.0  # the car crosses the sonar's line (x = 2.5) and leaves it
+    for bad, why in (({"waypoints": [[2.0, 2.0, 1.5]], "repeat": True}, "last waypoint"),
+                     ({"waypoints": [[2.0, 2.0, 1.5], [1.0, 1.0, 1.5]]}, "increasing")):
+        with pytest.raises(ValueError, match=why):
+            Config.model_validate({"obstacles": [{**car, "motion": bad}], "robots": [one]})

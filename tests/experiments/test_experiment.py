@@ -353,3 +353,12 @@ def test_batched_trials_and_per_cell_counts_keep_the_rows_and_seeds(tmp_path: Pa
             rows.append(list(_csv.reader(f)))
     assert rows[0] == rows[1] and len(rows[0]) == 8
     assert BATCH_CALLS == [3, 2, 2]  # in-process: cell 1 in batches of 3 and 2, cell 2's two trials together
+    BATCH_CALLS.clear()
+    Batched.cell_batch = lambda self, cell: 1 if cell["c"] == 2 else self.batch  # type: ignore[method-assign]
+    try:
+        run = execute_experiment("test-batched", jobs=1, out=tmp_path / "per-cell", progress=False)
+    finally:
+        del Batched.cell_batch
+    with open(tmp_path / "per-cell" / "trials.csv") as f:
+        assert list(_csv.reader(f)) == rows[0]
+    assert BATCH_CALLS == [3, 2]  # cell_batch: cell 2's trials one at a time (each through run), the same rows

@@ -108,6 +108,38 @@ def test_the_pi_may_change_the_firing_mode() -> None:
     assert b.read(P.FIRING) == bytes([P.FIRING_IDEAL]) and b.window().sensors[0].pings == 50
 
 
+@pytest.mark.parametrize("firing", [P.FIRING_SEQUENTIAL, P.FIRING_SIMULTANEOUS, P.FIRING_IDEAL])
+def test_the_trig_pins_tell_when_each_sensor_fires(firing: int) -> None:
+    """At power-up and at a change of firing mode the sketch tells each sensor's next firing time and period (pins
+    "trig"): the world casts a cone at the first quantum end at or after each, and those are the ticks it pings."""
+    b = Board([1.0] * 5, firing=firing)
+    pinged: dict[int, set[int]] = {i: set() for i in range(5)}
+    real = b.b.rangers.ping
+
+    def ping(sensors: list[int], ranges: list[float], rng: np.random.Generator) -> dict:
+        for i in sensors:
+            pinged[i].add(b.b.now)
+        return real(sensors, ranges, rng)
+
+    b.b.rangers.ping = ping  # type: ignore[method-assign]
+    assert b.trig is not None
+    told, start = b.trig, b.t
+    b.advance(1000 * MS)
+    q = 10 * MS
+    for i, (nxt, period) in enumerate(told):
+        assert nxt > start
+        casts = {-(-(nxt + k * period) // q) * q for k in range(2000) if nxt + k * period <= b.t}
+        assert pinged[i] == casts and casts
+    # the Pi changes the mode: the next loop tells the new times
+    b.trig = None
+    b.write(P.FIRING, P.FIRING_SIMULTANEOUS if firing != P.FIRING_SIMULTANEOUS else P.FIRING_IDEAL)
+    b.advance(10 * MS)
+    assert b.trig is not None and b.trig[0][1] != told[0][1]
+    b.trig = None
+    b.advance(100 * MS)
+    assert b.trig is None  # told once
+
+
 def test_noise_is_seeded() -> None:
     def run(seed: int) -> tuple[bytes, list[int]]:
         b = Board([1.5] * 5, firing=P.FIRING_IDEAL, seed=seed, noise_m=0.01)

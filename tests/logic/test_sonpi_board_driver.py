@@ -17,6 +17,7 @@ from swarm_logic.robots.sonpi.interfaces import (
     SONAR_ANGLES_RAD,
     VELOCITY,
     HolonomicVelocity,
+    NoPose,
     Odometry,
     Sonar,
 )
@@ -109,6 +110,31 @@ def test_the_heading_comes_from_the_robot_s_pose_device_when_it_has_one() -> Non
     dev2.set_velocity(-0.1, 0.0)
     run(board2, dev2, 3.0)
     assert board2.pose[0] > -0.1
+
+
+def test_a_robot_the_camera_has_never_seen_steers_by_its_odometry() -> None:
+    """The pose device has no pose for it (NoPose): the tracking layer takes the encoders' heading, no failure; once
+    the camera sees it, the camera's heading steers again."""
+    start = (0.0, 0.0, math.pi / 2)
+    board = Board([2.0] * 5, pose=start)
+    seen = {"now": False}
+
+    def read() -> SimpleNamespace:
+        if not seen["now"]:
+            raise NoPose("never seen")
+        return SimpleNamespace(yaw_rad=board.pose[2])
+
+    dev = open_driver(board, robot_with(start_pose=start, sonpi_pose=SimpleNamespace(read=read)))
+    dev.set_velocity(0.1, 0.0)  # east, the robot facing north
+    run(board, dev, 6.0)
+    x, y, yaw = board.pose
+    assert x > 0.35 and abs(math.remainder(yaw, math.tau)) < 0.15  # it turned east and drove on by odometry
+    n = dev.counters["heading_from_odometry"]
+    assert n >= 55 and dev.counters["bus_errors"] == 0
+    seen["now"] = True
+    dev.set_velocity(0.0, 0.1)  # north
+    run(board, dev, 4.0)
+    assert board.pose[1] - y > 0.2 and dev.counters["heading_from_odometry"] == n
 
 
 def test_sonar_readings_from_the_windows() -> None:

@@ -64,3 +64,24 @@ def test_the_groups_options_and_the_session_configs_load(tmp_path: Path) -> None
     assert robot_profile("sonpi").part(TopMarker).rgb == (255, 64, 0)
     for cfg in ("sonpi/sandbox.toml", "hil/sonpi_outside.toml"):
         assert load_config(ROOT / "hil_configs" / cfg).robots[0].profile == "sonpi"
+
+
+def test_the_board_s_pins_are_checked_before_they_act() -> None:
+    """PWM per motor, and the sonars' firing times only as five [next, period] pairs (a malformed one is dropped and
+    counted by the hub, never reaching the world)."""
+    from bridge.robots.sonpi.wiring import BOARD_WIRING as w
+
+    trig = [[60_000_000 * i, 300_000_000] for i in range(5)]
+    assert w.valid({"pwm": [0, 255]}) and w.valid({"pwm": [-255, 3], "trig": trig})
+    for bad in (
+        {"pwm": [0, 256]},
+        {"pwm": [0]},
+        {"trig": trig},
+        {"pwm": [0, 0], "trig": trig[:4]},
+        {"pwm": [0, 0], "trig": [*trig[:4], [0, 0]]},
+        {"pwm": [0, 0], "trig": [*trig[:4], [-1, 5]]},
+        {"pwm": [0, 0], "trig": [*trig[:4], [1.5, 5]]},
+        {"pwm": [0, 0], "echo": 1},
+        [0, 0],
+    ):
+        assert not w.valid(bad), bad

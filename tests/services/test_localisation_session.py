@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.config import to_toml
 from bridge.core.recorder import iter_messages
 from tests.core.test_session import _check_messages_match_their_schemas
 from tests.core.test_session import run as session_run
@@ -215,3 +216,40 @@ def test_sonpis_send_their_odometry_and_the_camera_fuses_it(tmp_path: Path) -> N
     assert cam["position_error_m"]["p95"] < 0.01 and cam["heading_error_deg"]["p95"] < 10
     assert s["services"]["controller"]["robots_reporting"] == 3
     assert all(r["alive"] for r in s["per_robot"])
+
+
+HIDDEN_SONPI = {  # a beam over robot 2's start: the camera has never seen it when its program starts
+    "session": {"name": "sonpi-hidden", "duration_s": 8, "seed": 4, "robots_per_process": 3},
+    "arena": {"width_m": 3, "length_m": 3},
+    "robots": [{
+        "count": 3, "profile": "sonpi", "behaviour": "roy_apf", "params": {"optimiser": "fixed", "v_max": 1.5},
+        "placement": {"kind": "explicit", "poses": [[0.6, 0.6, 0.0], [1.2, 0.6, 0.0], [0.6, 2.2, 0.0]]},
+        "devices": {"sonpi_wifi": {"url": "sitl://wifi", "localisation": "camera", "first_pose_timeout_s": 1.0}},
+    }],
+    "services": [{"kind": "overhead_camera", "name": "camera", "options": {
+        "mode": "noise", "occluders": [{"x": 0.6, "y": 2.2, "z": 0.6, "size": [0.9, 0.9, 0.05]}]}}],
+}
+
+
+def test_a_sonpi_the_camera_has_never_seen_drives_on_its_odometry(tmp_path: Path) -> None:
+    """Robot 2 starts under a beam: its pose device has no pose (NoPose) after its first_pose_timeout_s; its program
+    and tracking layer steer by its encoders meanwhile (no failure), it drives out from under the beam, and once the
+    camera sees it, the camera's pose steers it again."""
+    cfg = tmp_path / "hidden.toml"
+    cfg.write_text(to_toml(HIDDEN_SONPI))
+    out = tmp_path / "hidden"
+    rc, s = session_run(cfg, out)
+    assert rc == 0, s.get("error")
+    assert all(r["alive"] for r in s["per_robot"])
+    mcap = out / "session.mcap"
+    sources = [json.loads(d)["source"] for topic, _, d in iter_messages(mcap) if topic == "/r002/log/pose_source"]
+    assert sources[:2] == ["odometry", "camera"], sources
+    assert all(
+        json.loads(d)["source"] == "camera"
+        for topic, _, d in iter_messages(out / "session.mcap")
+        if topic in ("/r000/log/pose_source", "/r001/log/pose_source")
+    )
+    truth = _truth(out)
+    first, last = truth[0][1], truth[-1][1]
+    moved = math.hypot(last["x"][2] - first["x"][2], last["y"][2] - first["y"][2])
+    assert moved > 0.4, moved

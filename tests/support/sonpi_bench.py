@@ -50,6 +50,7 @@ class Board:
         self.omega = [0.0, 0.0]
         self.angle = [0.0, 0.0]
         self.pose = list(pose)
+        self.trig: list[list[int]] | None = None  # the last firing times the sketch told (pins "trig")
         self.tick([])
 
     def tick(self, items: list) -> dict:
@@ -59,6 +60,7 @@ class Board:
         self.out += res["out"]
         if "pins" in res:
             self.pwm = res["pins"]["pwm"]
+            self.trig = res["pins"].get("trig", self.trig)
         return res
 
     def advance(self, dt_ns: int) -> None:

@@ -25,6 +25,12 @@ register_schema(
             "encoders": {"type": "array", "items": {"type": "integer"}},
             "battery_v": {"type": "number"},
             "pwm": {"type": "array", "items": {"type": "integer", "minimum": -255, "maximum": 255}},
+            "trig": {
+                "type": "array",
+                "description": "when each sonar's TRIG pin fires next and its period (ns), right to left: sent at "
+                "power-up and when the firing mode changes; the world casts each cone at those times",
+                "items": {"type": "array", "items": {"type": "integer"}},
+            },
         },
     },
 )
@@ -56,14 +62,28 @@ class BoardWiring:
         return sens, rec
 
     def valid(self, pins: Any) -> bool:
-        """Signed 8-bit PWM per motor, nothing else."""
-        if not isinstance(pins, dict) or set(pins) != {"pwm"}:
+        """Signed 8-bit PWM per motor, and maybe the sonars' firing times (five [next, period] in ns)."""
+        if not isinstance(pins, dict) or not {"pwm"} <= set(pins) <= {"pwm", "trig"}:
             return False
         pwm = pins["pwm"]
-        return isinstance(pwm, list) and len(pwm) == 2 and all(type(v) is int and -255 <= v <= 255 for v in pwm)
+        if not (isinstance(pwm, list) and len(pwm) == 2 and all(type(v) is int and -255 <= v <= 255 for v in pwm)):
+            return False
+        trig = pins.get("trig")
+        return trig is None or (
+            isinstance(trig, list)
+            and len(trig) == len(BOARD_ORDER)
+            and all(
+                isinstance(s, list) and len(s) == 2 and all(type(v) is int for v in s) and s[0] >= 0 and s[1] > 0
+                for s in trig
+            )
+        )
 
     def actuate(self, world: Any, r: int, pins: dict[str, Any]) -> None:
         world.model("differential_drive").set_pwm(r, *pins["pwm"])
+        trig = pins.get("trig")
+        if trig is not None:  # the sonar part's order from the board's (right to left)
+            by_part = [trig[BOARD_ORDER.index(j)] for j in range(len(BOARD_ORDER))]
+            world.model("sonar").schedule(r, [s[0] for s in by_part], [s[1] for s in by_part])
 
 
 BOARD_WIRING = BoardWiring()

@@ -39,9 +39,14 @@ def build_camera(ctx: ServiceContext) -> OverheadCamera:
     boxes = [
         (ob.x, ob.y, ob.size[0], ob.size[1], ob.size[2], math.radians(ob.yaw_deg))
         for ob in cfg.obstacles
-        if isinstance(ob, BoxObstacle)
+        if isinstance(ob, BoxObstacle) and ob.motion is None
     ]
-    cylinders = [(ob.x, ob.y, ob.radius, ob.height) for ob in cfg.obstacles if not isinstance(ob, BoxObstacle)]
+    # moving obstacles (toy cars) are not drawn: lower than the markers, they never hide one and never stand still
+    cylinders = [
+        (ob.x, ob.y, ob.radius, ob.height)
+        for ob in cfg.obstacles
+        if not isinstance(ob, BoxObstacle) and ob.motion is None
+    ]
     top = max([r.height_m for r in ctx.robots] + [0.0])
     eye = (
         tuple(o.eye)

@@ -10,13 +10,12 @@ in summary.json); the numerical model runs the same seed and scenario in the sam
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
-from bridge.core.config import to_toml
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
+from bridge.experiments.sessions import run_config
 from bridge.experiments.stats import mean, ok
 from bridge.studies.pfsm.experiments import GRID_PARAMS, SEARCHERS, TARGETS, search_trial
 from bridge.studies.pfsm.numerical import Arena, deploy
@@ -54,15 +53,7 @@ def scenario_config(ns: int, nt: int, seed: int, max_s: float = COSIM_MAX_S, nam
 
 def run_session(cfg: dict[str, Any], workdir: Path) -> dict[str, Any]:
     """Write ``cfg``, run it in ``workdir``, return its summary (a failed session raises)."""
-    from bridge.core.launcher import run_session as launch
-
-    path = workdir / "pfsm.toml"
-    path.write_text(to_toml(cfg))
-    out = workdir / "session"
-    res = launch(str(path), None, str(out), progress=None, plot=False)
-    if res.code != 0:
-        raise RuntimeError(f"session failed ({res.code}): {res.summary.get('error')}")
-    return json.loads((out / "summary.json").read_text())
+    return run_config(cfg, workdir, "pfsm")[0]
 
 
 def cosim_trial(ns: int, nt: int, seed: int, workdir: Path, max_s: float = COSIM_MAX_S) -> TrialResult:

@@ -1,20 +1,69 @@
 """The Roy study's speed figures (``swarm-sitl bench --study roy``): 100 runs of the numerical chapter 3 scenario
 (roy-ch3-v2, BAT re-tuning every agent's gains at every step, 25 bats x 50 iterations) stepped in batches over the
-machine's cores (target: under 5 minutes), and one run through the controllers for comparison. Figures only, never
-pass/fail: the machine is shared and noisy."""
+machine's cores (target: under 5 minutes), and one run through the controllers for comparison; then sessions of
+SonPIs running chapter 3's law (fixed gains: the optimisers' cost is the numerical figure's) under the overhead
+camera: six in tracking mode (``hil_configs/sonpi/camera_formation.toml``, target at least 2x real time) and thirty
+in noise mode (target at least 1x), each with its real-time factor and every process's CPU seconds per simulated
+second. Figures only, never pass/fail: the machine is shared and noisy."""
 
 from __future__ import annotations
 
 import os
 import sys
 import time
+import tomllib
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
 
+from bridge.experiments.sessions import run_config
 from bridge.studies.roy.numerical import SCENARIOS, ch3_batch, ch3_trial
 
 RUNS = 100
 QUICK_RUNS = 10
 TARGET_S = 300.0
+CAMERA_FORMATION = Path(__file__).resolve().parents[3] / "hil_configs" / "sonpi" / "camera_formation.toml"
+SWARM_N = 30
+TARGET_RTF = {"tracking": 2.0, "noise": 1.0}
+
+
+def camera_sessions(duration: float) -> list[tuple[str, dict[str, Any]]]:
+    """The two camera sessions: ``camera_formation.toml`` (six SonPIs, tracking), and the same with ``SWARM_N``
+    SonPIs on a 6 x 5 grid in a 6 x 6 m arena, the camera in noise mode (too many to colour apart)."""
+    six = tomllib.loads(CAMERA_FORMATION.read_text())
+    six["session"].update(duration_s=duration, name="roy-bench-camera6")
+    many = tomllib.loads(CAMERA_FORMATION.read_text())
+    many["session"].update(duration_s=duration, name=f"roy-bench-camera{SWARM_N}", robots_per_process=15)
+    many["arena"].update(width_m=6.0, length_m=6.0)
+    many["obstacles"] = [{"type": "cylinder", "x": 3.0, "y": 3.6, "radius": 0.2}]
+    group = many["robots"][0]
+    group["count"] = SWARM_N
+    group["placement"] = {"kind": "grid", "origin": [0.6, 0.6], "spacing_m": 0.45, "columns": 6, "yaw_deg": 45}
+    group["params"] = {**group["params"], "target_x": 50.0, "target_y": 50.0}
+    many["services"][0]["options"] = {"mode": "noise", "fps": 10}
+    many["services"][1]["options"] = {**many["services"][1]["options"], "target": [5.0, 5.0]}
+    return [("tracking", six), ("noise", many)]
+
+
+def _session(name: str, raw: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    work = Path(out_dir) / name
+    work.mkdir(parents=True, exist_ok=True)
+    return run_config(raw, work, name)[0]
+
+
+def camera_figures(duration: float, out_dir: str) -> list[str]:
+    """Run the camera sessions; a line each: robots, mode, real-time factor against its target, and every
+    process's CPU seconds per simulated second."""
+    lines = []
+    for mode, raw in camera_sessions(duration):
+        n = raw["robots"][0]["count"]
+        s = _session(raw["session"]["name"], raw, out_dir)
+        sim = max(float(s["sim_time_s"]), 1e-9)
+        cpu = ", ".join(f"{p} {v / sim:.2f}" for p, v in sorted((s.get("process_cpu_s") or {}).items()))
+        lines.append(f"  {n} SonPIs, camera in {mode} mode, {duration:g} s: rtf {s['rtf']}x (target >= "
+                     f"{TARGET_RTF[mode]:g}x), {s['processes']} processes; CPU-s per simulated s: {cpu}")
+        print(f"  ran {n} SonPIs ({mode}): rtf {s['rtf']}x", file=sys.stderr)
+    return lines
 
 
 def _batch(seeds: list[int], max_s: float | None) -> tuple[int, int, float]:
@@ -26,7 +75,8 @@ def _batch(seeds: list[int], max_s: float | None) -> tuple[int, int, float]:
 
 def bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
     """``RUNS`` (``QUICK_RUNS``) seeded runs to arrival or the 600 s timeout (``duration``: simulated seconds per
-    run instead), in one batch per core."""
+    run instead), in one batch per core; then the camera sessions (``duration`` or 10 s quick, 30 s full)."""
+    camera = camera_figures(duration or (10.0 if quick else 30.0), out_dir)
     n = QUICK_RUNS if quick else RUNS
     jobs = max(1, min(os.cpu_count() or 1, n))
     seeds = list(range(1, n + 1))
@@ -47,4 +97,6 @@ def bench(quick: bool = False, duration: float | None = None, out_dir: str = "ru
           f"({cpu / max(sim_s, 1e-9) * 200:.1f} CPU-s per 200-s run)")
     print(f"  ran {n} runs in {wall:.1f} s", file=sys.stderr)
     print(f"  one run through the controllers (RoyApf per agent, no batch): {alone:.3f} CPU-s per simulated s")
+    for line in camera:
+        print(line)
     return 0

@@ -5,9 +5,9 @@ path length) for BAT, PSO, BFO ("BG"), BGPSO, PSOABG and the fixed-gain baseline
 gathering (C3).
 
 A cell names its ``kind`` of scenario: "numerical" (point agents, ``BatchSwarm``: one cell's trials stepped
-together, each run's numbers its own) is the only one so far; a co-simulation kind (SonPI robots, target D2) adds its
-own ``SCENARIO_KINDS`` entry, a trial function with the same metrics, and cells. The methods share their
-deployments (``seed_ignores``): the comparison is paired.
+together, each run's numbers its own) or "cosim" (``cosim``: sessions of SonPIs, chapter 7's hardware cases in a
+"simulation" and a "hardware" profile, target D2; each trial one session). The methods share their deployments, and
+a co-simulated case's two profiles too (``seed_ignores``): the comparisons are paired.
 """
 
 from __future__ import annotations
@@ -15,12 +15,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
 from bridge.experiments.stats import mean, ok, pooled_mean_sd, values
+from bridge.studies.roy import cosim
 from bridge.studies.roy.numerical import SCENARIOS, TRACE, Ch3Run, Ch3Scenario, Swarm, ch3_batch, deploy
 from swarm_logic.families.roy.gathering import CircleGathering
 
@@ -113,10 +115,39 @@ def numerical_trials(cell: dict[str, Any], trials: list[Trial]) -> list[TrialRes
     return [TrialResult(run_metrics(r)) for r in runs]
 
 
+def cosim_trials(cell: dict[str, Any], trials: list[Trial]) -> list[TrialResult]:
+    """A cell's sessions of SonPIs (``cosim``), one per trial, the deployment from the trial's seed (the same in
+    both profiles); smoke runs stop at ``SMOKE_S``."""
+    out = []
+    for t in trials:
+        wd = Path(t.workdir)
+        wd.mkdir(parents=True, exist_ok=True)
+        cfg = cosim.session_config(cell["scenario"], int(cell["n"]), cell["profile"], t.seed % (1 << 31), wd,
+                                   SMOKE_S if t.smoke else None, optimiser=cell["method"])
+        out.append(TrialResult(cosim.session_metrics(cosim.run_session(cfg, wd))))
+    return out
+
+
 # the scenario kinds a cell can name, each a function running a cell's trials
 SCENARIO_KINDS: dict[str, Callable[[dict[str, Any], list[Trial]], list[TrialResult]]] = {
     "numerical": numerical_trials,
+    "cosim": cosim_trials,
 }
+COSIM_TRIALS = 5  # sessions per co-simulated cell
+# chapter 7's hardware cases (Tables 7.1-7.3): (scenario, robots), the thesis' S/W and H/W time (s), FE mean (sd),
+# path (S/W unit, H/W "cm": digest §4.5.1 doubts the unit)
+COSIM_CASES = (("ch7-open", 3), ("ch7-static", 3), ("ch7-static", 4), ("ch7-moving-low", 4), ("ch7-moving-high", 4))
+TABLES_7 = {
+    ("ch7-open", 3): {"table": "7.1", "time": (35, 71), "fe": ((0.09, 0.01), (0.21, 0.05)), "path": (50.5, 51.2)},
+    ("ch7-static", 3): {"table": "7.2", "time": (98, 249), "fe": ((0.13, 0.2), (0.25, 0.19)), "path": (51.82, 53.07)},
+    ("ch7-static", 4): {"table": "7.2", "time": (100, 245), "fe": ((0.26, 0.2), (0.32, 0.21)), "path": (54.41, 57.93)},
+    ("ch7-moving-low", 4): {"table": "7.3", "time": (None, 304), "fe": (None, (0.37, 0.25)), "path": (None, 62.11)},
+    ("ch7-moving-high", 4): {"table": "7.3", "time": (None, 575), "fe": (None, (0.47, 0.41)), "path": (None, 69.5)},
+}
+
+
+def cosim_cell(outcomes: list[Outcome], scenario: str, n: int, profile: str) -> list[TrialResult]:
+    return ok(outcomes, kind="cosim", scenario=scenario, n=n, profile=profile)
 
 
 def _pct(x: float) -> str:
@@ -164,7 +195,7 @@ class RoyApfExperiment(Experiment):
     trials = 100
     smoke_trials = 2
     batch = 50
-    seed_ignores = ("method",)
+    seed_ignores = ("method", "profile")
     boxes = (("mission_s", "mission time (s)"), ("path_length", "mean path length (unit)"),
              ("ci_mean", "cohesion index, mean over the run"))
 
@@ -174,9 +205,13 @@ class RoyApfExperiment(Experiment):
         sizes = SCALING_N[:1] if smoke else SCALING_N
         scaling = [{"kind": "numerical", "scenario": "open", "n": n, "method": m} for n in sizes
                    for m in ("bat", "gathering")]
-        return main + scaling
+        hardware = [{"kind": "cosim", "scenario": sc, "n": n, "method": "bat", "profile": p}
+                    for sc, n in (COSIM_CASES[:1] if smoke else COSIM_CASES) for p in cosim.PROFILES]
+        return main + scaling + hardware
 
     def cell_trials(self, cell: dict[str, Any], n: int) -> int:
+        if cell["kind"] == "cosim":
+            return min(n, COSIM_TRIALS)
         if cell["scenario"] == "open":
             return min(n, SCALING_TRIALS[int(cell["n"])])
         if cell["method"] == "gathering":
@@ -184,6 +219,9 @@ class RoyApfExperiment(Experiment):
         if cell["method"] in ("bfo", "bgpso", "psoabg"):
             return min(n, BFO_TRIALS)
         return n
+
+    def cell_batch(self, cell: dict[str, Any]) -> int:
+        return 1 if cell["kind"] == "cosim" else self.batch  # sessions spread over the workers
 
     def run(self, trial: Trial) -> TrialResult:
         return self.run_batch([trial])[0]
@@ -214,6 +252,14 @@ class RoyApfExperiment(Experiment):
                    "PSO, BGPSO largest k_OA sd", "all three", self._c2),
             Target("C3", "mission time vs N against circle gathering (Table 3.6)", "BAT 200/386/812 s, gathering "
                    "357/698/1225 s", "BAT faster at every N; BAT's 30/6 ratio < 5", self._c3),
+            Target("D2-FE", "SonPIs: formation error (eq. 7.1) hardware > simulation (Tables 7.1, 7.2)",
+                   "3 robots open 0.21 vs 0.09; static 3 robots 0.25 vs 0.13, 4 robots 0.32 vs 0.26",
+                   "hardware's mean FE above simulation's in every case", _d2_fe),
+            Target("D2-time", "SonPIs: hardware missions longer than simulation's (Tables 7.1, 7.2)",
+                   "x 2.0 (71/35), 2.5 (249/98), 2.5 (245/100)", "ratio of mean mission times 1.5-3 in every case",
+                   _d2_time),
+            Target("D2-dyn", "SonPIs, hardware: low < high complexity in time, FE and path (Table 7.3)",
+                   "304 < 575 s, FE 0.37 < 0.47, path 62.11 < 69.5", "all three orderings", _d2_dyn),
         ]
 
     @staticmethod
@@ -357,4 +403,132 @@ class RoyApfExperiment(Experiment):
                 cells.append(f"{_f(float(np.mean(t)), 0) if len(t) else '-'} ({len(res)}, {len(t)})")
             if any(not c.startswith("- (0") for c in cells):
                 lines.append(f"| {n} | {TABLE_3_6[n][0]} | {cells[0]} | {TABLE_3_6[n][1]} | {cells[1]} |")
-        return lines
+        return lines + cosim_sections(outcomes)
+
+
+# -- the co-simulated hardware cases (target D2) --------------------------------------------------------------------
+def _cosim_means(res: list[TrialResult]) -> dict[str, float]:
+    """A cell's means: mission time and path over the arrivals, FE (the runs' mission means, and their sd's mean)."""
+    arr = [r for r in res if r.metrics.get("success")]
+    return {"time": mean(arr, "mission_s"), "fe": mean(res, "fe_mean"), "fe_sd": mean(res, "fe_sd"),
+            "path": mean(arr, "path_m"), "success": mean(res, "success"), "n": len(res), "arrived": len(arr)}
+
+
+def _cases(outcomes: list[Outcome]) -> dict[tuple[str, int], dict[str, dict[str, float]]]:
+    out = {}
+    for sc, n in COSIM_CASES:
+        cells = {p: _cosim_means(cosim_cell(outcomes, sc, n, p)) for p in cosim.PROFILES}
+        if any(c["n"] for c in cells.values()):
+            out[(sc, n)] = cells
+    return out
+
+
+def _d2_fe(outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
+    cases = {k: v for k, v in _cases(outcomes).items() if TABLES_7[k]["fe"][0] is not None}
+    both = {k: v for k, v in cases.items() if v["simulation"]["n"] and v["hardware"]["n"]}
+    if not both:
+        return "no runs", None, ""
+    text = "; ".join(f"{sc} N={n}: {_f(v['hardware']['fe'])} vs {_f(v['simulation']['fe'])}"
+                     for (sc, n), v in both.items())
+    return text, all(v["hardware"]["fe"] > v["simulation"]["fe"] for v in both.values()), "hardware vs simulation"
+
+
+def _d2_time(outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
+    cases = {k: v for k, v in _cases(outcomes).items() if TABLES_7[k]["time"][0] is not None}
+    both = {k: v for k, v in cases.items() if v["simulation"]["n"] and v["hardware"]["n"]}
+    if not both:
+        return "no runs", None, ""
+    ratios = {k: v["hardware"]["time"] / v["simulation"]["time"] for k, v in both.items()}
+    text = "; ".join(f"{sc} N={n}: x {_f(r)} ({_f(both[(sc, n)]['hardware']['time'], 0)} / "
+                     f"{_f(both[(sc, n)]['simulation']['time'], 0)} s)" for (sc, n), r in ratios.items())
+    if all(math.isnan(r) for r in ratios.values()):
+        return text, None, "no case arrived in both profiles"
+    good = all(not math.isnan(r) and 1.5 <= r <= 3.0 for r in ratios.values())
+    return text, good, "means over the arrivals; a case without arrivals in a profile fails"
+
+
+def _d2_dyn(outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
+    cases = _cases(outcomes)
+    lo, hi = cases.get(("ch7-moving-low", 4)), cases.get(("ch7-moving-high", 4))
+    if not lo or not hi or not lo["hardware"]["n"] or not hi["hardware"]["n"]:
+        return "no runs", None, ""
+    a, b = lo["hardware"], hi["hardware"]
+    text = (f"time {_f(a['time'], 0)} vs {_f(b['time'], 0)} s, FE {_f(a['fe'])} vs {_f(b['fe'])}, path "
+            f"{_f(100 * a['path'], 1)} vs {_f(100 * b['path'], 1)} cm (arrivals {a['arrived']}/{a['n']}, "
+            f"{b['arrived']}/{b['n']})")
+    return text, bool(a["time"] < b["time"] and a["fe"] < b["fe"] and a["path"] < b["path"]), "hardware profile"
+
+
+def _th(v: Any, nd: int = 2) -> str:
+    return "-" if v is None else (f"{v[0]} +- {v[1]}" if isinstance(v, tuple) else f"{v:g}" if nd else f"{v}")
+
+
+def cosim_sections(outcomes: list[Outcome]) -> list[str]:
+    """Tables 7.1-7.3 with ours beside, the localisation's and the sonars' errors, the runs that did not arrive."""
+    cases = _cases(outcomes)
+    if not cases:
+        return []
+    lines = ["", "## Tables 7.1-7.3: SonPIs in co-simulation, thesis beside ours", "",
+             "Ours: sessions of SonPIs (`bridge/studies/roy/cosim.py`), the thesis' S/W column beside our "
+             "\"simulation\" profile, its H/W column beside our \"hardware\" profile. Time and path: means over the "
+             "sessions that arrived; FE: the mean over sessions of each session's mean over its mission (1 s samples), "
+             "and the mean of their sd's. Paths: the thesis' S/W in units, H/W in \"cm\" (the digest doubts that "
+             "unit); ours in units of 0.1 m and in cm.", "",
+             "| table | case | N | time S/W thesis | ours sim (arrived/runs) | time H/W thesis | "
+             "ours hw (arrived/runs) | hw/sim | FE S/W thesis | ours sim | FE H/W thesis | ours hw | "
+             "path S/W thesis | ours sim (unit) | path H/W thesis | ours hw (cm) |", "|" + "---|" * 16]
+    for (sc, n), v in cases.items():
+        th = TABLES_7[(sc, n)]
+        s, h = v["simulation"], v["hardware"]
+        ratio = h["time"] / s["time"] if s["n"] and h["n"] else math.nan
+        lines.append(
+            f"| {th['table']} | {sc} | {n} | {_th(th['time'][0])} | {_f(s['time'], 0)} ({s['arrived']}/{s['n']}) | "
+            f"{_th(th['time'][1])} | {_f(h['time'], 0)} ({h['arrived']}/{h['n']}) | {_f(ratio)} | "
+            f"{_th(th['fe'][0])} | {_f(s['fe'])} +- {_f(s['fe_sd'])} | {_th(th['fe'][1])} | "
+            f"{_f(h['fe'])} +- {_f(h['fe_sd'])} | {_th(th['path'][0])} | {_f(10 * s['path'], 1)} | "
+            f"{_th(th['path'][1])} | {_f(100 * h['path'], 1)} |")
+    lines += ["", "## Localisation and sonars per cell (means over the sessions)", "",
+              "Broadcast: the poses the robots got (the camera's fix fused with odometry, or the exact pose in the "
+              "simulation profile), against the ground truth at the frame; fix: the camera's own, before the "
+              "comparator. Sonar: each board's 250 ms windows' nearest echo against the nearest true surface "
+              "(`per_robot[].firmware.arduino.sonar_windows`).", "",
+              "| case | N | profile | broadcast error mm (p95) | heading deg | fix error mm | fix heading deg | "
+              "frames without pose | sonar Hz | sonar mean error mm | RMS mm | valid | Wi-Fi lost / sent | "
+              "closest pair m | sim s per session | CPU s per session |", "|" + "---|" * 16]
+    for (sc, n), _v in cases.items():
+        for p in cosim.PROFILES:
+            res = cosim_cell(outcomes, sc, n, p)
+            if not res:
+                continue
+            lines.append(
+                f"| {sc} | {n} | {p} | {_f(mean(res, 'loc_err_mm'))} ({_f(mean(res, 'loc_err_p95_mm'))}) | "
+                f"{_f(mean(res, 'loc_head_deg'))} | {_f(mean(res, 'fix_err_mm'))} | {_f(mean(res, 'fix_head_deg'))} | "
+                f"{_f(mean(res, 'frames_without_pose'), 1)} | {_f(mean(res, 'sonar_hz'), 1)} | "
+                f"{_f(mean(res, 'sonar_err_mm'))} | {_f(mean(res, 'sonar_rms_mm'))} | "
+                f"{_f(mean(res, 'sonar_valid'), 3)} | "
+                f"{_f(mean(res, 'wifi_lost'), 0)} / {_f(mean(res, 'wifi_sent'), 0)} | {_f(mean(res, 'nn_min_m'), 3)} | "
+                f"{_f(mean(res, 'sim_s'), 0)} | {_f(mean(res, 'cpu_s'), 0)} |")
+    lines += ["", "## The formation error's parts per cell", "",
+              "FE = the share of robot pairs closer than 2 r_s + the share farther than 3 r_s (means over each "
+              "session's mission, then over the sessions).", "",
+              "| case | N | profile | FE | pairs < 2 r_s | pairs > 3 r_s | closest pair (m, mean of the sessions' "
+              "minima) |", "|---|---|---|---|---|---|---|"]
+    for (sc, n), _v in cases.items():
+        for p in cosim.PROFILES:
+            res = cosim_cell(outcomes, sc, n, p)
+            if res:
+                lines.append(f"| {sc} | {n} | {p} | {_f(mean(res, 'fe_mean'))} | {_f(mean(res, 'fe_close'))} | "
+                             f"{_f(mean(res, 'fe_far'))} | {_f(mean(res, 'nn_min_m'), 3)} |")
+    missed = [(o.trial, o.result) for o in outcomes if o.trial.cell.get("kind") == "cosim"
+              and (o.result is None or not o.result.metrics.get("success"))]
+    lines += ["", "## Sessions that did not arrive", ""]
+    if not missed:
+        lines.append("None: every session's swarm reached T.")
+    for t, r in missed:
+        c = t.cell
+        what = ("raised (see the errors above)" if r is None else
+                f"ended at {_f(r.metrics.get('sim_s'), 0)} s without arriving; FE {_f(r.metrics.get('fe_mean'))}, "
+                f"path {_f(r.metrics.get('path_m'))} m, closest pair {_f(r.metrics.get('nn_min_m'), 3)} m, "
+                f"{r.metrics.get('alive')} robots alive")
+        lines.append(f"- {c['scenario']} N={c['n']} {c['profile']}, trial {t.index} (seed {t.seed}): {what}")
+    return lines

@@ -15,8 +15,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from bridge.core.config import to_toml
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
+from bridge.experiments.sessions import run_config
 from bridge.experiments.stats import mean, ok
 from bridge.studies.zebro.cosim import SENSING, SETUPS, scenario_config
 from swarm_logic.families.zebro.messages import NAMES
@@ -31,15 +31,7 @@ BUDGET_FPS = 512  # [uwb] frames_per_s: the swarm's TDMA budget
 
 def run_session(cfg: dict[str, Any], workdir: Path) -> tuple[dict[str, Any], Path]:
     """Write ``cfg``, run it in ``workdir``, return its summary and output directory (a failed session raises)."""
-    from bridge.core.launcher import run_session as launch
-
-    path = workdir / "zebro.toml"
-    path.write_text(to_toml(cfg))
-    out = workdir / "session"
-    res = launch(str(path), None, str(out), progress=None, plot=False)
-    if res.code != 0:
-        raise RuntimeError(f"session failed ({res.code}): {res.summary.get('error')}")
-    return json.loads((out / "summary.json").read_text()), out
+    return run_config(cfg, workdir, "zebro")
 
 
 def air_frames(mcap: Path) -> tuple[Counter[str], int, dict[int, int]]:

@@ -35,7 +35,9 @@ past its block cannot be refused (a slave transmitter cannot NACK): the missing 
 Items as a leg module's: ``["i2c", txn, segments]`` in, ``["i2c", txn, [bytes | None...]]`` out for reads (``None``: a
 refused read, the last), ``["i2c_attach", 0x20, False, True]`` at power-up (it may refuse reads); pins in: ``ranges_m``
 (the surface in each sensor's beam, m, ``inf`` beyond reach), ``encoders``, ``battery_v``; pins out: ``pwm`` (left,
-right).
+right), and ``trig`` after power-up and after each change of firing mode: when each sensor's TRIG pin fires next and
+how often it fires (``[[next_ns, period_ns]]`` right to left), so the world casts only the cones the sketch will read,
+at its ping times.
 """
 
 from __future__ import annotations
@@ -145,6 +147,7 @@ class SonarBoard:
         # sonars
         self.next_fire = 0
         self.next_sensor = 0
+        self.trig_due = True  # the sensors' firing times are to be told (pins "trig") at the next loop
         self.pending: list[tuple[int, int, Echo, float]] = []  # (echo end ns, sensor, echo, true range)
         self.window_end = 0
         self.acc = [_Acc() for _ in range(P.SENSORS)]
@@ -206,10 +209,24 @@ class SonarBoard:
             self._loop(t_ns, sens)
             self.next_loop = max(self.next_loop + self.period_ns, t_ns + 1)
             res["pins"] = {"pwm": list(self.pwm)}
+            if self.trig_due:
+                self.trig_due = False
+                res["pins"]["trig"] = self.trig_schedule()
         res["wake"] = self.next_loop
         return res
 
     # -- the sonars ------------------------------------------------------------------------------------------------
+    def trig_schedule(self) -> list[list[int]]:
+        """Per sensor (right to left): the time its TRIG pin fires next and its period (ns) in the current mode."""
+        if self.firing == P.FIRING_SEQUENTIAL:
+            slot = SLOT_MS * 1_000_000
+            return [
+                [self.next_fire + ((i - self.next_sensor) % P.SENSORS) * slot, P.SENSORS * slot]
+                for i in range(P.SENSORS)
+            ]
+        period = SLOT_MS * 1_000_000 if self.firing == P.FIRING_SIMULTANEOUS else IDEAL_PERIOD_US * 1000
+        return [[self.next_fire, period] for _ in range(P.SENSORS)]
+
     def _sonars(self, t: int, ranges: Any) -> None:
         if ranges is None or len(ranges) != P.SENSORS:
             ranges = [math.inf] * P.SENSORS
@@ -384,6 +401,7 @@ class SonarBoard:
         if P.ERROR_COUNT in vals:
             self.error_count = self.last_error = 0
         if P.FIRING in vals:
+            self.trig_due = self.trig_due or vals[P.FIRING] != self.firing
             self.firing = vals[P.FIRING]
         if P.WATCHDOG in vals:
             self.watchdog = vals[P.WATCHDOG]

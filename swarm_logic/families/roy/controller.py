@@ -21,13 +21,17 @@ from swarm_logic.families.roy.tuning import command, deadlocked, draw, kind, tun
 from swarm_logic.robot import Robot
 from swarm_logic.robots.sonpi.interfaces import (
     LOCALISATION,
+    ODOMETRY,
     POSE,
     SONAR,
     VELOCITY,
+    AgentPose,
     HolonomicVelocity,
     Localisation,
+    Odometry,
     OwnPose,
     Sonar,
+    own_pose,
 )
 
 OPTIMISERS = ("bat", "pso", "bfo", "bgpso", "psoabg", "fixed")
@@ -37,13 +41,20 @@ COUNT = "[1, 10000]"
 UNIT = "[0, 1]"
 
 
+POSE_SOURCES = ("camera", "carried", "odometry", "none")  # ``own_pose``'s answers, in telemetry's ``pose_src`` code
+
+
 class SonpiAgent(Controller):
-    """A chapter 3 agent on the SonPI's four devices: ``init`` binds them, ``destroy`` commands zero velocity."""
+    """A chapter 3 agent on the SonPI's four devices (and its odometry, when it has one): ``init`` binds them,
+    ``destroy`` commands zero velocity. ``read_pose`` is the agent's own pose: the localisation service's (fresh, or
+    carried on by odometry while the camera has lost the robot), the odometry's while the service has none for it
+    (``NoPose``: the camera has never seen it), or None when it has neither (the agent then holds still)."""
 
     pose: OwnPose
     localisation: Localisation
     sonar: Sonar
     velocity: HolonomicVelocity
+    odometry: Odometry | None
 
     def bind(self, robot: Robot, p: dict[str, Any]) -> None:
         """Keep the resolved parameters ``p`` and the period, and look up the devices."""
@@ -53,6 +64,26 @@ class SonpiAgent(Controller):
         self.localisation = robot.device(LOCALISATION)
         self.sonar = robot.device(SONAR)
         self.velocity = robot.device(VELOCITY)
+        self.odometry = robot.devices.get(ODOMETRY, robot.faces.get(ODOMETRY))
+        self.pose_steps = dict.fromkeys(POSE_SOURCES, 0)
+        self.pose_src = "start"
+
+    def read_pose(self) -> AgentPose | None:
+        """This agent's pose now (see the class), its source counted in ``pose_steps``."""
+        me, src = own_pose(self.pose, self.odometry, self.robot.id)
+        if src != self.pose_src:  # a change of source is worth a line (topic pose_source)
+            self.robot.log("pose_source", source=src, previous=self.pose_src, steps=dict(self.pose_steps))
+            self.pose_src = src
+        self.pose_steps[src] += 1
+        return me
+
+    def pose_code(self) -> int:
+        """The last step's pose source as its index in ``POSE_SOURCES`` (-1 before the first step)."""
+        return POSE_SOURCES.index(self.pose_src) if self.pose_src in POSE_SOURCES else -1
+
+    def hold(self) -> None:
+        """No pose at all: stand still (a step without a pose must not steer by a guess)."""
+        self.velocity.set_velocity(0.0, 0.0)
 
     def destroy(self) -> None:
         """Command zero velocity."""
@@ -166,10 +197,9 @@ class RoyApf(SonpiAgent):
         self.centroids: deque[np.ndarray] = deque(maxlen=max(2, round(p["deadlock_window_s"] / self.period_s) + 1))
         self.u = np.zeros(2)
 
-    def state(self) -> AgentState:
-        """What this agent knows now, in thesis units (a batch of one)."""
+    def state(self, me: AgentPose) -> AgentState:
+        """What this agent knows now, its own pose ``me``, in thesis units (a batch of one)."""
         unit = float(self.p["unit_m"])
-        me = self.pose.read()
         x_i = np.array([[me.x_m, me.y_m]]) / unit
         v_i = np.array([[me.vx_mps, me.vy_mps]]) / unit
         poses = self.localisation.poses()
@@ -181,7 +211,11 @@ class RoyApf(SonpiAgent):
         return observe(x_i, v_i, xs, vs, np.array([me.yaw_rad]), ranges, angles, self.p)
 
     def step(self) -> None:
-        s = self.state()
+        me = self.read_pose()
+        if me is None:
+            self.hold()
+            return
+        s = self.state(me)
         p = self.p
         deadlock = False
         if p["optimiser"] == "psoabg":
@@ -202,4 +236,4 @@ class RoyApf(SonpiAgent):
     def telemetry(self) -> dict[str, float | int]:
         k = self.gains
         return {"k_a": float(k[0]), "k_v": float(k[1]), "k_r": float(k[2]), "k_oa": float(k[3]),
-                "pso_on": int(self.using_pso)}
+                "pso_on": int(self.using_pso), "pose_src": self.pose_code()}

@@ -120,7 +120,10 @@ class CircleGathering(SonpiAgent):
     def step(self) -> None:
         p = self.p
         unit = float(p["unit_m"])
-        me = self.pose.read()
+        me = self.read_pose()
+        if me is None:
+            self.hold()
+            return
         poses = self.localisation.poses()
         ids = [self.robot.id, *(q.id for q in poses)]
         xs = np.array([[me.x_m, me.y_m], *([q.x_m, q.y_m] for q in poses)], float) / unit
@@ -149,4 +152,4 @@ class CircleGathering(SonpiAgent):
         self.velocity.set_velocity(float(v[0]) * unit, float(v[1]) * unit)
 
     def telemetry(self) -> dict[str, float | int]:
-        return {"rounds": self.rounds}
+        return {"rounds": self.rounds, "pose_src": self.pose_code()}

@@ -10,7 +10,9 @@ faces (``interfaces``):
 - ``sonpi_odometry``: the pose dead-reckoned from the encoders (from the robot's start pose when its HAL gives one).
 
 The heading for the tracking layer is the robot's ``sonpi_pose`` (the overhead camera's) when it has that device,
-looked up at first use, else the odometry's.
+looked up at first use, else the odometry's. While the camera has lost the robot, that device carries its last pose
+on by odometry (``fresh`` False), which steers as well; while it has never had one (``NoPose``, a robot the camera
+has not seen), the odometry's heading steers (``counters["heading_from_odometry"]``).
 
 Each poll is one I2C transaction (the odometry block, and the window block when a new window is due: 54 bytes read
 after repeated STARTs) and, when the set-points change or the keep-alive is due, one write. A bus error is counted
@@ -36,6 +38,7 @@ from swarm_logic.robots.sonpi.interfaces import (
     SONAR,
     SONAR_ANGLES_RAD,
     VELOCITY,
+    NoPose,
     OdometryReading,
     SonarReading,
 )
@@ -93,6 +96,7 @@ class SonpiBoard:
             "windows": 0,
             "windows_missed": 0,
             "not_identified": 0,
+            "heading_from_odometry": 0,  # polls that steered by the encoders: the pose device had no pose yet
         }
         self.last_error: str | None = None
         self._faces = {SONAR: SonarFace(self), VELOCITY: VelocityFace(self), ODOMETRY: OdometryFace(self)}
@@ -177,7 +181,13 @@ class SonpiBoard:
                 self._pose = self.robot.device(POSE) if self.robot is not None else False
             except KeyError:
                 self._pose = False
-        return self._pose.read().yaw_rad if self._pose else self.yaw
+        if not self._pose:
+            return self.yaw
+        try:
+            return self._pose.read().yaw_rad  # the camera's, or its last one carried on by odometry (not fresh)
+        except NoPose:  # the camera has never seen this robot: steer by the encoders meanwhile
+            self.counters["heading_from_odometry"] += 1
+            return self.yaw
 
     def _send(self) -> None:
         vx, vy = self.command

@@ -6,7 +6,8 @@ A robot reaches them as ``robot.device(name)`` under the names below. Poses are 
 counter-clockwise); sonar angles are relative to the robot's heading (+ = left).
 
 - ``sonpi_pose`` (``OwnPose``): this robot's pose and velocity, as the localisation service (overhead camera fused
-  with odometry in the thesis) estimates it.
+  with odometry in the thesis) estimates it; ``read`` raises ``NoPose`` while the service has never given one (a
+  robot the camera has not seen), and a reader falls back to the odometry (``own_pose``).
 - ``sonpi_localisation`` (``Localisation``): the other robots' poses and velocities as the service broadcasts them
   (the thesis' controllers need all agents' positions, ch.3 also their velocities; digest §5.1 item 3).
 - ``sonpi_sonar`` (``Sonar``): the 5 HC-SR04 sonars, 45 degrees apart over the front 180 degrees (digest §3.2).
@@ -69,10 +70,14 @@ class OdometryReading:
     right_counts: int
 
 
+class NoPose(LookupError):
+    """The localisation service has given this robot no pose yet (the camera has never seen it)."""
+
+
 @runtime_checkable
 class OwnPose(Protocol):
     def read(self) -> AgentPose:
-        """This robot's latest pose and velocity estimate."""
+        """This robot's latest pose and velocity estimate (``NoPose`` when there is none yet)."""
         ...
 
 
@@ -106,3 +111,24 @@ class Odometry(Protocol):
     def read(self) -> OdometryReading:
         """The latest dead-reckoned pose and speeds."""
         ...
+
+
+def odometry_pose(robot_id: int, o: OdometryReading) -> AgentPose:
+    """The odometry's reading as a pose (its frame: the world's when the robot's start pose was known)."""
+    return AgentPose(robot_id, o.x_m, o.y_m, o.yaw_rad, o.v_mps * math.cos(o.yaw_rad), o.v_mps * math.sin(o.yaw_rad))
+
+
+def own_pose(pose: OwnPose | None, odometry: Odometry | None, robot_id: int) -> tuple[AgentPose | None, str]:
+    """This robot's pose and where it came from: ``"camera"`` (the service's fresh estimate), ``"carried"`` (the
+    service's last one carried on: the camera has lost the robot; ``fresh`` False), ``"odometry"`` (the service has
+    none, ``NoPose``: the encoders' dead reckoning) or ``"none"`` (neither: the pose is None)."""
+    if pose is not None:
+        try:
+            p = pose.read()
+        except NoPose:
+            pass
+        else:
+            return p, ("camera" if getattr(pose, "fresh", True) else "carried")
+    if odometry is not None:
+        return odometry_pose(robot_id, odometry.read()), "odometry"
+    return None, "none"

@@ -30,14 +30,10 @@ from typing import Any
 
 from swarm_logic.drivers.wifi import open_link
 from swarm_logic.robots.sonpi import pose_packet as pp
-from swarm_logic.robots.sonpi.interfaces import LOCALISATION, POSE, AgentPose
+from swarm_logic.robots.sonpi.interfaces import LOCALISATION, POSE, AgentPose, NoPose
 
 MISSION = "sonpi_mission"
 ODOMETRY_FACE = "sonpi_odometry"  # the robot's own odometry (its board's device), if it has one
-
-
-class NoPose(LookupError):
-    """No pose arrived from the localisation service (within ``first_pose_timeout_s`` of the first read)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,8 +51,9 @@ class _OwnPose:
         self.dev = dev
 
     def read(self) -> AgentPose:
-        """This robot's latest pose estimate (waiting up to ``first_pose_timeout_s`` for the first one). While the
-        camera has lost it, the last broadcast pose carried on by the robot's own odometry when it has some."""
+        """This robot's latest pose estimate (the first read waits up to ``first_pose_timeout_s`` for the first one;
+        ``NoPose`` after that, and at once from then on until one comes). While the camera has lost it, the last
+        broadcast pose carried on by the robot's own odometry when it has some."""
         d = self.dev
         if d.own is None:
             d.wait_first_pose()
@@ -129,6 +126,7 @@ class SonpiWifi:
         self._odom_face: Any = None
         self._odom_at_own: tuple[float, float, float] | None = None  # the odometry's pose when the last own pose came
         self._odom_looked = False
+        self._waited = False  # the first read's wait for a pose is over
         self._next_odom = 0.0
         self._next_status = 0.0
         self._next_log = 0.0
@@ -178,6 +176,13 @@ class SonpiWifi:
             self._take(got[0])
 
     def wait_first_pose(self) -> None:
+        """Wait for the first own pose, once: a robot the camera never saw must not stall every read."""
+        if self._waited:
+            self._drain()
+            if self.own is None:
+                raise NoPose(f"robot {self.robot.id}: still no pose from the localisation service")
+            return
+        self._waited = True
         deadline = self.clock.now() + self.first_timeout
         while self.own is None:
             left = deadline - self.clock.now()

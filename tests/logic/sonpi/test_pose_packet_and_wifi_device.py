@@ -146,6 +146,10 @@ def test_no_pose_within_the_timeout_is_an_error_naming_the_setting() -> None:
     try:
         with pytest.raises(NoPose, match="first_pose_timeout_s"):
             dev.faces()[POSE].read()
+        t = robot.clock.t
+        with pytest.raises(NoPose, match="still no pose"):  # the wait is the first read's only: no stall
+            dev.faces()[POSE].read()
+        assert robot.clock.t == t
     finally:
         dev.close()
     with pytest.raises(ValueError, match="unknown settings"):

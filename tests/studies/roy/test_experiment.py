@@ -36,7 +36,7 @@ def test_a_batch_of_trials_runs_in_the_numerical_kind_with_its_metrics() -> None
     g = exp.run_batch([Trial("roy-apf", {**cell, "method": "gathering"}, 0, 11, True, "")])[0].metrics
     assert g["sim_s"] == pytest.approx(20.0) and g["collisions"] == 0
     with pytest.raises(ValueError, match="kind"):
-        exp.run_batch([Trial("roy-apf", {**cell, "kind": "cosim"}, 0, 1, True, "")])
+        exp.run_batch([Trial("roy-apf", {**cell, "kind": "hil"}, 0, 1, True, "")])
 
 
 def outcome(method: str, i: int, **metrics: object) -> Outcome:

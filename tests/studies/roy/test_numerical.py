@@ -137,7 +137,9 @@ def test_each_optimiser_improves_theta_on_an_agent_of_the_scenario(optimiser: st
                                                       "bat_pop": 10, "bat_iters": 10, "pso_particles": 10,
                                                       "pso_iters": 10, "bfo_bacteria": 10})
         c = sw.ctls[0]
-        s = c.state()
+        me = c.read_pose()
+        assert me is not None
+        s = c.state(me)
         if optimiser == "psoabg_stuck":
             c.centroids.extend([s.x_bar[0]] * (c.centroids.maxlen - 1))  # type: ignore[operator]
         before = float(theta(c.gains[None, None], s, mode)[0, 0])

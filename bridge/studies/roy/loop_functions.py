@@ -1,0 +1,137 @@
+"""The Roy study's loop functions: a session of robots running chapter 3's controllers, scored from the true poses
+as the thesis' hardware experiments were (chapter 7, digest 001 §4.5.1, §5.5): the formation error of eq. 7.1
+(repaired: a pair counts when 2 r_s <= x_ij <= 3 r_s), the mission time (the swarm at the target, the numerical
+model's arrival test: the centroid within ``goal_tol_m`` of T and every robot within ``goal_tol_m`` + r_s sqrt(N) of
+it), the mean path length, and the closest two robots came. Opt-in: a session with a ``[formation]`` section.
+
+Every ``sample_s`` the live robots' poses are sampled (recorded on ``/world/formation``: t, FE, centroid, nearest
+pair); the session ends ``end_after_arrival_s`` after the swarm arrives.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from pydantic import Field
+
+from bridge.core.config import Section
+from bridge.core.loop_functions import LoopFunctions
+from bridge.core.recorder import register_schema
+
+if TYPE_CHECKING:
+    from bridge.core.config import Config
+    from bridge.core.hub import Hub
+
+register_schema("swarm_sitl.RoyFormation", {
+    "type": "object",
+    "description": "One sample of the swarm's formation (Roy ch.7): eq. 7.1's formation error, the centroid, the "
+                   "closest pair's distance (m), and whether the swarm is at the target",
+    "properties": {"t_s": {"type": "number"}, "fe": {"type": "number"}, "cx": {"type": "number"},
+                   "cy": {"type": "number"}, "nn_min_m": {"type": "number"}, "arrived": {"type": "boolean"}},
+})
+
+
+class FormationCfg(Section):
+    """``[formation]``: how a chapter 3 session is scored and when it ends."""
+
+    target: tuple[float, float] = Field(description="T (m, world frame)")
+    r_s_m: float = Field(0.113, gt=0, description="r_s (m): the hardware's 11.3 cm (digest §4.5.4)")
+    goal_tol_m: float = Field(0.1, gt=0, description="the centroid's arrival radius (m; 1 unit, digest §5.5)")
+    sample_s: float = Field(1.0, gt=0, le=60, description="the sampling step of FE and the arrival test")
+    end_after_arrival_s: float | None = Field(0.0, ge=0, description="end the session this long after the swarm "
+                                                                     "arrives (none: run to duration_s)")
+
+
+def pair_shares(xy: np.ndarray, r_s: float) -> tuple[float, float]:
+    """The shares of the ordered pairs i != j closer than 2 r_s and farther than 3 r_s (0, 0 for fewer than 2)."""
+    n = len(xy)
+    if n < 2:
+        return 0.0, 0.0
+    d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+    off = ~np.eye(n, dtype=bool)
+    pairs = n * (n - 1)
+    return float((off & (d < 2 * r_s)).sum()) / pairs, float((off & (d > 3 * r_s)).sum()) / pairs
+
+
+def formation_error(xy: np.ndarray, r_s: float) -> float:
+    """Eq. 7.1, repaired (digest §4.5.1): 1 - #{ordered pairs i != j with 2 r_s <= x_ij <= 3 r_s} / (N (N - 1))."""
+    close, far = pair_shares(xy, r_s)
+    return close + far
+
+
+def arrived(xy: np.ndarray, target: np.ndarray, r_s: float, tol: float) -> bool:
+    """The swarm is at T: its centroid within ``tol``, every robot within ``tol`` + r_s sqrt(N) (the numerical
+    model's test, ``docs/roy.md``)."""
+    if not len(xy):
+        return False
+    far = np.hypot(*(xy - target).T)
+    return bool(np.hypot(*(xy.mean(0) - target)) <= tol and far.max() <= tol + r_s * math.sqrt(len(xy)))
+
+
+class RoyLoopFunctions(LoopFunctions):
+    @classmethod
+    def wanted(cls, cfg: Config) -> bool:
+        return "formation" in (cfg.model_extra or {})
+
+    def __init__(self, hub: Hub) -> None:
+        super().__init__(hub)
+        self.cfg: FormationCfg = hub.cfg.section("formation")
+        self.target = np.array(self.cfg.target, float)
+        self.tick_ns = round(self.cfg.sample_s * 1e9)
+        self.next_tick = 0
+        self.fe: list[float] = []  # per sample until arrival
+        self.close: list[float] = []  # its two parts: pairs closer than 2 r_s, farther than 3 r_s
+        self.far: list[float] = []
+        self.nn_min = math.inf
+        self.arrived_s: float | None = None
+        self.path_m: float | None = None  # the mean odometer at arrival
+
+    def pre_step(self, t: int) -> None:
+        if t < self.next_tick:
+            return
+        self.next_tick += self.tick_ns
+        w = self.hub.world
+        xy = w.pos[w.alive]
+        close, far = pair_shares(xy, self.cfg.r_s_m)
+        fe = close + far
+        d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) if len(xy) > 1 else np.zeros((1, 1))
+        np.fill_diagonal(d, math.inf)
+        nn = float(d.min()) if len(xy) > 1 else math.inf
+        at = arrived(xy, self.target, self.cfg.r_s_m, self.cfg.goal_tol_m)
+        c = xy.mean(0) if len(xy) else np.full(2, math.nan)
+        self.hub.rec.write(t, "/world/formation", "swarm_sitl.RoyFormation",
+                           {"t_s": t / 1e9, "fe": round(fe, 4), "cx": round(float(c[0]), 4),
+                            "cy": round(float(c[1]), 4), "nn_min_m": round(nn, 4) if math.isfinite(nn) else -1.0,
+                            "arrived": at})
+        if self.arrived_s is not None:
+            return
+        self.fe.append(fe)
+        self.close.append(close)
+        self.far.append(far)
+        self.nn_min = min(self.nn_min, nn)
+        if at:
+            self.arrived_s = t / 1e9
+            self.path_m = float(w.odometer[w.alive].mean())
+            if self.cfg.end_after_arrival_s is not None:
+                q = self.hub.q_ns
+                end = t + round(self.cfg.end_after_arrival_s * 1e9)
+                self.hub.end_ns = min(self.hub.end_ns, max(t + q, -(-end // q) * q))
+
+    def summary(self) -> dict[str, Any]:
+        """``formation``: FE's mean and sd over the mission's samples (and its parts: the pairs too close, too far),
+        the mission time (None: not arrived), the
+        mean path length (m; at arrival, else at the end), the closest pair (m)."""
+        w = self.hub.world
+        fe = np.array(self.fe)
+        path = self.path_m if self.path_m is not None else float(w.odometer[w.alive].mean()) if w.alive.any() else 0.0
+        return {"formation": {
+            "r_s_m": self.cfg.r_s_m, "target": list(self.cfg.target), "samples": len(fe),
+            "fe_mean": round(float(fe.mean()), 4) if len(fe) else None,
+            "fe_sd": round(float(fe.std(ddof=1)), 4) if len(fe) > 1 else None,
+            "fe_close": round(float(np.mean(self.close)), 4) if self.close else None,
+            "fe_far": round(float(np.mean(self.far)), 4) if self.far else None,
+            "arrived": self.arrived_s is not None, "mission_s": self.arrived_s,
+            "path_m": round(path, 4), "nn_min_m": round(self.nn_min, 4) if math.isfinite(self.nn_min) else None,
+        }}
