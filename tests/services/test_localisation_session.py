@@ -222,7 +222,8 @@ HIDDEN_SONPI = {  # a beam over robot 2's start: the camera has never seen it wh
     "session": {"name": "sonpi-hidden", "duration_s": 8, "seed": 4, "robots_per_process": 3},
     "arena": {"width_m": 3, "length_m": 3},
     "robots": [{
-        "count": 3, "profile": "sonpi", "behaviour": "roy_apf", "params": {"optimiser": "fixed", "v_max": 1.5},
+        "count": 3, "profile": "sonpi", "behaviour": "roy_apf", "params": {"optimiser": "fixed", "v_max": 1.5,
+                                                                  "target_x": 25, "target_y": 25},
         "placement": {"kind": "explicit", "poses": [[0.6, 0.6, 0.0], [1.2, 0.6, 0.0], [0.6, 2.2, 0.0]]},
         "devices": {"sonpi_wifi": {"url": "sitl://wifi", "localisation": "camera", "first_pose_timeout_s": 1.0}},
     }],
