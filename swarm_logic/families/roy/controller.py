@@ -106,7 +106,7 @@ class RoyApf(SonpiAgent):
         "v_max": 0.25,  # digest §5.3 [R], units/s: calibrated, BAT arrives near 200 s in roy-ch3-v2 (docs/roy.md)
         "d_max": 5.0,  # sensor range, units (digest §0 item 5): d in Theta when nothing echoes (erratum #3)
         "optimiser": "bat",  # the thesis' choice
-        "objective": "lookahead",  # erratum #3: "literal" or "lookahead"
+        "objective": "lookahead",  # erratum #3: "literal" or "lookahead"; "weighted", "spacing" (docs/roy.md)
         "oa_mode": "per_sensor",  # digest §2.1.6 [R]: one OA term per reading within r_s, or the nearest only
         "oa_law": "bounded",  # [R] not vanishing at contact; "literal": eq. 3.21 as printed
         "lookahead_s": 1.0,  # erratum #3 [R]: the look-ahead's horizon, s; 0 = one period_s (the one-step reading)

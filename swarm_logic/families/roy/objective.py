@@ -14,6 +14,15 @@ w = 1 (``progress`` "centroid", the digest's reading) or n ("swarm": the agent's
 the swarm's progress, as it does in the other terms; with w = 1 a move shifts the first term n times less than
 the second, and the optimiser neglects the target).
 
+Weighted look-ahead ("weighted"): eq. 3.22 as printed, gains as weights, scored at the look-ahead's predicted state:
+k_a ||x_bar' - T|| + k_v ||v_i' - v_bar'|| + k_r sum_j (x'_ij / 2r_s - 1) + 1 / (k_OA d'^2), the gains entering
+both through the motion and as weights (still linear in the weights: the minimum runs to the bounds).
+
+Spacing look-ahead ("spacing"): the look-ahead with the cohesion term summed only over the predicted pairs closer
+than 2 r_s (the pairs eq. 3.26's formation matrix counts), so it penalises crowding and never rewards an agent for
+pulling its far neighbours closer: 6 agents cannot all be 2 r_s from all 5 others, and "lookahead"'s compromise
+packs them.
+
 Every array carries leading batch dimensions S (none for one agent on a robot; (runs, agents) in the numerical
 model's batched runner), through the same arithmetic.
 """
@@ -27,7 +36,7 @@ import numpy as np
 
 from swarm_logic.families.roy import potential
 
-MODES = ("lookahead", "literal")
+MODES = ("lookahead", "literal", "weighted", "spacing")
 
 
 @dataclass(frozen=True)
@@ -103,7 +112,7 @@ def theta(gains: np.ndarray, s: AgentState, mode: str = "lookahead") -> np.ndarr
         d2 = np.asarray(s.d_near) ** 2
         return (k[..., 0] * t1[..., None] + k[..., 1] * t2[..., None] + k[..., 2] * t3[..., None]
                 + 1.0 / (k[..., 3] * d2[..., None]))
-    if mode != "lookahead":
+    if mode not in MODES:
         raise ValueError(f"objective: expected one of {', '.join(MODES)}, got {mode!r}")
     h = s.dt if s.horizon is None else s.horizon
     u0, u1 = potential.control_xy(k, s.basis[..., None, :, :], s.extra[..., None, :])  # (S, P) each
@@ -117,14 +126,18 @@ def theta(gains: np.ndarray, s: AgentState, mode: str = "lookahead") -> np.ndarr
         t1 = t1 * s.n
     f0 = v0 - (s.v_bar[..., None, 0] + (v0 - s.v_i[..., None, 0]) / s.n)  # v_i' - v_bar'
     f1 = v1 - (s.v_bar[..., None, 1] + (v1 - s.v_i[..., None, 1]) / s.n)
-    out = t1 + np.sqrt(f0 * f0 + f1 * f1)
+    t2 = np.sqrt(f0 * f0 + f1 * f1)
+    t3 = np.zeros(np.shape(t1))
     m = s.others.shape[-2]
     for j in range(m):  # the cohesion term, neighbour by neighbour (m is small)
         g0 = x0 - s.others[..., None, j, 0]
         g1 = x1 - s.others[..., None, j, 1]
         c = np.sqrt(g0 * g0 + g1 * g1) * (0.5 / s.r_s) - 1
-        c = c * c
-        out = out + (c if s.near is None else np.where(s.near[..., None, j], c, 0.0))
+        if mode == "spacing":
+            c = np.minimum(c, 0.0)
+        if mode != "weighted":
+            c = c * c
+        t3 = t3 + (c if s.near is None else np.where(s.near[..., None, j], c, 0.0))
     # the obstacle term: the nearest sensed point; readings no agent of the batch has are infinitely far for all
     d2 = np.full(np.shape(t1), np.inf)
     for q in np.flatnonzero(np.isfinite(s.points[..., 0]).reshape(-1, s.points.shape[-2]).any(axis=0)):
@@ -132,4 +145,6 @@ def theta(gains: np.ndarray, s: AgentState, mode: str = "lookahead") -> np.ndarr
         g1 = x1 - s.points[..., None, q, 1]
         d2 = np.minimum(d2, g0 * g0 + g1 * g1)
     d = np.minimum(np.maximum(np.sqrt(d2), 1e-6), s.d_max)
-    return out + 1.0 / (d * d)
+    if mode == "weighted":
+        return k[..., 0] * t1 + k[..., 1] * t2 + k[..., 2] * t3 + 1.0 / (k[..., 3] * d * d)
+    return t1 + t2 + t3 + 1.0 / (d * d)

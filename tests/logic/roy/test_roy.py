@@ -111,8 +111,8 @@ def test_observe_gathers_the_means_the_obstacle_point_and_the_basis() -> None:
     assert np.allclose(s.basis[0, 3], math.exp(-0.49) * np.array([0.0, 0.7]))
 
 
-@pytest.mark.parametrize("mode", ["literal", "lookahead"])
-def test_optimisers_improve_theta_in_both_modes(mode: str) -> None:
+@pytest.mark.parametrize("mode", ["literal", "lookahead", "weighted", "spacing"])
+def test_optimisers_improve_theta_in_every_mode(mode: str) -> None:
     s = state()
     x0 = np.array([4.4, 0.31, 6.64, 2.5])
     start = float(theta(x0[None, None], s, mode)[0, 0])
@@ -123,6 +123,29 @@ def test_optimisers_improve_theta_in_both_modes(mode: str) -> None:
     for run in (lambda r: pso(f, LO, HI, r, 20, 20, x0=x0)[1], lambda r: bat(f, LO, HI, r, 15, 20, x0=x0)[1],
                 lambda r: bfo(f, LO, HI, r, bacteria=20, x0=x0)[1]):
         assert run(np.random.default_rng(1)) < start
+
+
+def still_state() -> AgentState:
+    """Agent i at rest at the origin with two others at 1 and 3 units on the x axis, a law of zero output (so the
+    predicted state is the present one), nothing sensed, T 4 units north of the centroid."""
+    x_bar = np.array([[4.0 / 3.0, 0.0]])
+    z = np.zeros((1, 2))
+    return AgentState(z, z, x_bar, z, 3, np.array([[[1.0, 0.0], [3.0, 0.0]]]), np.full((1, 1, 2), np.inf),
+                      np.array([5.0]), np.zeros((1, 4, 2)), z, x_bar[0] + [0.0, 4.0], 1.0, 0.05, 5.0, 1.0,
+                      progress="centroid")
+
+
+def test_the_readings_of_theta_at_a_known_state() -> None:
+    """Pairs at 1 and 3 units (x_ij / 2r_s - 1 = -0.5 and 0.5), centroid 4 units from T, d = d_max = 5:
+    lookahead 4 + 0.25 + 0.25 + 1/25; spacing counts only the pair closer than 2 r_s; weighted weighs the
+    unsquared terms by the gains and divides the obstacle term by k_OA."""
+    s = still_state()
+    k = np.array([[[2.0, 3.0, 5.0, 0.5], [4.0, 3.0, 5.0, 0.5]]])
+    assert theta(k, s, "lookahead")[0] == pytest.approx([4.54, 4.54])
+    assert theta(k, s, "spacing")[0] == pytest.approx([4.29, 4.29])
+    assert theta(k, s, "weighted")[0] == pytest.approx([2 * 4 + 5 * 0.0 + 1 / (0.5 * 25), 4 * 4 + 1 / (0.5 * 25)])
+    crowded = AgentState(**{**s.__dict__, "others": np.array([[[1.0, 0.0], [0.0, 1.5]]])})
+    assert theta(k, crowded, "weighted")[0, 0] == pytest.approx(2 * 4 + 5 * (-0.5 - 0.25) + 1 / 12.5)
 
 
 def test_literal_theta_is_linear_in_the_gains() -> None:

@@ -172,6 +172,19 @@ def test_a_batched_run_is_the_run_alone_and_the_controllers_run(optimiser: str) 
     assert not np.array_equal(together[0].final, together[1].final)
 
 
+@pytest.mark.parametrize("objective", ["weighted", "spacing"])
+def test_the_batched_run_and_the_controllers_agree_on_each_reading_of_theta(objective: str) -> None:
+    """The readings of Theta beside the default one: the batched runner and ``RoyApf`` give the same run."""
+    from bridge.studies.roy.numerical import ch3_batch
+
+    params = {**SMALL, "optimiser": "bat", "objective": objective}
+    together = ch3_batch([5, 3], params, max_s=1.5)
+    through = ch3_trial(3, params, max_s=1.5)
+    assert same_run(together[1], through)
+    default = ch3_trial(3, {**params, "objective": "lookahead"}, max_s=1.5)
+    assert not np.array_equal(default.gain_sum, through.gain_sum)
+
+
 def test_a_batch_stops_each_run_where_it_arrives() -> None:
     """Runs that arrive stop (their figures end there) while the others go on."""
     from bridge.studies.roy.numerical import ch3_batch
