@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from bridge.services.overhead_camera.camera import Occluder, OverheadCamera
-from bridge.services.overhead_camera.fusion import OdometryReading, PoseFilter
+from bridge.services.overhead_camera.fusion import PoseFilter
 from bridge.services.overhead_camera.noise import NoiseModel, fit
 from bridge.services.overhead_camera.service import default_eye
 from bridge.services.overhead_camera.tracker import MarkerTracker
+from swarm_logic.robots.sonpi.interfaces import OdometryReading
 
 N = 6
 OCCLUDER = Occluder(3.2, 3.2, 0.6, (0.6, 0.6, 0.05))
@@ -114,7 +115,7 @@ def test_fusion_corrects_odometry_drift_towards_the_camera():
     # odometry in its own frame (starting at 0, 0, 0), drifting: it says 0.11 m per frame, the truth is 0.1 m
     truth = [(1.0 + 0.1 * k, 2.0, 0.0) for k in range(30)]
     for k, (x, y, yaw) in enumerate(truth):
-        f.odometry(OdometryReading(0.1 * k, 0.11 * k, 0.0, 0.0, 1.1, 0.0))
+        f.odometry(OdometryReading(0.1 * k, 0.11 * k, 0.0, 0.0, 1.1, 0.0, 0, 0))
         est = f.update(0.1 * k, (x, y, yaw))
     assert est is not None
     # the steady state: 0.01 m too far each frame, corrected by 0.3 of the comparator's error, leaves the estimate
@@ -181,7 +182,7 @@ def test_fusion_holds_when_odometry_comes_at_its_own_times_and_late():
         t = 0.1 * frame
         for taken, arrives in readings:
             if t - 0.1 < arrives <= t:
-                f.odometry(OdometryReading(taken, v * taken, 0.0, 0.0, v, 0.0))  # its own frame from (0, 0, 0)
+                f.odometry(OdometryReading(taken, v * taken, 0.0, 0.0, v, 0.0, 0, 0))  # its own frame from (0, 0, 0)
         est = f.update(t, (1.0 + v * t, 2.0, 0.0))
         if frame > 5:
             worst = max(worst, abs(est.x - (1.0 + v * t)))

@@ -27,19 +27,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from swarm_logic.robots.sonpi.interfaces import OdometryReading
+
 
 def wrap(a: float) -> float:
     return math.remainder(a, math.tau)
-
-
-@dataclass
-class OdometryReading:
-    t_s: float
-    x: float
-    y: float
-    yaw: float
-    v: float
-    w: float
 
 
 @dataclass
@@ -81,8 +73,9 @@ class PoseFilter:
         o = self.odom
         assert o is not None
         dt = t_s - o.t_s
-        mid = o.yaw + o.w * dt / 2
-        return o.x + o.v * dt * math.cos(mid), o.y + o.v * dt * math.sin(mid), wrap(o.yaw + o.w * dt)
+        mid = o.yaw_rad + o.w_rps * dt / 2
+        return (o.x_m + o.v_mps * dt * math.cos(mid), o.y_m + o.v_mps * dt * math.sin(mid),
+                wrap(o.yaw_rad + o.w_rps * dt))
 
     def update(self, t_s: float, fix: tuple[float, float, float] | None) -> Estimate | None:
         """The estimate at frame time ``t_s`` given this frame's camera fix (None: unseen, no estimate)."""
@@ -112,7 +105,7 @@ class PoseFilter:
             x, y, yaw = px + g * ex, py + g * ey, wrap(pyaw + gh * eyaw)
         if fresh:
             assert self.odom is not None
-            vx, vy = self.odom.v * math.cos(yaw), self.odom.v * math.sin(yaw)
+            vx, vy = self.odom.v_mps * math.cos(yaw), self.odom.v_mps * math.sin(yaw)
         elif prev is not None and t_s > self.t_est:
             dt = t_s - self.t_est
             a = self.alpha_v

@@ -18,9 +18,10 @@ import numpy as np
 from bridge.core.config import BoxObstacle
 from bridge.core.services import Service, ServiceContext
 from bridge.services.overhead_camera.camera import Occluder, OverheadCamera
-from bridge.services.overhead_camera.fusion import OdometryReading, PoseFilter, wrap
+from bridge.services.overhead_camera.fusion import PoseFilter, wrap
 from bridge.services.overhead_camera.noise import NoiseModel
 from swarm_logic.robots.sonpi import pose_packet as pp
+from swarm_logic.robots.sonpi.interfaces import OdometryReading
 
 MARKER_SHARE = 0.8  # a marker's radius, as a share of the robot's, unless the options say
 
@@ -138,7 +139,8 @@ class OverheadCameraService(Service):
             offset = self.clock_offset[k] = gap if abs(gap) > self.o.odometry_timeout_s else 0.0
         self.filters[k].odometry(
             OdometryReading(
-                head.t_s + offset, content.x_m, content.y_m, content.yaw_rad, content.v_mps, content.w_radps
+                head.t_s + offset, content.x_m, content.y_m, content.yaw_rad, content.v_mps, content.w_radps,
+                content.left, content.right,
             )
         )
 
