@@ -126,14 +126,15 @@ def scalable_law(
     r_s: float,
     neighbours: str = "knn",
     k: int = 6,
-    cutoff_scales: float | None = 20.0,
+    cutoff_scales: float | None = 12.0,
     safety: Safety | None = None,
     v_max: float | None = None,
 ) -> np.ndarray:
     """Eq. 4.41: u_i = -k_c (x_i - O_e) + k_f sum_j exp(-|x_ij| / R_s) (x_i - x_j), R_s = sqrt(a b / N) (Theorem 3,
     ``cohesion_radius``). Neighbours (the thesis leaves Delta for 50 agents open): "knn" the ``k`` nearest (default
-    6), or "all", truncated at ``cutoff_scales`` R_s (20: a dropped pair weighs below 20 R_s e^-20 = 4e-8 R_s;
-    ``None``: every pair)."""
+    6), or "all", truncated at ``cutoff_scales`` R_s (12: a dropped pair weighs below 12 e^-12 R_s = 7e-5 R_s; for
+    1000 agents in a disc at the cohesion density the largest error is 4e-4 of the largest repulsion, at a quarter of
+    the exact law's cost; ``None``: every pair, O(N^2))."""
     x = np.asarray(x, dtype=float)
     cutoff = None if cutoff_scales is None else cutoff_scales * r_s
     i, j = neighbour_pairs(x, neighbours, k, cutoff)
