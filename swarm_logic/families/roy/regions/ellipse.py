@@ -16,6 +16,7 @@ import numpy as np
 from scipy.cluster.vq import ClusterError, kmeans2
 from scipy.spatial import cKDTree
 
+from swarm_logic.families.roy.regions.sensing import check_fields
 from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.geometry import wrap
 
@@ -239,14 +240,8 @@ class RegionParams:
             raise ValueError(f"dynamics: expected one of {', '.join(DYNAMICS)}, got {self.dynamics!r}")
         if self.axes not in AXES:
             raise ValueError(f"axes: expected one of {', '.join(AXES)}, got {self.axes!r}")
-        for name in ("r_c", "k_vcir", "v_max", "k_theta"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name}: must be finite and > 0, got {v}")
-        for name in ("clearance", "axes_lag", "r_robot"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{name}: must be finite and >= 0, got {v}")
+        check_fields(self, ("r_c", "k_vcir", "v_max", "k_theta"))
+        check_fields(self, ("clearance", "axes_lag", "r_robot"), positive=False)
 
 
 def axis_targets(b_fs: float, params: RegionParams, area_factor: float = 1.0) -> tuple[float, float]:
@@ -399,10 +394,7 @@ class FailureParams:
     hold: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("v_max", "speed_frac", "centre_frac", "hold"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name}: must be finite and > 0, got {v}")
+        check_fields(self, ("v_max", "speed_frac", "centre_frac", "hold"))
 
 
 class FailureDetector:

@@ -20,28 +20,16 @@ from swarm_logic.families.roy.regions.shapes import Ellipse
 
 MISMATCH = ("iou", "literal")
 
+
+def graph(rows: str) -> np.ndarray:
+    """An adjacency matrix from its rows of 0/1 digits separated by spaces."""
+    return np.array([[int(c) for c in row] for row in rows.split()], dtype=int)
+
+
 # Eq. 4.2 (Fig. 4.4): the hexagon 1-..-6 triangulated by the inner triangle 1-3-5.
-DELTA_4_2 = np.array(
-    [
-        [0, 1, 1, 0, 1, 1],
-        [1, 0, 1, 0, 0, 0],
-        [1, 1, 0, 1, 1, 0],
-        [0, 0, 1, 0, 1, 0],
-        [1, 0, 1, 1, 0, 1],
-        [1, 0, 0, 0, 1, 0],
-    ]
-)
+DELTA_4_2 = graph("011011 101000 110110 001010 101101 100010")
 # §4.6.1's initial "triangular" formation: a 3-row triangular lattice, rows {1}, {2, 3}, {4, 6, 5}.
-DELTA_TRI = np.array(
-    [
-        [0, 1, 1, 0, 0, 0],
-        [1, 0, 1, 1, 0, 1],
-        [1, 1, 0, 0, 1, 1],
-        [0, 1, 0, 0, 0, 1],
-        [0, 0, 1, 0, 0, 1],
-        [0, 1, 1, 1, 1, 0],
-    ]
-)
+DELTA_TRI = graph("011000 101101 110011 010001 001001 011110")
 
 
 def tri_coordinates(rho: float) -> np.ndarray:

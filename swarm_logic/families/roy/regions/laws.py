@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from swarm_logic.families.roy.regions.sensing import check_fields
+
 NEIGHBOURS = ("knn", "all")
 CH6_MODES = ("nearest", "sum")
 
@@ -48,6 +50,25 @@ def _pull(x: np.ndarray, centre: np.ndarray, k: float) -> np.ndarray:
     return -k * (x - np.asarray(centre, dtype=float))
 
 
+def _law(
+    x: np.ndarray,
+    centre: np.ndarray,
+    k_pull: float,
+    k_rep: float,
+    pairs: tuple[np.ndarray, np.ndarray],
+    scale: np.ndarray | float,
+    safety: Safety | None,
+    v_max: float | None,
+) -> np.ndarray:
+    """-k_pull (x_i - c_i) + k_rep sum_pairs kernel (+ the safety term), saturated: the shape every law here shares."""
+    u = _pull(x, centre, k_pull)
+    if len(pairs[0]):
+        u = u + k_rep * kernel_sum(x, pairs[0], pairs[1], scale)
+    if safety is not None:
+        u = u + safety.term(x)
+    return saturate(u, v_max)
+
+
 @dataclass(frozen=True)
 class Safety:
     """Erratum 16's all-pairs safety repulsion: every pair closer than ``factor`` x the robot diameter (2 ``r_robot``)
@@ -59,10 +80,7 @@ class Safety:
     k: float = 5.0
 
     def __post_init__(self) -> None:
-        for name in ("r_robot", "factor", "k"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name}: must be finite and > 0, got {v}")
+        check_fields(self, ("r_robot", "factor", "k"))
 
     @property
     def distance(self) -> float:
@@ -87,12 +105,7 @@ def formation_law(
     (``None``: the law as printed)."""
     x = np.asarray(x, dtype=float)
     i, j = np.nonzero(np.asarray(desired) > 0)
-    u = _pull(x, centre, k_c)
-    if len(i):
-        u = u + k_f * kernel_sum(x, i, j, np.asarray(desired, dtype=float)[i, j])
-    if safety is not None:
-        u = u + safety.term(x)
-    return saturate(u, v_max)
+    return _law(x, centre, k_c, k_f, (i, j), np.asarray(desired, dtype=float)[i, j], safety, v_max)
 
 
 def neighbour_pairs(x: np.ndarray, neighbours: str, k: int, cutoff: float | None) -> tuple[np.ndarray, np.ndarray]:
@@ -137,13 +150,7 @@ def scalable_law(
     the exact law's cost; ``None``: every pair, O(N^2))."""
     x = np.asarray(x, dtype=float)
     cutoff = None if cutoff_scales is None else cutoff_scales * r_s
-    i, j = neighbour_pairs(x, neighbours, k, cutoff)
-    u = _pull(x, centre, k_c)
-    if len(i):
-        u = u + k_f * kernel_sum(x, i, j, r_s)
-    if safety is not None:
-        u = u + safety.term(x)
-    return saturate(u, v_max)
+    return _law(x, centre, k_c, k_f, neighbour_pairs(x, neighbours, k, cutoff), r_s, safety, v_max)
 
 
 def packing_law(
@@ -159,21 +166,17 @@ def packing_law(
     circle centre (N, 2); Table 5.1's gains. All pairs, truncated at ``cutoff_scales`` x 2 r_s (``None``: none)."""
     x = np.asarray(x, dtype=float)
     cutoff = None if cutoff_scales is None else cutoff_scales * 2 * r_s
-    i, j = neighbour_pairs(x, "all", 0, cutoff)
-    u = _pull(x, circle_centres, k_a)
-    if len(i):
-        u = u + k_r * kernel_sum(x, i, j, 2 * r_s)
-    return saturate(u, v_max)
+    return _law(x, circle_centres, k_a, k_r, neighbour_pairs(x, "all", 0, cutoff), 2 * r_s, None, v_max)
 
 
 def split_merge_law(
     x: np.ndarray,
     centre: np.ndarray,
+    obstacles: np.ndarray | None = None,
+    mode: str = "nearest",
     k_c: float = 12.0,
     k_f: float = 2.5,
     r_s: float = 1.0,
-    obstacles: np.ndarray | None = None,
-    mode: str = "nearest",
     radius_scales: float = 3.0,
     v_max: float | None = None,
 ) -> np.ndarray:

@@ -32,6 +32,14 @@ def fan_angles(count: int, spacing: float) -> np.ndarray:
     return (np.arange(count) - (count - 1) / 2.0) * spacing
 
 
+def check_fields(obj: object, names: tuple[str, ...], positive: bool = True) -> None:
+    """A ValueError naming the first of the dataclass' ``names`` that is not finite and > 0 (``positive``) or >= 0."""
+    for name in names:
+        v = getattr(obj, name)
+        if not (math.isfinite(v) and (v > 0 if positive else v >= 0)):
+            raise ValueError(f"{name}: must be finite and {'>' if positive else '>='} 0, got {v}")
+
+
 @dataclass(frozen=True)
 class SensingParams:
     """The reading filters. ``d_min``/``d_max``: the window kept (eqs. 5.3, 6.1; chapter 4 has no floor and a 5 unit
@@ -44,10 +52,7 @@ class SensingParams:
     eclipse_eps: float = 0.1
 
     def __post_init__(self) -> None:
-        for name in ("d_min", "d_max", "r_robot", "eclipse_eps"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{name}: must be finite and >= 0, got {v}")
+        check_fields(self, ("d_min", "d_max", "r_robot", "eclipse_eps"), positive=False)
         if self.d_max <= self.d_min:
             raise ValueError(f"d_max: must exceed d_min ({self.d_min}), got {self.d_max}")
 
