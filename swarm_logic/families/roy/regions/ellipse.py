@@ -75,12 +75,17 @@ def _farthest_pair_init(p: np.ndarray) -> np.ndarray:
     return p[[i, j]].copy()
 
 
-def free_space(points: np.ndarray, centre: np.ndarray, mode: str = "closest") -> Gap:
+def free_space(points: np.ndarray, centre: np.ndarray, mode: str = "closest", heading: float | None = None) -> Gap:
     """Eq. 4.30: split the obstacle points (K, 2) into two clusters (k-means, K = 2, from a deterministic farthest-pair
     start: same input, same answer) and measure the free space between them. ``mode`` "centroid": b_fs = |r_o1 - r_o2|
     as printed; "closest" (erratum 12, default): the closest pair of points across the two clusters (the centroids
     lie inside the obstacles' point clouds, so their distance over-estimates the gap). Below 2 finite points, or when
-    every point falls in one cluster, no gap is sensed (b_fs = inf)."""
+    every point falls in one cluster, no gap is sensed (b_fs = inf).
+
+    ``heading`` (ours, off by default as the thesis assumes obstacles on both sides of one path): when given, the two
+    clusters' centroids must lie on opposite sides of the line through ``centre`` along ``heading`` (say, toward the
+    target); a single wall, which k-means also cuts in two, is then "one side" and no gap, instead of a gap as wide
+    as the spacing of its own points."""
     if mode not in GAP_MODES:
         raise ValueError(f"mode: expected one of {', '.join(GAP_MODES)}, got {mode!r}")
     p = np.asarray(points, dtype=float).reshape(-1, 2)
@@ -98,13 +103,17 @@ def free_space(points: np.ndarray, centre: np.ndarray, mode: str = "closest") ->
     a, b = p[label == 0], p[label == 1]
     if len(a) == 0 or len(b) == 0:
         return Gap(math.inf, n_points=len(p), reason="one cluster")
+    o = np.asarray(centre, dtype=float)
+    if heading is not None:
+        side = np.cos(heading) * (cent[:, 1] - o[1]) - np.sin(heading) * (cent[:, 0] - o[0])
+        if side[0] * side[1] >= 0:
+            return Gap(math.inf, n_points=len(p), reason="one side")
     if mode == "centroid":
         p1, p2 = cent[0], cent[1]
     else:
         dist, j = cKDTree(b).query(a)
         i = int(np.argmin(dist))
         p1, p2 = a[i], b[int(j[i])]
-    o = np.asarray(centre, dtype=float)
     t1, t2 = (math.atan2(q[1] - o[1], q[0] - o[0]) for q in (p1, p2))
     return Gap(
         float(np.hypot(*(p1 - p2))),
@@ -326,6 +335,8 @@ def step_region(
     ``held`` says why."""
     if not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"dt: must be finite and > 0, got {dt}")
+    if n_failed and positions is None:
+        raise ValueError("n_failed: needs the positions (and active mask) of the swarm it is counted against")
     e = state.region
     tgt = np.asarray(target, dtype=float)
     x = None if positions is None else np.asarray(positions, dtype=float).reshape(-1, 2)

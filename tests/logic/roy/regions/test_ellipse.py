@@ -42,6 +42,14 @@ def test_gap_closest_pair_and_centroid():
     assert free_space(p, np.zeros(2)).as_dict() == closest.as_dict()
 
 
+def test_one_wall_is_no_gap_when_sides_are_required():
+    wall = np.stack([np.linspace(0.0, 8.0, 30), np.full(30, 2.0)], axis=1)  # one wall along the path, on the left
+    literal = free_space(wall, np.zeros(2))
+    assert literal.sensed and literal.b_fs < 0.3  # k-means cuts the wall in two: a "gap" of one point spacing
+    assert free_space(wall, np.zeros(2), heading=0.0).reason == "one side"
+    assert free_space(walls(1.6), np.zeros(2), heading=0.0).b_fs == pytest.approx(1.6)  # both sides: kept
+
+
 def test_no_gap_sensed():
     assert free_space(np.zeros((0, 2)), np.zeros(2)).reason == "fewer than 2 points"
     assert free_space(np.array([[1.0, 1.0], [np.nan, 2.0]]), np.zeros(2)).b_fs == math.inf
@@ -172,6 +180,14 @@ def test_failure_shrink_a5_and_cohesion_radius_a6():
     e = region_with_failures(Ellipse(0, 0, r_c * r_c / u_b, u_b), r_c, 50, 10)
     assert e.b == u_b and e.area == pytest.approx(area * 0.8)
     assert region_with_failures(Ellipse.circle(0, 0, r_c), r_c, 50, 10).is_circle
+    # the planner's update: 40 active agents and 10 failed ones, in the open
+    params = RegionParams(r_c=r_c, barrier=False, r_robot=0.1)
+    x = np.zeros((50, 2))
+    active = np.arange(50) >= 10
+    out = step_region(RegionState(Ellipse.circle(0, 0, r_c)), Gap(math.inf), np.ones(2), 0.25, params, x, active, 10)
+    assert out.state.region.is_circle and out.state.region.area == pytest.approx(area * 0.8)
+    with pytest.raises(ValueError, match="n_failed"):
+        step_region(RegionState(Ellipse.circle(0, 0, r_c)), Gap(math.inf), np.ones(2), 0.25, params, n_failed=1)
     with pytest.raises(ValueError, match="n_failed"):
         failure_area_factor(6, 7)
 
