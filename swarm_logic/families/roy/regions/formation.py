@@ -108,7 +108,7 @@ def hull(positions: np.ndarray, pad: float = 0.0) -> Polygon:
     return h.buffer(pad) if pad > 0 else (h if isinstance(h, Polygon) else Polygon())
 
 
-def _aligned(positions: np.ndarray, region: Ellipse) -> np.ndarray:
+def aligned(positions: np.ndarray, region: Ellipse) -> np.ndarray:
     """The positions centred on the region's centre, their principal axis along the region's major axis."""
     p = np.asarray(positions, dtype=float)
     p = p - p.mean(axis=0)
@@ -120,6 +120,27 @@ def _aligned(positions: np.ndarray, region: Ellipse) -> np.ndarray:
     return p @ np.array([[c, s], [-s, c]]) + region.centre
 
 
+def formation_slots(embedding: np.ndarray, region: Ellipse, positions: np.ndarray) -> np.ndarray:
+    """Each agent's place (N, 2) in the region for a chosen formation: its embedding (``embed``) aligned with the
+    region (``aligned``), and of the four placements the ellipse cannot tell apart (turned by pi, mirrored across
+    the major axis) the one nearest the agents' ``positions`` (least sum of squared distances). The thesis' law pulls
+    every agent to the centre, so a tree's shape has nothing to form around; a per-agent centre (the laws accept an
+    (N, 2) centre) is ours."""
+    p = aligned(embedding, region) - region.centre
+    c, s = math.cos(region.theta), math.sin(region.theta)
+    along = np.array([c, s])
+    across = np.array([-s, c])
+    u, v = p @ along, p @ across
+    x = np.asarray(positions, dtype=float)
+    best, cost = None, math.inf
+    for su, sv in ((1, 1), (-1, -1), (1, -1), (-1, 1)):
+        q = region.centre + (su * u)[:, None] * along + (sv * v)[:, None] * across
+        k = float(np.sum((q - x) ** 2))
+        if k < cost:
+            best, cost = q, k
+    return best
+
+
 def mismatch(positions: np.ndarray, region: Ellipse, mode: str = "iou", pad: float = 0.5) -> float:
     """Eq. 4.40's mismatch between the formation's hull (B, discs of radius ``pad``) and the ellipse (A), after
     centring and aligning (erratum 15). ``mode`` "iou" (default): 1 - |A n B| / |A u B|, in [0, 1], scale-free;
@@ -127,7 +148,7 @@ def mismatch(positions: np.ndarray, region: Ellipse, mode: str = "iou", pad: flo
     not overlap."""
     if mode not in MISMATCH:
         raise ValueError(f"mode: expected one of {', '.join(MISMATCH)}, got {mode!r}")
-    b = hull(_aligned(positions, region), pad)
+    b = hull(aligned(positions, region), pad)
     a = region.polygon()
     x = a.intersection(b).area
     if x <= 0:

@@ -12,6 +12,7 @@ from swarm_logic.families.roy.regions.formation import (
     DELTA_TRI,
     desired_distances,
     embed,
+    formation_slots,
     match_formation,
     mismatch,
     shape_name,
@@ -119,3 +120,17 @@ def test_shape_names():
     assert shape_name(line) == "line"
     assert shape_name(line, heading=0.0) == "column" and shape_name(line, heading=math.pi / 2) == "row"
     assert shape_name(np.zeros((0, 2))) == "empty" and shape_name(np.ones((1, 2))) == "point"
+
+
+def test_formation_slots_fit_the_ellipse_near_the_agents():
+    rho = 1.0
+    path = np.zeros((6, 6), int)
+    for i in range(5):
+        path[i, i + 1] = path[i + 1, i] = 1
+    corridor = Ellipse(10.0, 10.0, 2.5**2 / 0.5, 0.5, math.pi / 4)
+    agents = tri_coordinates(rho)[::-1] + np.array([10.0, 10.0])
+    slots = formation_slots(embed(path, desired_distances(path, rho)), corridor, agents)
+    assert np.all(corridor.contains(slots)) and shape_name(slots, heading=math.pi / 4) == "column"
+    assert np.hypot(*(slots[1:] - slots[:-1]).T) == pytest.approx([rho] * 5)
+    flipped = 2 * corridor.centre - slots  # the same line turned by pi: never nearer the agents than the choice
+    assert np.sum((slots - agents) ** 2) <= np.sum((flipped - agents) ** 2)
