@@ -21,6 +21,7 @@ from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.geometry import wrap
 
 GAP_MODES = ("closest", "centroid")
+SPLITS = ("kmeans", "sides")
 DYNAMICS = ("repaired", "literal")
 AXES = ("geometric", "literal")
 
@@ -75,35 +76,49 @@ def _farthest_pair_init(p: np.ndarray) -> np.ndarray:
     return p[[i, j]].copy()
 
 
-def free_space(points: np.ndarray, centre: np.ndarray, mode: str = "closest", heading: float | None = None) -> Gap:
+def free_space(
+    points: np.ndarray, centre: np.ndarray, mode: str = "closest", heading: float | None = None, split: str = "kmeans"
+) -> Gap:
     """Eq. 4.30: split the obstacle points (K, 2) into two clusters (k-means, K = 2, from a deterministic farthest-pair
     start: same input, same answer) and measure the free space between them. ``mode`` "centroid": b_fs = |r_o1 - r_o2|
     as printed; "closest" (erratum 12, default): the closest pair of points across the two clusters (the centroids
     lie inside the obstacles' point clouds, so their distance over-estimates the gap). Below 2 finite points, or when
     every point falls in one cluster, no gap is sensed (b_fs = inf).
 
-    ``heading`` (ours, off by default as the thesis assumes obstacles on both sides of one path): when given, the two
-    clusters' centroids must lie on opposite sides of the line through ``centre`` along ``heading`` (say, toward the
-    target); a single wall, which k-means also cuts in two, is then "one side" and no gap, instead of a gap as wide
-    as the spacing of its own points."""
+    Two options of ours for a planner, off by default (the thesis assumes obstacles on both sides of one path ahead):
+    ``heading``: the two clusters' centroids must lie on opposite sides of the line through ``centre`` along
+    ``heading`` (say, toward the target), else "one side" and no gap: k-means also cuts a single wall in two, and
+    would report a gap as wide as the spacing of that wall's points. ``split`` "sides" (needs ``heading``): the two
+    clusters are the points left and right of that line instead of k-means' (inside a corridor k-means cuts the walls
+    into a front and a back half, whose closest pair is two neighbouring points of one wall)."""
     if mode not in GAP_MODES:
         raise ValueError(f"mode: expected one of {', '.join(GAP_MODES)}, got {mode!r}")
+    if split not in SPLITS:
+        raise ValueError(f"split: expected one of {', '.join(SPLITS)}, got {split!r}")
+    if split == "sides" and heading is None:
+        raise ValueError("split: 'sides' needs a heading")
     p = np.asarray(points, dtype=float).reshape(-1, 2)
     p = p[np.isfinite(p).all(axis=1)]
+    o = np.asarray(centre, dtype=float)
     if len(p) < 2:
         return Gap(math.inf, n_points=len(p), reason="fewer than 2 points")
     if np.ptp(p, axis=0).max() == 0.0:
         return Gap(math.inf, n_points=len(p), reason="one cluster")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            cent, label = kmeans2(p, _farthest_pair_init(p), minit="matrix", missing="raise")
-    except ClusterError:
-        return Gap(math.inf, n_points=len(p), reason="one cluster")
+    if split == "sides":
+        label = (np.cos(heading) * (p[:, 1] - o[1]) - np.sin(heading) * (p[:, 0] - o[0]) < 0).astype(int)
+        if label.min() == label.max():
+            return Gap(math.inf, n_points=len(p), reason="one side")
+        cent = np.stack([p[label == 0].mean(axis=0), p[label == 1].mean(axis=0)])
+    else:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                cent, label = kmeans2(p, _farthest_pair_init(p), minit="matrix", missing="raise")
+        except ClusterError:
+            return Gap(math.inf, n_points=len(p), reason="one cluster")
     a, b = p[label == 0], p[label == 1]
     if len(a) == 0 or len(b) == 0:
         return Gap(math.inf, n_points=len(p), reason="one cluster")
-    o = np.asarray(centre, dtype=float)
     if heading is not None:
         side = np.cos(heading) * (cent[:, 1] - o[1]) - np.sin(heading) * (cent[:, 0] - o[0])
         if side[0] * side[1] >= 0:

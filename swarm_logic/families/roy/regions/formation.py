@@ -19,6 +19,7 @@ from shapely.geometry import MultiPoint, Polygon
 from swarm_logic.families.roy.regions.shapes import Ellipse
 
 MISMATCH = ("iou", "literal")
+TRIGGERS = ("area", "fit")
 
 
 def graph(rows: str) -> np.ndarray:
@@ -164,7 +165,8 @@ def mismatch(positions: np.ndarray, region: Ellipse, mode: str = "iou", pad: flo
 class FormationChoice:
     """Algorithm 1's outcome: ``searched`` whether the tree search ran, ``reason`` why not (or what it chose),
     ``adjacency`` and ``desired`` (rho o Delta) the formation to use, ``mismatch`` its zeta, ``tree`` its index among
-    the ``n_trees`` spanning trees (-1: unchanged), ``shape`` its embedding's shape name."""
+    the ``n_trees`` spanning trees (-1: unchanged), ``shape`` its embedding's shape name, ``embedding`` its positions
+    (N, 2) centred (for ``formation_slots``; None when unchanged)."""
 
     searched: bool
     reason: str
@@ -174,6 +176,7 @@ class FormationChoice:
     tree: int = -1
     n_trees: int = 0
     shape: str = ""
+    embedding: np.ndarray | None = None
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -184,6 +187,7 @@ class FormationChoice:
             "tree": self.tree,
             "n_trees": self.n_trees,
             "shape": self.shape,
+            "embedding": None if self.embedding is None else self.embedding.tolist(),
         }
 
 
@@ -196,12 +200,19 @@ def match_formation(
     mode: str = "iou",
     pad: float | None = None,
     max_agents: int = 10,
+    trigger: str = "area",
 ) -> FormationChoice:
-    """Algorithm 1: when the region is an ellipse and the hull of the current formation (``positions`` (N, 2), discs
-    of radius ``pad``, default rho / 2) is at least as large as the ellipse, choose among the spanning trees of
-    ``graph`` (the formation graph the trees are cut from) the one whose embedding mismatches the ellipse least.
-    Otherwise keep ``current``. Above ``max_agents`` agents the search is skipped: the scalable law (eq. 4.41)
-    applies."""
+    """Algorithm 1: when the region is an ellipse and the current formation does not fit it, choose among the
+    spanning trees of ``graph`` (the formation graph the trees are cut from) the one whose embedding mismatches the
+    ellipse least; otherwise keep ``current``. Above ``max_agents`` agents the search is skipped: the scalable law
+    (eq. 4.41) applies.
+
+    ``trigger`` "area" (Algorithm 1 as printed): the hull of the agents' ``positions`` (N, 2), discs of radius
+    ``pad`` (default rho / 2), is at least as large as the ellipse; "fit" (ours): some agent lies outside the
+    ellipse. Under Theorem 1's gains a 6-agent formation's hull stays well below pi r_c^2, so "area" never fires,
+    while its width can exceed the ellipse's and hold the region's barrier for good (see the chapter's page)."""
+    if trigger not in TRIGGERS:
+        raise ValueError(f"trigger: expected one of {', '.join(TRIGGERS)}, got {trigger!r}")
     pad = rho / 2 if pad is None else pad
     cur = check_adjacency(current)
     keep = FormationChoice(False, "", cur, desired_distances(cur, rho))
@@ -210,9 +221,12 @@ def match_formation(
         return FormationChoice(False, f"N = {n} > {max_agents}: the scalable law applies", cur, keep.desired)
     if region.is_circle:
         return FormationChoice(False, "region is a circle", cur, keep.desired)
-    area = hull(positions, pad).area
-    if area < region.area:
-        return FormationChoice(False, f"formation hull {area:.4g} < ellipse {region.area:.4g}", cur, keep.desired)
+    if trigger == "area":
+        area = hull(positions, pad).area
+        if area < region.area:
+            return FormationChoice(False, f"formation hull {area:.4g} < ellipse {region.area:.4g}", cur, keep.desired)
+    elif np.all(region.contains(np.asarray(positions, dtype=float))):
+        return FormationChoice(False, "formation fits the ellipse", cur, keep.desired)
     trees = spanning_trees(graph)
     if not trees:
         return FormationChoice(False, "graph is not connected", cur, keep.desired)
@@ -223,7 +237,15 @@ def match_formation(
     best = trees[k]
     emb = embed(best, desired_distances(best, rho))
     return FormationChoice(
-        True, "least mismatch", best, desired_distances(best, rho), float(scores[k]), k, len(trees), shape_name(emb)
+        True,
+        "least mismatch",
+        best,
+        desired_distances(best, rho),
+        float(scores[k]),
+        k,
+        len(trees),
+        shape_name(emb),
+        emb,
     )
 
 

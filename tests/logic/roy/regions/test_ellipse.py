@@ -17,6 +17,7 @@ from swarm_logic.families.roy.regions.ellipse import (
     cohesion_radius,
     failure_area_factor,
     free_space,
+    gap_bisector,
     region_with_failures,
     shrunk_major_axis,
     step_region,
@@ -48,6 +49,16 @@ def test_one_wall_is_no_gap_when_sides_are_required():
     assert literal.sensed and literal.b_fs < 0.3  # k-means cuts the wall in two: a "gap" of one point spacing
     assert free_space(wall, np.zeros(2), heading=0.0).reason == "one side"
     assert free_space(walls(1.6), np.zeros(2), heading=0.0).b_fs == pytest.approx(1.6)  # both sides: kept
+
+
+def test_inside_a_corridor_the_sides_split_finds_its_width():
+    long = walls(2.0, x0=-6.0, depth=12.0, n=40)  # the region's centre halfway down a 2-wide corridor
+    assert free_space(long, np.zeros(2)).b_fs < 0.5  # k-means: front and back halves, two points of one wall
+    sides = free_space(long, np.zeros(2), heading=0.0, split="sides")
+    assert sides.b_fs == pytest.approx(2.0) and abs(gap_bisector(sides, 0.0)) < 1e-9
+    assert free_space(long[long[:, 1] > 0], np.zeros(2), heading=0.0, split="sides").reason == "one side"
+    with pytest.raises(ValueError, match="split"):
+        free_space(long, np.zeros(2), split="sides")
 
 
 def test_no_gap_sensed():

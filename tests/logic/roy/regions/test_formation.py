@@ -86,6 +86,13 @@ def test_algorithm1_skips_when_it_should():
     roomy = Ellipse(0.0, 0.0, 8.0, 4.0)
     out = match_formation(pos, DELTA_TRI, DELTA_TRI, rho, roomy)
     assert not out.searched and out.reason.startswith("formation hull") and out.adjacency is not None
+    compact = tri_coordinates(1.0)  # Theorem 1's spacing: a small hull, but wider than a thin ellipse
+    thin = Ellipse(0.5, 0.8, 2.5**2 / 0.6, 0.6)
+    assert match_formation(compact, DELTA_TRI, DELTA_TRI, rho, thin).reason.startswith("formation hull")
+    fit = match_formation(compact, DELTA_TRI, DELTA_TRI, rho, thin, trigger="fit")
+    assert fit.searched and fit.embedding.shape == (6, 2)
+    inside = match_formation(compact * 0.2 + [0.5, 0.8], DELTA_TRI, DELTA_TRI, rho, thin, trigger="fit")
+    assert inside.reason == "formation fits the ellipse"
     big = np.zeros((12, 12), int)
     assert "scalable law" in match_formation(np.zeros((12, 2)), big, big, rho, roomy).reason
 
