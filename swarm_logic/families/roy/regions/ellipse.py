@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy.cluster.vq import ClusterError, kmeans2
@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 from swarm_logic.families.roy.regions.sensing import check_fields
 from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.geometry import wrap
+from swarm_logic.log import plain
 
 GAP_MODES = ("closest", "centroid")
 SPLITS = ("kmeans", "sides")
@@ -56,17 +57,8 @@ class Gap:
         return (np.asarray(self.c1) + np.asarray(self.c2)) / 2.0
 
     def as_dict(self) -> dict[str, object]:
-        return {
-            "b_fs": self.b_fs if self.sensed else None,
-            "c1": self.c1,
-            "c2": self.c2,
-            "p1": self.p1,
-            "p2": self.p2,
-            "theta1": self.theta1 if self.sensed else None,
-            "theta2": self.theta2 if self.sensed else None,
-            "n_points": self.n_points,
-            "reason": self.reason,
-        }
+        """Strict JSON (NaN and infinities as None)."""
+        return plain(asdict(self))
 
 
 def _farthest_pair_init(p: np.ndarray) -> np.ndarray:
@@ -171,16 +163,8 @@ class GapDecision:
     ad_now: float = math.nan
 
     def as_dict(self) -> dict[str, object]:
-        return {
-            "status": self.status,
-            "gap": None if self.gap is None else self.gap.as_dict(),
-            "ad_ref": _nan_none(self.ad_ref),
-            "ad_now": _nan_none(self.ad_now),
-        }
-
-
-def _nan_none(v: float) -> float | None:
-    return None if math.isnan(v) else v
+        """Strict JSON (NaN and infinities as None)."""
+        return plain(asdict(self))
 
 
 def mean_distance(points: np.ndarray, ref: np.ndarray) -> float:
@@ -295,7 +279,8 @@ class RegionState:
     alpha: float = 0.0
 
     def as_dict(self) -> dict[str, object]:
-        return {"region": self.region.as_dict(), "v": self.v, "alpha": self.alpha}
+        """Strict JSON (NaN and infinities as None)."""
+        return plain(asdict(self))
 
 
 @dataclass(frozen=True)
@@ -311,14 +296,8 @@ class RegionStep:
     notes: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, object]:
-        return {
-            "state": self.state.as_dict(),
-            "advanced": self.advanced,
-            "a_target": self.a_target,
-            "b_target": self.b_target,
-            "held": self.held,
-            **self.notes,
-        }
+        """Strict JSON (NaN and infinities as None)."""
+        return plain(asdict(self))
 
 
 def can_hold(a: float, b: float, n: int, r_robot: float) -> str:
@@ -354,6 +333,8 @@ def step_region(
         raise ValueError("n_failed: needs the positions (and active mask) of the swarm it is counted against")
     e = state.region
     tgt = np.asarray(target, dtype=float)
+    if tgt.shape != (2,) or not np.isfinite(tgt).all():
+        raise ValueError(f"target: expected 2 finite numbers, got {target!r}")
     x = None if positions is None else np.asarray(positions, dtype=float).reshape(-1, 2)
     act = None if x is None else (np.ones(len(x), bool) if active is None else np.asarray(active, bool))
     n_active = 0 if act is None else int(act.sum())

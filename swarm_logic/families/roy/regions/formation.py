@@ -10,13 +10,14 @@ area), and compared to the ellipse after centring and aligning its principal axi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import networkx as nx
 import numpy as np
 from shapely.geometry import MultiPoint, Polygon
 
 from swarm_logic.families.roy.regions.shapes import Ellipse
+from swarm_logic.log import plain
 
 MISMATCH = ("iou", "literal")
 TRIGGERS = ("area", "fit")
@@ -103,8 +104,10 @@ def embed(adjacency: np.ndarray, desired: np.ndarray) -> np.ndarray:
 
 
 def hull(positions: np.ndarray, pad: float = 0.0) -> Polygon:
-    """The convex hull of the positions, each drawn as a disc of radius ``pad`` (0: the bare hull, possibly empty)."""
-    mp = MultiPoint(np.asarray(positions, dtype=float).reshape(-1, 2))
+    """The convex hull of the (finite) positions, each drawn as a disc of radius ``pad`` (0: the bare hull, possibly
+    empty)."""
+    p = np.asarray(positions, dtype=float).reshape(-1, 2)
+    mp = MultiPoint(p[np.isfinite(p).all(axis=1)])
     h = mp.convex_hull
     return h.buffer(pad) if pad > 0 else (h if isinstance(h, Polygon) else Polygon())
 
@@ -179,16 +182,8 @@ class FormationChoice:
     embedding: np.ndarray | None = None
 
     def as_dict(self) -> dict[str, object]:
-        return {
-            "searched": self.searched,
-            "reason": self.reason,
-            "adjacency": self.adjacency.tolist(),
-            "mismatch": None if math.isnan(self.mismatch) else self.mismatch,
-            "tree": self.tree,
-            "n_trees": self.n_trees,
-            "shape": self.shape,
-            "embedding": None if self.embedding is None else self.embedding.tolist(),
-        }
+        """Strict JSON (NaN and infinities as None)."""
+        return plain(asdict(self))
 
 
 def match_formation(

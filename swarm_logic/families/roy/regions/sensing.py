@@ -10,10 +10,12 @@ Every dropped reading is counted under the first reason that applies, so a calle
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+from swarm_logic.log import plain
 
 DROP_REASONS = ("no_echo", "garbage", "out_of_window", "boundary", "eclipse")
 
@@ -71,7 +73,8 @@ class ObstaclePoints:
         return int(self.points.shape[0])
 
     def as_dict(self) -> dict[str, object]:
-        return {"points": self.points.tolist(), "owner": self.owner.tolist(), "dropped": dict(self.dropped)}
+        """Strict JSON (NaN and infinities as None)."""
+        return plain(asdict(self))
 
 
 def sense(

@@ -1,6 +1,7 @@
 """Chapter 4's global controller: the gap by k-means, the moving-obstacle test, the region update with its equal
 area, the failure detector and shrink, and Theorem 3's R_s."""
 
+import json
 import math
 
 import numpy as np
@@ -83,7 +84,11 @@ def test_moving_obstacle_blocks_then_accepts():
     assert d.status == "accepted" and d.ad_now >= d.ad_ref
     d = test.feed(p1, g1)
     assert d.status == "accepted" and d.gap.b_fs == pytest.approx(3.0)
-    assert MovingObstacleTest().feed(np.zeros((0, 2)), Gap(math.inf)).status == "no_gap"
+    none = MovingObstacleTest().feed(np.zeros((0, 2)), Gap(math.inf))
+    assert none.status == "no_gap"
+    logged = json.loads(json.dumps(d.as_dict(), allow_nan=False))
+    assert logged["gap"]["b_fs"] == pytest.approx(3.0) and logged["status"] == "accepted"
+    assert json.loads(json.dumps(none.as_dict(), allow_nan=False))["ad_ref"] is None
 
 
 @pytest.mark.parametrize("b_fs", [0.05, 0.7, 1.3, 2.0, 2.49])
@@ -164,6 +169,9 @@ def test_region_that_cannot_hold_the_swarm_is_not_adopted():
     s = RegionState(Ellipse.circle(0.0, 0.0, 2.5))
     narrow = step_region(s, free_space(walls(0.9), np.zeros(2)), np.array([10.0, 0.0]), 0.25, params)
     assert narrow.state is s and narrow.held.startswith("infeasible: semi-axes")
+    assert json.loads(json.dumps(narrow.as_dict(), allow_nan=False))["a_target"] is None  # a = inf, logged as null
+    with pytest.raises(ValueError, match="target"):
+        step_region(s, Gap(math.inf), np.array([np.nan, 0.0]), 0.25, params)
     crowd = step_region(s, Gap(math.inf), np.array([10.0, 0.0]), 0.25, params, positions=np.zeros((30, 2)))
     assert crowd.state is s and "N pi r_robot^2" in crowd.held
 

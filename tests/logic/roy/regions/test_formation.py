@@ -1,6 +1,7 @@
 """Chapter 4's formations: the graphs, Kirchhoff's count and the tree enumeration (A7), the MDS embedding, the
 mismatch factor, Algorithm 1's choice and the shape names a run logs (B4)."""
 
+import json
 import math
 
 import networkx as nx
@@ -106,6 +107,8 @@ def test_algorithm1_picks_a_line_for_a_narrow_corridor_b4():
     out = match_formation(pos, DELTA_TRI, DELTA_TRI, rho, corridor)
     assert out.searched and out.n_trees == 54 and out.adjacency.sum() == 2 * 5
     assert out.shape == "line"
+    logged = json.loads(json.dumps(out.as_dict(), allow_nan=False))
+    assert logged["tree"] == out.tree and len(logged["embedding"]) == 6 and len(logged["adjacency"]) == 6
     scores = [
         mismatch(embed(t, desired_distances(t, rho)), corridor, "iou", rho / 2) for t in spanning_trees(DELTA_TRI)
     ]

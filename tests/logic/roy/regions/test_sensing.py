@@ -1,6 +1,7 @@
 """Range readings to obstacle points: the projection, the window, eq. 4.26's boundary test, the eclipse test and the
 drop counts."""
 
+import json
 import math
 
 import numpy as np
@@ -33,6 +34,8 @@ def test_garbage_window_and_counts():
     out = sense(x, np.zeros(2), ranges, fan_angles(5, 0.5), SensingParams(d_min=0.5, d_max=5.0))
     assert out.dropped == {"no_echo": 3, "garbage": 2, "out_of_window": 2, "boundary": 0, "eclipse": 0}
     assert len(out) == 3 and sorted(out.owner.tolist()) == [0, 1, 1]
+    logged = json.loads(json.dumps(out.as_dict(), allow_nan=False))
+    assert logged["dropped"]["garbage"] == 2 and len(logged["points"]) == 3
 
 
 def test_bad_pose_is_garbage_not_a_crash():
