@@ -10,16 +10,15 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.cluster.vq import ClusterError, kmeans2
 from scipy.spatial import cKDTree
 
-from swarm_logic.families.roy.regions.sensing import check_fields
+from swarm_logic.families.roy.regions.sensing import Logged, check_fields
 from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.geometry import wrap
-from swarm_logic.log import plain
 
 GAP_MODES = ("closest", "centroid")
 SPLITS = ("kmeans", "sides")
@@ -31,7 +30,7 @@ AXES = ("geometric", "literal")
 
 
 @dataclass(frozen=True)
-class Gap:
+class Gap(Logged):
     """The sensed free space: its width ``b_fs`` (``inf``: no gap sensed), the two cluster centroids ``c1``, ``c2``
     (r_o1, r_o2), the two points whose distance is ``b_fs`` (``p1``, ``p2``: the centroids in "centroid" mode, the
     closest pair in "closest" mode), their bearings ``theta1``, ``theta2`` from the region centre, the point count and
@@ -55,10 +54,6 @@ class Gap:
     def midpoint(self) -> np.ndarray:
         """R of eq. 4.36: the midpoint of the two cluster centres."""
         return (np.asarray(self.c1) + np.asarray(self.c2)) / 2.0
-
-    def as_dict(self) -> dict[str, object]:
-        """Strict JSON (NaN and infinities as None)."""
-        return plain(asdict(self))
 
 
 def _farthest_pair_init(p: np.ndarray) -> np.ndarray:
@@ -152,7 +147,7 @@ def gap_bisector(gap: Gap, toward: float) -> float:
 
 
 @dataclass(frozen=True)
-class GapDecision:
+class GapDecision(Logged):
     """One window's verdict: ``status`` "accepted" (``gap`` is the reference window's gap, eq. 4.37), "blocked" (a
     mover came into the gap: AD(t2) < AD(t1); retry at the next window), "pending" (first window: no reference yet)
     or "no_gap" (the reference window sensed no gap: nothing to test); the two mean distances."""
@@ -161,10 +156,6 @@ class GapDecision:
     gap: Gap | None
     ad_ref: float = math.nan
     ad_now: float = math.nan
-
-    def as_dict(self) -> dict[str, object]:
-        """Strict JSON (NaN and infinities as None)."""
-        return plain(asdict(self))
 
 
 def mean_distance(points: np.ndarray, ref: np.ndarray) -> float:
@@ -270,7 +261,7 @@ def axis_targets(b_fs: float, params: RegionParams, area_factor: float = 1.0) ->
 
 
 @dataclass(frozen=True)
-class RegionState:
+class RegionState(Logged):
     """The region and its controller's state: the ellipse, its speed ``v`` and the target bearing ``alpha`` (both
     integrated in the literal dynamics), and the last region that could hold the swarm."""
 
@@ -278,13 +269,9 @@ class RegionState:
     v: float = 0.0
     alpha: float = 0.0
 
-    def as_dict(self) -> dict[str, object]:
-        """Strict JSON (NaN and infinities as None)."""
-        return plain(asdict(self))
-
 
 @dataclass(frozen=True)
-class RegionStep:
+class RegionStep(Logged):
     """One update's outcome: the new state, whether the centre advanced, the target axes and why anything was held
     (``held``: "barrier", "gap blocked", "infeasible: ..." or "")."""
 
@@ -294,10 +281,6 @@ class RegionStep:
     b_target: float
     held: str = ""
     notes: dict[str, float] = field(default_factory=dict)
-
-    def as_dict(self) -> dict[str, object]:
-        """Strict JSON (NaN and infinities as None)."""
-        return plain(asdict(self))
 
 
 def can_hold(a: float, b: float, n: int, r_robot: float) -> str:

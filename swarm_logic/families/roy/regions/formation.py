@@ -10,14 +10,14 @@ area), and compared to the ellipse after centring and aligning its principal axi
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import networkx as nx
 import numpy as np
 from shapely.geometry import MultiPoint, Polygon
 
+from swarm_logic.families.roy.regions.sensing import Logged
 from swarm_logic.families.roy.regions.shapes import Ellipse
-from swarm_logic.log import plain
 
 MISMATCH = ("iou", "literal")
 TRIGGERS = ("area", "fit")
@@ -165,7 +165,7 @@ def mismatch(positions: np.ndarray, region: Ellipse, mode: str = "iou", pad: flo
 
 
 @dataclass(frozen=True)
-class FormationChoice:
+class FormationChoice(Logged):
     """Algorithm 1's outcome: ``searched`` whether the tree search ran, ``reason`` why not (or what it chose),
     ``adjacency`` and ``desired`` (rho o Delta) the formation to use, ``mismatch`` its zeta, ``tree`` its index among
     the ``n_trees`` spanning trees (-1: unchanged), ``shape`` its embedding's shape name, ``embedding`` its positions
@@ -180,10 +180,6 @@ class FormationChoice:
     n_trees: int = 0
     shape: str = ""
     embedding: np.ndarray | None = None
-
-    def as_dict(self) -> dict[str, object]:
-        """Strict JSON (NaN and infinities as None)."""
-        return plain(asdict(self))
 
 
 def match_formation(

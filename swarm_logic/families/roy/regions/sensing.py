@@ -34,6 +34,13 @@ def fan_angles(count: int, spacing: float) -> np.ndarray:
     return (np.arange(count) - (count - 1) / 2.0) * spacing
 
 
+class Logged:
+    """A record a planner logs: ``as_dict`` gives it as strict JSON (arrays as lists, NaN and infinities as None)."""
+
+    def as_dict(self) -> dict[str, object]:
+        return plain(asdict(self))
+
+
 def check_fields(obj: object, names: tuple[str, ...], positive: bool = True) -> None:
     """A ValueError naming the first of the dataclass' ``names`` that is not finite and > 0 (``positive``) or >= 0."""
     for name in names:
@@ -60,7 +67,7 @@ class SensingParams:
 
 
 @dataclass(frozen=True)
-class ObstaclePoints:
+class ObstaclePoints(Logged):
     """The stacked obstacle points of eq. 4.29: ``points`` (K, 2), ``owner`` (K,) the agent whose beam gave each,
     ``beam`` (K,) its beam index, and ``dropped`` the count of readings lost per reason (``DROP_REASONS``)."""
 
@@ -71,10 +78,6 @@ class ObstaclePoints:
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
-
-    def as_dict(self) -> dict[str, object]:
-        """Strict JSON (NaN and infinities as None)."""
-        return plain(asdict(self))
 
 
 def sense(
