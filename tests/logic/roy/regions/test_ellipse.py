@@ -227,3 +227,14 @@ def test_failure_detector_b5():
     det2 = FailureDetector(1)
     for k in range(20):
         assert not det2.update(0.25 * k, np.array([[6.0, 0.0]]), Ellipse.circle(0, 0, 2.5)).any()
+
+
+def test_axes_lag_is_first_order():
+    params = RegionParams(barrier=False, axes_lag=1.0, clearance=0.5)
+    s = RegionState(Ellipse.circle(0.0, 0.0, 2.5))
+    gap = free_space(walls(3.0), np.zeros(2))  # targets b = 1.0, a = 6.25
+    out = step_region(s, gap, np.array([30.0, 0.0]), 0.25, params)
+    g = 1 - math.exp(-0.25)
+    assert out.state.region.b == pytest.approx(2.5 + g * (1.0 - 2.5))
+    assert out.state.region.a == pytest.approx(2.5 + g * (6.25 - 2.5))
+    assert (out.a_target, out.b_target) == pytest.approx((6.25, 1.0))
