@@ -238,10 +238,17 @@ def detect_openings(
 
     An opening is seen through points only: pass every beam's end, the obstacle it hit or, without an echo, the
     end of its range (its free end); from hits alone a lane shows only by what its beams hit beyond it."""
-    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    pts = np.asarray(points, dtype=float)
+    if pts.size and (pts.ndim != 2 or pts.shape[1] != 2):
+        raise ValueError(f"detect_openings: points must be (K, 2), got shape {pts.shape}")
+    pts = pts.reshape(-1, 2)
     o = np.asarray(origin, dtype=float)
     finite = np.isfinite(pts).all(axis=1)
     nonfinite = int((~finite).sum())
+    if o.shape != (2,) or not (np.isfinite(o).all() and math.isfinite(heading)):
+        return _no_scan(
+            f"frame not finite (origin {o.tolist()}, heading {heading}): no opening", 0, nonfinite, int(finite.sum())
+        )
     pts = pts[finite]
     d = pts - o
     h = np.array([math.cos(heading), math.sin(heading)])
@@ -651,7 +658,7 @@ def merge_swarms(
     total = float(area.sum())
     w = area / total if params.merge_centre == "area_weighted" else np.full(len(area), 1 / len(area))
     centre = w @ np.array([p.centre for p in proposals])
-    if target is not None and np.any(np.asarray(target, dtype=float) != centre):
+    if target is not None and np.isfinite(target).all() and np.any(np.asarray(target, dtype=float) != centre):
         d = np.asarray(target, dtype=float) - centre
         theta = math.atan2(d[1], d[0])
     elif direction is not None:

@@ -1,6 +1,7 @@
 """Chapter 6's split and merge: openings found in corridor point sets, sub-region sizing (A8), allocation and
 leaders (B9), merge (A9, B10), lane targets, and the missing-leader promotions."""
 
+import json
 import math
 
 import numpy as np
@@ -94,6 +95,10 @@ def test_no_opening_in_open_space_and_bad_points_are_counted():
     scan = detect_openings(pts, (0, 0), NORTH, P)
     assert scan.dropped_nonfinite == 2 and len(scan.openings) == 3
     assert scan.as_dict()["reason"] == "3 openings"
+    lost = detect_openings(corridor(THREE), (np.nan, 0.0), NORTH, P)
+    assert lost.openings == () and lost.reason.startswith("frame not finite")
+    with pytest.raises(ValueError, match=r"\(K, 2\)"):
+        detect_openings(np.zeros((4, 3)), (0, 0), NORTH, P)
 
 
 def test_an_opening_narrower_than_2_r_s_stops_the_split():
@@ -152,6 +157,7 @@ def test_split_b9_the_widest_opening_gets_the_most_agents_and_leaders_are_neares
         assert s.region.b == pytest.approx(o.b_fs) and s.region.centre == pytest.approx(o.centre)
         dist = np.hypot(*(pos[list(s.members)] - s.region.centre).T)
         assert s.leader == s.members[int(np.argmin(dist))]  # eq. 6.14
+    json.dumps([scan.as_dict(), d.as_dict()])  # plain values, for the planner's log
     # eq. 6.13: the widest region took the agents nearest its centre
     first = d.swarms[0]
     dist0 = np.hypot(*(pos - first.region.centre).T)
@@ -206,6 +212,7 @@ def test_merge_a9_b10_hardware_swarm():
     assert m.swarm.region.centre == pytest.approx(centre)
     assert m.swarm.region.theta == pytest.approx(math.atan2(10.0 - centre[1], 200.0 - centre[0]))
     assert m.swarm.leader == int(np.argmin(np.hypot(*(pos - centre).T))) and m.swarm.members == tuple(range(6))
+    json.dumps([m.as_dict() for m in merges] + [s.as_dict() for s in out])
     equal = merge_swarms(subs, [props[0], props[0].moved(5.0, 0.0)], pos, prm)
     assert equal.area == pytest.approx(2 * 3 * math.pi * r_s**2) and equal.theorem1
     small = merge_swarms(subs, [Ellipse(0, 0, 10, 10), Ellipse(5, 0, 10, 10)], pos, prm)
@@ -245,6 +252,7 @@ def test_a_missing_leader_is_replaced_by_the_survivor_nearest_the_centre():
     b = SubSwarm(2, (6, 7, 8, 9, 10, 11), 6, Ellipse(1.0, 4.0, 2.0, 2.0))
     m = merge_swarms([a, b], [a.region, b.region], pos[alive], P, ids=ids[alive])
     assert [p.dead for p in m.promotions] == [4] and m.promotions[0].promoted == m.swarm.leader != 4
+    json.dumps(m.as_dict())
     assert len(m.swarm.members) == 11 and m.required_area == pytest.approx(11 * math.pi)
 
 
