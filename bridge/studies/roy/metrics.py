@@ -113,7 +113,7 @@ def path_lengths(track: np.ndarray) -> np.ndarray:
     count 0)."""
     t = np.asarray(track, dtype=float)
     step = np.hypot(*np.moveaxis(np.diff(t, axis=0), -1, 0))
-    return np.nansum(np.where(np.isfinite(step), step, np.nan), axis=0)
+    return np.where(np.isfinite(step), step, 0.0).sum(axis=0)
 
 
 def travel_variance_index(travelled: Sequence[float] | np.ndarray) -> float:

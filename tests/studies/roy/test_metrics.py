@@ -34,8 +34,8 @@ def test_tvi_a10():
     assert travel_variance_index([1.0, 2.0, 3.0]) == pytest.approx(36 / 42)
     with pytest.raises(ValueError, match="finite"):
         travel_variance_index([1.0, -1.0])
-    track = np.array([[[0, 0], [0, 0]], [[3, 4], [0, 1]], [[3, 4], [0, 2]]], float)
-    assert path_lengths(track).tolist() == [5.0, 2.0]
+    track = np.array([[[0, 0], [0, 0]], [[3, 4], [0, 1]], [[3, 4], [0, 2]], [[np.nan, 0], [0, 3]]], float)
+    assert path_lengths(track).tolist() == [5.0, 3.0]  # a step to or from a lost position counts 0
 
 
 @pytest.mark.parametrize(
