@@ -50,12 +50,13 @@ class SplitMergeParams:
     - ``prominence``, ``min_width``: a peak is an opening if it stands out by >= ``prominence`` (default 2 r_s) and
       is >= ``min_width`` (default 2 r_s) wide at half its prominence; ``min_split_gap`` (default 2 r_s): a split
       needs every opening's b_fs at least this wide.
-    - ``empty_bins``: a bin no point falls in takes the value of the "nearest" sampled bin (the lower on a tie: it
-      lies between two beams) or the ``horizon`` (default the farthest point of the profile: nothing seen is open).
-    - ``edges``: "minimum" (eq. 6.6: from the flank's half-prominence point outward to the nearest minimum, where
-      the profile stops falling by more than ``edge_tolerance``, default r_s / 4) or "foot" (the first sample beyond
-      the half-prominence point). Default "minimum" for the depth profile, "foot" for the range profile (a straight
-      wall across the lanes is no minimum of range against bearing: it falls toward the heading).
+    - ``empty_bins``: a bin with neither a hit nor a free beam end is unknown: it takes the value of the "nearest"
+      sampled bin (the default; the lower on a tie) or is open to the ``horizon`` (default the deepest point plus
+      twice ``prominence``: for callers without free ends, where a bin no beam hit is taken as open).
+    - ``edges``: "minimum" (eq. 6.6: from the peak across its top, then down while the profile falls by more than
+      ``edge_tolerance`` per sample, default r_s / 4) or "foot" (the first sample beyond the half-prominence
+      point). Default "minimum" for the depth profile, "foot" for the range profile (a straight wall across the
+      lanes is no minimum of range against bearing: it falls toward the heading).
     - ``semi_minor``: "literal" b^i = b_fs^i (eq. 6.9, target A8) or "half" b^i = b_fs^i / 2 (the region as wide as
       the gap; the semi-axis reading of erratum 11).
     - ``allocation``: "nearest" (eq. 6.13: regions in decreasing b_fs take their nearest unassigned agents) or
@@ -209,35 +210,62 @@ def _no_scan(reason: str, used: int, nonfinite: int, behind: int) -> OpeningScan
     return OpeningScan((), (), False, reason, used, nonfinite, behind, e, e, e)
 
 
-def _edge(s: np.ndarray, start: int, step: int, drop: float | None) -> int:
-    """The edge sample of a flank: from ``start`` (the first sample beyond the half-prominence point) going ``step``
-    (-1 left, +1 right), unless ``drop`` is None on down while the profile keeps falling by more than ``drop``, to
-    the nearest minimum (eq. 6.6: f' ~ 0 and f'' > 0 where the fall ends)."""
-    i = min(max(start, 0), len(s) - 1)
+def _minimum(s: np.ndarray, p: int, step: int, tol: float) -> int | None:
+    """The nearest minimum of ``s`` from peak ``p`` going ``step`` (-1 left, +1 right), eq. 6.6 (f' ~ 0 and f'' > 0
+    where the fall ends): across the peak's top (within ``tol`` of it), then down while the profile falls by more
+    than ``tol`` per sample (or over two samples, across a one-sample ledge). None if the top leads up to higher
+    ground: ``p`` is a bump on a higher peak's flank, no peak of its own."""
     end = 0 if step < 0 else len(s) - 1
-    while drop is not None and i != end and s[i + step] < s[i] - drop:
+    i = p
+    while i != end and abs(s[i + step] - s[p]) <= tol:
         i += step
+    if i != end and s[i + step] > s[p] + tol:
+        return None
+    while i != end:
+        if s[i + step] < s[i] - tol:
+            i += step
+        elif i + step != end and s[i + 2 * step] < s[i] - tol and s[i + step] <= s[i] + tol:
+            i += 2 * step
+        else:
+            break
     return i
 
 
+def _crossing(s: np.ndarray, p: int, step: int, level: float) -> float:
+    """Where ``s`` first falls to ``level`` from peak ``p`` going ``step``, interpolated between samples."""
+    i = p
+    while s[i] > level and 0 <= i + step < len(s):
+        i += step
+    if s[i] > level or s[i - step] == s[i]:
+        return float(i)
+    return float(i - step) + step * (s[i - step] - level) / (s[i - step] - s[i])
+
+
 def detect_openings(
-    points: np.ndarray, origin: Sequence[float] | np.ndarray, heading: float, params: SplitMergeParams
+    points: np.ndarray,
+    origin: Sequence[float] | np.ndarray,
+    heading: float,
+    params: SplitMergeParams,
+    free: np.ndarray | None = None,
 ) -> OpeningScan:
     """Multi-path detection (§6.3, eqs. 6.6-6.7, erratum 23) on sensed points (K, 2) in the frame at ``origin``
     (the leader's position or the region's centre) facing ``heading`` (rad).
 
     Depth profile: each point's lateral offset u (to the right of the heading) and forward depth f; the points
-    ahead (f > ``min_forward``) are binned along u, each bin keeps its nearest point ahead (the clearance there), an
-    empty bin takes its nearest sampled neighbour's value (or the ``horizon``, ``empty_bins``). Range profile: the
-    same with bearing (clockwise from the heading, within ``half_fov``) and range. The profile is smoothed by a
-    moving median of ``median_window`` samples; the peaks of prominence >= 2 r_s and width >= 2 r_s at half
-    prominence (for the range profile, an angle of 2 r_s at the points' median range) are the openings (peaks of
-    one plateau are one opening). Each edge (``edges``) is the sensed point of the edge sample's bin nearest the
+    ahead (f > ``min_forward``) are binned along u and each bin keeps its nearest point ahead (the clearance there).
+    ``free`` (F, 2), optional, are the ends of the beams that had no echo (sensor position + its range along the
+    beam): a bin with no hit keeps the farthest of its free ends (clear at least that far). A bin with neither takes
+    its nearest sampled neighbour's value (unknown; or the ``horizon``, ``empty_bins``). Range profile: the same
+    with bearing (clockwise from the heading, within ``half_fov``) and range. The profile is smoothed by a moving
+    median of ``median_window`` samples; each peak (``find_peaks``) has its edges at the nearest minima either side
+    (eq. 6.6, ``edges``), its prominence over the higher of the two, its width at half that prominence (for the
+    range profile, an angle at the points' median range); the peaks of prominence >= 2 r_s and width >= 2 r_s are
+    the openings (peaks of one plateau are one opening). l1, l2 are the sensed points of the edge bins nearest the
     peak (the bin's centre if it holds none). Split iff there are >= 2 openings and every b_fs >= 2 r_s. No point
     ahead: no opening.
 
-    An opening is seen through points only: pass every beam's end, the obstacle it hit or, without an echo, the
-    end of its range (its free end); from hits alone a lane shows only by what its beams hit beyond it."""
+    The points are obstacle hits (``sensing.sense`` gives them): from hits alone a lane shows only by what its beams
+    hit beyond it; pass ``free`` (or ``empty_bins="horizon"``) for lanes whose beams return nothing."""
     pts = np.asarray(points, dtype=float)
     if pts.size and (pts.ndim != 2 or pts.shape[1] != 2):
         raise ValueError(f"detect_openings: points must be (K, 2), got shape {pts.shape}")
@@ -250,19 +278,22 @@ def detect_openings(
             f"frame not finite (origin {o.tolist()}, heading {heading}): no opening", 0, nonfinite, int(finite.sum())
         )
     pts = pts[finite]
-    d = pts - o
     h = np.array([math.cos(heading), math.sin(heading)])
     right = np.array([h[1], -h[0]])
-    if params.profile == "depth":
-        x, y = d @ right, d @ h
-        ahead = y > params.min_forward
-        step = params.bin
-    else:
+    step = params.bin if params.profile == "depth" else params.bin_angle
+
+    def frame(q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Profile coordinate (lateral offset or clockwise bearing), value (depth or range), whether ahead."""
+        d = q - o
+        if params.profile == "depth":
+            u, v = d @ right, d @ h
+            return u, v, v > params.min_forward
         bearing = np.arctan2(d[:, 1], d[:, 0]) - heading
-        x = -np.arctan2(np.sin(bearing), np.cos(bearing))  # clockwise: left to right
-        y = np.hypot(d[:, 0], d[:, 1])
-        ahead = (np.abs(x) <= params.half_fov) & (y > 0)
-        step = params.bin_angle
+        u = -np.arctan2(np.sin(bearing), np.cos(bearing))  # clockwise: left to right
+        v = np.hypot(d[:, 0], d[:, 1])
+        return u, v, (np.abs(u) <= params.half_fov) & (v > 0)
+
+    x, y, ahead = frame(pts)
     behind = int((~ahead).sum())
     x, y, pts = x[ahead], y[ahead], pts[ahead]
     if not len(x):
@@ -272,9 +303,18 @@ def detect_openings(
     nb = int(idx.max()) + 1
     raw = np.full(nb, np.inf)
     np.minimum.at(raw, idx, y)
+    if free is not None and len(free):
+        fu, fv, fa = frame(np.asarray(free, dtype=float).reshape(-1, 2))
+        ok = fa & np.isfinite(fu) & np.isfinite(fv)
+        fb = np.floor((fu[ok] - lo) / step).astype(int)
+        inside = (fb >= 0) & (fb < nb)
+        reach = np.full(nb, -np.inf)
+        np.maximum.at(reach, fb[inside], fv[ok][inside])
+        seen_free = ~np.isfinite(raw) & np.isfinite(reach)
+        raw[seen_free] = reach[seen_free]  # no hit, but a beam ran this far clear
     empty = ~np.isfinite(raw)
     if params.empty_bins == "horizon":
-        raw[empty] = params.horizon if params.horizon is not None else float(y.max())
+        raw[empty] = params.horizon if params.horizon is not None else float(y.max()) + 2 * params.peak_prominence
     elif empty.any():
         have = np.flatnonzero(~empty)
         hole = np.flatnonzero(empty)
@@ -285,7 +325,7 @@ def detect_openings(
     smooth = median_filter(raw, size=params.median_window, mode="nearest")
     xs = lo + (np.arange(nb) + 0.5) * step
     width_scale = step if params.profile == "depth" else step * float(np.median(y))  # samples -> length
-    peaks, props = find_peaks(smooth, prominence=params.peak_prominence, width=0)
+    peaks, _ = find_peaks(smooth)  # every local maximum (a plateau by its middle)
 
     def world(u: float, v: float) -> np.ndarray:
         if params.profile == "depth":
@@ -303,16 +343,19 @@ def detect_openings(
     found: list[Opening] = []
     narrow: list[Opening] = []
     seen: set[tuple[int, int]] = set()
-    walk = params.edge_drop if params.edge_rule == "minimum" else None
-    for k, p in enumerate(peaks.tolist()):
-        ends = (
-            _edge(smooth, math.floor(props["left_ips"][k]), -1, walk),
-            _edge(smooth, math.ceil(props["right_ips"][k]), +1, walk),
-        )
-        if ends in seen:  # peaks of one plateau (equal heights, rounding between them): one opening
+    for p in peaks.tolist():
+        lo_i, hi_i = _minimum(smooth, p, -1, params.edge_drop), _minimum(smooth, p, +1, params.edge_drop)
+        if lo_i is None or hi_i is None:
             continue
-        seen.add(ends)
-        l1, l2 = edge_point(ends[0], +1), edge_point(ends[1], -1)
+        prominence = float(smooth[p] - max(smooth[lo_i], smooth[hi_i]))
+        if prominence < params.peak_prominence or (lo_i, hi_i) in seen:  # one plateau's peaks are one opening
+            continue
+        seen.add((lo_i, hi_i))
+        level = float(smooth[p]) - prominence / 2
+        left_x, right_x = _crossing(smooth, p, -1, level), _crossing(smooth, p, +1, level)
+        if params.edge_rule == "foot":
+            lo_i, hi_i = math.floor(left_x), math.ceil(right_x)
+        l1, l2 = edge_point(lo_i, +1), edge_point(hi_i, -1)
         mouth = l2 - l1
         normal = np.array([mouth[1], -mouth[0]]) if np.any(mouth) else h.copy()  # l1 left, l2 right: ahead
         if normal @ ((l1 + l2) / 2 - o) < 0:
@@ -322,8 +365,8 @@ def detect_openings(
             _pt(l2),
             _pt(world(float(xs[p]), float(smooth[p]))),
             float(np.hypot(*mouth)),
-            float(props["prominences"][k]),
-            float(props["widths"][k] * width_scale),
+            prominence,
+            (right_x - left_x) * width_scale,
             math.atan2(normal[1], normal[0]),
         )
         (found if op.width >= params.peak_width else narrow).append(op)

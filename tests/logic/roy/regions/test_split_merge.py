@@ -101,6 +101,23 @@ def test_no_opening_in_open_space_and_bad_points_are_counted():
         detect_openings(np.zeros((4, 3)), (0, 0), NORTH, P)
 
 
+def test_lanes_seen_only_through_beams_without_echo():
+    """Hits on the wall alone (the lanes' beams return nothing): the free ends of those beams show the lanes; without
+    them the unknown columns take their neighbours' value (no opening) unless they are taken as open (horizon)."""
+    xs = np.round(np.arange(-20.0, 20.05, 0.1), 6)
+    wall = xs[(np.abs(xs + 6.0) > 2.0) & (np.abs(xs - 6.0) > 2.5)]
+    hits = np.c_[wall, np.full(len(wall), 10.0)]
+    gap_x = np.r_[np.arange(-7.9, -4.0, 0.3), np.arange(3.6, 8.5, 0.3)]
+    free = np.c_[gap_x, np.full(len(gap_x), 14.0)]  # beams that ran clear to their 14-unit reach
+    seen = detect_openings(hits, (0, 0), NORTH, P, free=free)
+    assert seen.split and [o.b_fs for o in seen.openings] == pytest.approx([4.0, 5.0], abs=0.2)
+    assert detect_openings(hits, (0, 0), NORTH, P).openings == ()
+    assumed = detect_openings(hits, (0, 0), NORTH, SplitMergeParams(1.0, empty_bins="horizon"))
+    assert [o.b_fs for o in assumed.openings] == pytest.approx([4.0, 5.0], abs=0.2)
+    short = np.c_[gap_x, np.full(len(gap_x), 9.0)]  # free ends short of the wall say nothing of what lies beyond
+    assert detect_openings(hits, (0, 0), NORTH, P, free=short).openings == ()
+
+
 def test_an_opening_narrower_than_2_r_s_stops_the_split():
     scan = detect_openings(corridor([(-8.0, -4.0), (3.0, 5.0)]), (0, 0), NORTH, P)
     assert not scan.split and len(scan.openings) == 1 and len(scan.narrow) == 1
