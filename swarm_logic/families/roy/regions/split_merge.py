@@ -366,7 +366,7 @@ def detect_openings(
             _pt(world(float(xs[p]), float(smooth[p]))),
             float(np.hypot(*mouth)),
             prominence,
-            (right_x - left_x) * width_scale,
+            float((right_x - left_x) * width_scale),
             math.atan2(normal[1], normal[0]),
         )
         (found if op.width >= params.peak_width else narrow).append(op)
