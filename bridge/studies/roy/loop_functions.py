@@ -19,6 +19,7 @@ from pydantic import Field
 from bridge.core.config import Section
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.recorder import register_schema
+from bridge.studies.roy.metrics import pair_shares
 
 if TYPE_CHECKING:
     from bridge.core.config import Config
@@ -42,23 +43,6 @@ class FormationCfg(Section):
     sample_s: float = Field(1.0, gt=0, le=60, description="the sampling step of FE and the arrival test")
     end_after_arrival_s: float | None = Field(0.0, ge=0, description="end the session this long after the swarm "
                                                                      "arrives (none: run to duration_s)")
-
-
-def pair_shares(xy: np.ndarray, r_s: float) -> tuple[float, float]:
-    """The shares of the ordered pairs i != j closer than 2 r_s and farther than 3 r_s (0, 0 for fewer than 2)."""
-    n = len(xy)
-    if n < 2:
-        return 0.0, 0.0
-    d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
-    off = ~np.eye(n, dtype=bool)
-    pairs = n * (n - 1)
-    return float((off & (d < 2 * r_s)).sum()) / pairs, float((off & (d > 3 * r_s)).sum()) / pairs
-
-
-def formation_error(xy: np.ndarray, r_s: float) -> float:
-    """Eq. 7.1, repaired (digest §4.5.1): 1 - #{ordered pairs i != j with 2 r_s <= x_ij <= 3 r_s} / (N (N - 1))."""
-    close, far = pair_shares(xy, r_s)
-    return close + far
 
 
 def arrived(xy: np.ndarray, target: np.ndarray, r_s: float, tol: float) -> bool:

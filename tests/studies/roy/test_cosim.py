@@ -13,7 +13,8 @@ from bridge.core.config import load_config, to_toml
 from bridge.experiments.runner import Outcome, Trial, TrialResult, get_experiment, trial_seed
 from bridge.studies.roy import cosim
 from bridge.studies.roy.experiments import COSIM_CASES, RoyApfExperiment, cosim_sections
-from bridge.studies.roy.loop_functions import arrived, formation_error, pair_shares
+from bridge.studies.roy.loop_functions import arrived
+from bridge.studies.roy.metrics import formation_error, pair_shares
 
 R = 0.113
 
