@@ -225,7 +225,9 @@ class RegionParams:
     EFA polygon is clipped to, ``grow`` (ours: the disc grows past ``d_max`` until Φ has that area or is the whole
     EFA polygon; off: exactly ``d_max``), ``min_points`` below which the circle rule applies, ``advance``
     ("shift_clip" ours, "efa" the reconstruction as is), ``sort_about`` (the polar sort's centre: the points'
-    centroid or the swarm's, erratum 19) and the EFA's own parameters."""
+    centroid or the swarm's, erratum 19), ``clearance`` (ours, in r_s: the circle rule cuts a disc of that radius
+    about every sensed point out of its circle, so one wall, whose points give the EFA no area, is not inside Φ; 0:
+    off) and the EFA's own parameters."""
 
     step: float = 1.0
     packing_density: float = 0.7
@@ -234,6 +236,7 @@ class RegionParams:
     min_points: int = 3
     advance: str = "shift_clip"
     sort_about: str = "points"
+    clearance: float = 1.0
     efa: EfaParams = field(default_factory=EfaParams)
 
     def __post_init__(self) -> None:
@@ -250,15 +253,22 @@ class RegionParams:
         require(
             self.sort_about in SORT_CENTRES, "sort_about", f"expected one of {', '.join(SORT_CENTRES)}", self.sort_about
         )
+        require(
+            math.isfinite(self.clearance) and self.clearance >= 0.0,
+            "clearance",
+            "must be finite and >= 0",
+            self.clearance,
+        )
 
 
 @dataclass(frozen=True)
 class PolygonRegion:
-    """Φ for one update: the valid ``polygon`` (never empty for N >= 1), the ``rule`` that made it ("circle": rule
-    (a), too few points or no EFA area; "efa_disc": rule (b); "efa": the reconstruction as is), ``reason`` in words,
-    the ``centre`` it was built about (the swarm centroid one step toward T), ``disc_radius`` of the clip (NaN when
-    none), ``repaired``/``pieces_dropped`` for any piece dropped (the EFA's self-crossings and the clip's), the
-    sensed points dropped (non-finite, repeated), and the ``fit`` when EFA ran."""
+    """Φ for one update: the valid ``polygon`` (never empty), the ``rule`` that made it ("circle": rule (a), too few
+    points, or an EFA polygon with less area than one circle; "efa_disc": rule (b); "efa": the reconstruction as
+    is), ``reason`` in words, the ``centre`` it was built about (the swarm centroid one step toward T),
+    ``disc_radius`` of the clip (NaN when none), ``repaired``/``pieces_dropped`` for any piece dropped (the EFA's
+    self-crossings, the clip's, the circle's beyond the points), the sensed points dropped (non-finite, repeated),
+    and the ``fit`` when EFA ran."""
 
     polygon: Polygon
     rule: str
@@ -353,13 +363,33 @@ def polygon_region(
 
     def circle(reason: str, fit: EfaFit | None) -> PolygonRegion:
         disc = Ellipse.circle(float(ahead[0]), float(ahead[1]), math.sqrt(need / math.pi)).polygon()
-        return PolygonRegion(disc, "circle", reason, ahead, math.nan, False, 0, nonfinite, dups, fit)
+        dropped = 0
+        if params.clearance > 0.0 and len(clean):
+            cut = shapely.multipoints(clean).buffer(params.clearance * r_s, quad_segs=8)
+            piece, dropped = largest_polygon(disc.difference(cut))
+            if piece.is_empty:
+                return PolygonRegion(
+                    disc,
+                    "circle",
+                    reason + "; no room left beside the points, not cut",
+                    ahead,
+                    math.nan,
+                    False,
+                    0,
+                    nonfinite,
+                    dups,
+                    fit,
+                )
+            disc = piece
+        return PolygonRegion(disc, "circle", reason, ahead, math.nan, dropped > 0, dropped, nonfinite, dups, fit)
 
     if len(clean) < params.min_points:
         return circle(f"{len(clean)} points sensed (fewer than {params.min_points})", None)
     fit = efa_fit(clean, params.efa, here if params.sort_about == "swarm" else None)
     if fit.polygon.is_empty:
         return circle("the EFA contour encloses no area (collinear points)", fit)
+    if fit.area < math.pi * r_s * r_s:
+        return circle(f"the EFA polygon ({fit.area:.3g}) is smaller than one circle", fit)
     if params.advance == "efa":
         return PolygonRegion(
             fit.polygon,

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+import shapely
 from shapely.geometry import Polygon
 
 from swarm_logic.families.roy.regions.efa import (
@@ -168,6 +169,21 @@ def test_degenerate_inputs_fall_back_to_the_circle():
     bad = polygon_region(np.full((5, 2), np.nan), np.full((3, 2), np.nan), np.array([np.nan, 0.0]), 1.0)
     assert bad.rule == "circle" and bad.centre.tolist() == [0.0, 0.0] and bad.dropped_nonfinite == 5
     assert bad.area == pytest.approx(math.pi / 0.7, rel=2e-3)
+
+
+def test_one_wall_is_cut_out_of_the_circle():
+    """One wall's points are collinear (no EFA area), or with noise a sliver smaller than one circle: the circle
+    rule, less a disc of r_s about every point, so Φ stays on the swarm's side of the wall."""
+    x = np.linspace(-5.0, 5.0, 21)
+    wall = np.c_[x, np.full_like(x, 3.0)]
+    pos, target = np.zeros((14, 2)), np.array([0.0, 30.0])
+    for pts, why in ((wall, "no area"), (wall + np.random.default_rng(0).normal(0, 0.05, wall.shape), "smaller")):
+        reg = polygon_region(pts, pos, target, 1.0)
+        assert reg.rule == "circle" and why in reg.reason
+        assert reg.polygon.bounds[3] < 2.1 and reg.pieces_dropped == 1  # the cap beyond the wall dropped
+        assert shapely.distance(reg.polygon, shapely.multipoints(pts)) >= 1.0 - 1e-2
+    uncut = polygon_region(wall, pos, target, 1.0, RegionParams(clearance=0.0))
+    assert uncut.area == pytest.approx(14 * math.pi / 0.7, rel=2e-3)
 
 
 def test_parameters_are_checked():
