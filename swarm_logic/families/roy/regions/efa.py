@@ -12,6 +12,8 @@ Erratum 19 (digest §5.2), two gaps:
   circle of area N π r_s² / η one step toward T; (b) otherwise the EFA polygon intersected with a disc about the swarm
   centroid shifted one step toward T (``RegionParams.advance = "shift_clip"``). ``"efa"`` keeps the EFA polygon as
   reconstructed, neither moved nor clipped (the thesis' figures taken at face value; rule (a) still applies).
+  Ours on top: rule (a) also takes an EFA polygon with less area than one circle (one wall's points), its circle
+  loses a disc of r_s about every sensed point, and rule (b)'s disc grows past d_thre+ until Φ has N π r_s² / η.
 """
 
 from __future__ import annotations
@@ -130,7 +132,8 @@ def largest_polygon(geom: shapely.Geometry) -> tuple[Polygon, int]:
         return Polygon(), 0
     if not geom.is_valid:
         geom = shapely.make_valid(geom)
-    parts = [g for g in shapely.get_parts(geom) if g.geom_type == "Polygon" and g.area > 0.0]
+    flat = shapely.get_parts(shapely.get_parts(geom))  # a collection's multipolygons flattened too
+    parts = [g for g in flat if g.geom_type == "Polygon" and g.area > 0.0]
     if not parts:
         return Polygon(), 0
     areas = np.array([g.area for g in parts])
