@@ -99,6 +99,9 @@ def test_resample_equal_arc_length():
     assert r.shape == (32, 2) and r[0].tolist() == [0.0, 0.0]
     steps = np.hypot(*np.diff(np.vstack([r, r[:1]]), axis=0).T)
     assert steps == pytest.approx(np.full(32, 0.5))  # 16 / 32 along every side, corners fall on samples
+    line = order_points(np.c_[np.arange(6.0), np.arange(6.0)]).points  # collinear: out along the line and back
+    back_and_forth = resample_closed(line, 20)
+    assert back_and_forth.shape == (20, 2) and np.allclose(back_and_forth[:, 0], back_and_forth[:, 1])
     assert resample_closed(np.array([[1.0, 1.0]]), 10).shape == (0, 2)
     assert resample_closed(np.array([[1.0, 1.0], [1.0, 1.0]]), 10).shape == (0, 2)
 
@@ -151,6 +154,20 @@ def test_grown_disc_stops_at_the_whole_polygon():
     reg = polygon_region(corridor(half_length=4.0), pos, np.array([0.5, 0.0]), 1.0)
     assert reg.rule == "efa_disc"
     assert reg.area == pytest.approx(reg.fit.area, rel=1e-6)  # 48 < 40 pi / 0.7: all of it
+
+
+def test_sort_about_the_swarm():
+    """A C-shaped pocket open toward +x, the swarm outside its mouth: about the swarm and about the points' centroid
+    the polar orders differ, and the option reaches the fit."""
+    t = np.linspace(0.5, 2 * math.pi - 0.5, 40)
+    pocket = np.c_[4.0 * np.cos(t), 4.0 * np.sin(t)]
+    pos = np.tile([6.0, 0.0], (6, 1))
+    target = np.array([6.0, 0.0])
+    swarm = polygon_region(pocket, pos, target, 0.5, RegionParams(sort_about="swarm", advance="efa"))
+    assert swarm.polygon.equals(efa_fit(pocket, centre=pos.mean(axis=0)).polygon)
+    points = polygon_region(pocket, pos, target, 0.5, RegionParams(advance="efa"))
+    assert points.polygon.equals(efa_fit(pocket).polygon)
+    assert not swarm.polygon.equals(points.polygon)
 
 
 def test_literal_advance_keeps_the_reconstruction():
