@@ -164,7 +164,7 @@ class EfaFit:
     def as_dict(self) -> dict[str, Any]:
         return {
             "coeffs": self.coeffs.tolist(),
-            "locus": self.locus.tolist(),
+            "locus": self.locus.tolist() if np.isfinite(self.locus).all() else None,
             "polygon": polygon_coords(self.polygon),
             "area": self.area,
             "repaired": self.repaired,

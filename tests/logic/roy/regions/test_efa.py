@@ -146,7 +146,7 @@ def test_corridor_region_is_the_clipped_efa_polygon():
     grown = polygon_region(corridor(), pos, target, 1.0, RegionParams(step=1.0))
     assert grown.disc_radius > 5.0
     assert grown.area == pytest.approx(14 * math.pi / 0.7, rel=1e-3)
-    json.dumps(grown.as_dict())
+    json.dumps(grown.as_dict(), allow_nan=False)
 
 
 def test_grown_disc_stops_at_the_whole_polygon():
@@ -181,6 +181,7 @@ def test_degenerate_inputs_fall_back_to_the_circle():
     line = np.c_[np.arange(8.0), np.zeros(8)]
     reg = polygon_region(line, pos, np.array([0.0, 10.0]), 1.0)
     assert reg.rule == "circle" and "no area" in reg.reason
+    json.dumps(reg.as_dict(), allow_nan=False)
     far = polygon_region(corridor() + np.array([100.0, 0.0]), pos, np.array([0.0, 10.0]), 1.0, RegionParams(grow=False))
     assert far.rule == "circle" and "outside" in far.reason
     bad = polygon_region(np.full((5, 2), np.nan), np.full((3, 2), np.nan), np.array([np.nan, 0.0]), 1.0)

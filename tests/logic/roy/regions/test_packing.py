@@ -58,7 +58,7 @@ def test_every_packing_is_disjoint_and_inside(name):
     assert p.method in ("lattice", "relaxed", "shrunk")
     assert_packed(p, region, 14 if name != "stadium" else 8)
     assert p.region_area == pytest.approx(region.area)
-    json.dumps(p.as_dict())
+    json.dumps(p.as_dict(), allow_nan=False)
 
 
 def test_fig_5_7_analog_lattice_six_fallback_eight():
@@ -169,7 +169,7 @@ def test_assignment_edge_cases():
     fewer = assign_circles(np.array([[0.0, 0.0], [1.0, 0.0], [9.0, 0.0]]), np.array([[8.0, 0.0]]), "bottleneck")
     assert fewer.index.tolist() == [-1, -1, 0]
     assert assign_circles(np.zeros((2, 2)), np.zeros((0, 2))).index.tolist() == [-1, -1]
-    json.dumps(a.as_dict())
+    json.dumps(a.as_dict(), allow_nan=False)
     with pytest.raises(ValueError, match="method"):
         assign_circles(x, x, "greedy")
 
@@ -187,7 +187,7 @@ def test_barrier_waits_for_every_agent_or_the_timeout():
     assert not s.released
     s = barrier(x, targets, 1.0, since=10.0, now=40.0, params=BarrierParams(timeout=30.0))
     assert s.released and s.timed_out and not s.all_arrived
-    json.dumps(s.as_dict())
+    json.dumps(s.as_dict(), allow_nan=False)
     with pytest.raises(ValueError, match="tolerance"):
         BarrierParams(tolerance=0.0)
 
@@ -203,4 +203,4 @@ def test_region_update_holds_n_circles_for_every_agent():
     assert plan.packing.radius == 1.0
     assert_packed(plan.packing, region.polygon, 14)
     assert plan.assignment.one_to_one and (plan.assignment.index >= 0).all()
-    json.dumps(plan.as_dict())
+    json.dumps(plan.as_dict(), allow_nan=False)
