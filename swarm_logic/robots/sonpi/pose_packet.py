@@ -297,10 +297,11 @@ def encode_plan(seq: int, t_s: float, plan: PlanPacket, limit: int = MAX_DATAGRA
     return _fits(_header(PLAN, seq, t_s) + body, f"a plan of {n} agents ({edges} matrix entries)", limit)
 
 
-def accept(data: bytes, kind: type, sender: int | None) -> tuple[str, Header | None, Content | None]:
+def accept(data: bytes, kind: type | tuple[type, ...], sender: int | None) -> tuple[str, Header | None, Content | None]:
     """A receiver's verdict on a datagram from robot ``sender`` (None: not a robot) that should carry ``kind``
-    (``Odometry``, ``Status``): ``"ok"`` with its header and content; ``"ignored"``, another SonPI packet (a broadcast
-    meant for others); ``"malformed"``, not a packet, or one naming another robot than its sender."""
+    (``Odometry``, ``Status``, or a tuple of them): ``"ok"`` with its header and content; ``"ignored"``, another
+    SonPI packet (a broadcast meant for others); ``"malformed"``, not a packet, or one naming another robot
+    than its sender."""
     try:
         head, content = decode(data)
     except PacketError:
