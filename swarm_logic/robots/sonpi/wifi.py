@@ -103,8 +103,9 @@ class _Plan:
         """The latest plan the controller broadcast (None before the first)."""
         return self.dev.plan
 
-    def send_sonar(self, t_s: float, ranges_m: list[float]) -> None:
-        """Send the sonar window that ended at ``t_s`` to the controller (``inf``: no echo; NaN: no reading)."""
+    def send_sonar(self, t_s: float, ranges_m: list[float | None]) -> None:
+        """Send the sonar window that ended at ``t_s`` to the controller (``inf``: no echo; None or NaN: no reading;
+        ValueError for a negative range or one beyond the wire's 65.533 m)."""
         d = self.dev
         d._send(pp.encode_sonar(d._seq, t_s, pp.SonarWindow(d.robot.id, tuple(ranges_m))), d.controller)
         d.counters["sonar_sent"] += 1

@@ -24,6 +24,7 @@ from swarm_logic.families.roy.regions.sensing import SensingParams, sense
 from swarm_logic.log import plain
 from swarm_logic.robot import Robot
 from swarm_logic.robots.sonpi import pose_packet as pp
+from swarm_logic.robots.sonpi.interfaces import SonarReading
 from swarm_logic.robots.sonpi.wifi import PLAN, PlanOrder
 
 HOLD_REASONS = ("no_plan", "stale_plan", "no_pose", "not_in_plan", "unit")
@@ -54,6 +55,16 @@ def from_packet(packet: pp.PlanPacket, t: float) -> Plan:
         leaders=tuple(x.id for x in a if x.leader),
         done=packet.done,
     )
+
+
+def window_ranges(readings: list[SonarReading]) -> tuple[list[float | None], int]:
+    """A window's ranges as the wire carries them (m; ``inf`` no echo) and how many readings it could not carry (not
+    finite, negative or beyond its 65.533 m), which go as "no reading" (None)."""
+    out: list[float | None] = []
+    for r in readings:
+        ok = r.range_m == math.inf or (math.isfinite(r.range_m) and 0 <= r.range_m <= pp.MAX_RANGE_MM / 1000)
+        out.append(r.range_m if ok else None)
+    return out, sum(x is None for x in out)
 
 
 def _square(v: Any, n: int) -> bool:
@@ -115,6 +126,7 @@ class RegionAgent(SonpiAgent):
         self.holds = dict.fromkeys(HOLD_REASONS, 0)
         self.applied = 0
         self.missing_rows = 0  # plan agents left out of the law: the camera had no pose for them
+        self.bad_readings = 0  # sonar readings sent as "no reading" (not finite, negative, beyond the wire's range)
         self.v = np.zeros(2)
 
     def send_window(self, now: float) -> None:
@@ -123,7 +135,9 @@ class RegionAgent(SonpiAgent):
             return
         p = float(self.p["sonar_period_s"])
         self.next_sonar = self.next_sonar + p if now - self.next_sonar < p else now + p
-        self.plan_face.send_sonar(now, [r.range_m for r in self.sonar.readings()])
+        ranges, bad = window_ranges(self.sonar.readings())
+        self.bad_readings += bad
+        self.plan_face.send_sonar(now, ranges)
 
     def why_hold(self, now: float, order: PlanOrder | None, me: Any) -> str | None:
         if order is None:

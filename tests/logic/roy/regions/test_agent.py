@@ -3,16 +3,18 @@ can place (the law unchanged for them), and why a robot holds still."""
 
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from swarm_logic.behaviours import load_behaviour
-from swarm_logic.families.roy.regions.agent import RegionAgent, from_packet, restrict, to_packet
+from swarm_logic.families.roy.regions.agent import RegionAgent, from_packet, restrict, to_packet, window_ranges
 from swarm_logic.families.roy.regions.formation import DELTA_TRI, desired_distances
 from swarm_logic.families.roy.regions.planner import Plan, velocities
 from swarm_logic.robots.sonpi import pose_packet as pp
+from swarm_logic.robots.sonpi.interfaces import SonarReading
 from swarm_logic.robots.sonpi.wifi import PlanOrder
 
 X = np.array([[0.0, 0.0], [3.0, 0.5], [1.0, 4.0], [6.0, 6.0], [2.0, 2.5], [5.0, 1.0]])
@@ -86,3 +88,11 @@ def test_the_behaviour_is_registered() -> None:
     assert load_behaviour("roy_region") is RegionAgent
     with pytest.raises(ValueError, match="stale_s"):
         RegionAgent.with_defaults({"stale_s": 0})
+
+
+def test_a_window_carries_what_the_wire_can_and_no_reading_for_the_rest() -> None:
+    readings = [SonarReading(r, 0.0) for r in (0.5, math.inf, math.nan, -0.2, 80.0, 4.0)]
+    ranges, bad = window_ranges(readings)
+    assert ranges == [0.5, math.inf, None, None, None, 4.0] and bad == 3
+    data = pp.encode_sonar(0, 1.0, pp.SonarWindow(2, tuple(ranges)))
+    assert pp.decode(data)[1].ranges_m == (0.5, math.inf, None, None, None, 4.0)
