@@ -111,6 +111,7 @@ def test_bad_input_is_counted_and_logged_never_fatal_and_a_failing_planner_keeps
     ]
     err = next(e for e in events if e["kind"] == "planner_error")
     assert err["error"] == "ZeroDivisionError: planner fault" and err["kept"] == 1.25
+    assert s["last_planner_error"] == {"t": 1.75, "error": "ZeroDivisionError: planner fault", "kept": 1.25}
     assert next(e for e in events if e["kind"] == "unsendable")["error"].endswith("more than one datagram (1472 bytes)")
     # while the planner fails, and when its plan cannot be sent, the last plan goes out again
     assert plans[6] == plans[7] == plans[5] and plans[10] == plans[9]

@@ -118,6 +118,7 @@ class RegionController(GlobalController):
         )
         self.events: Counter[str] = Counter()
         self.done_t: float | None = None
+        self.last_error: dict[str, Any] | None = None  # the planner's last exception, and the plan kept
         self.scene_key: Any = None
 
     # -- input ------------------------------------------------------------------------------------------------
@@ -205,14 +206,9 @@ class RegionController(GlobalController):
             plan = self.planner.plan(obs)
         except Exception as e:  # a planner's fault must not end the swarm's control: keep the last plan
             self.counts["planner_errors"] += 1
-            self.decision(
-                t_s,
-                {
-                    "kind": "planner_error",
-                    "error": f"{type(e).__name__}: {e}",
-                    "kept": None if self.last is None else self.last.t,
-                },
-            )
+            kept = None if self.last is None else self.last.t
+            self.last_error = {"t": t_s, "error": f"{type(e).__name__}: {e}", "kept": kept}
+            self.decision(t_s, {"kind": "planner_error", "error": self.last_error["error"], "kept": kept})
             plan = None
         if plan is not None:
             self.counts["plans"] += 1
@@ -257,5 +253,6 @@ class RegionController(GlobalController):
             "events": dict(sorted(self.events.items())),
             "done_s": self.done_t,
             "silent": sorted(self.silent),
+            "last_planner_error": self.last_error,
             "planner_summary": plain(self.planner.summary()),
         }
