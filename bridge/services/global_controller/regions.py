@@ -4,11 +4,12 @@ name from the entry point group ``swarm_sitl.region_planners`` or as ``module:Cl
 records the plan and its events, and records the regions as a scene a viewer draws (``scene.py``).
 
 What it observes, in thesis units of ``unit_m`` m: each robot's pose from the latest camera broadcast that had it
-(else its own latest status with a pose), its heading, and its latest sonar window (``pose_packet.SONAR``, beams at
-``sonar_angles_deg`` from the heading). A robot is in the observation while its own packets (status, sonar windows)
-keep coming: one silent for ``silent_s`` is left out until it reports again; each change is a decision (event
-``input``). A window with the wrong beam count, or readings missing (no reading) or beyond ``max_range_m`` (garbage),
-is counted; those readings are NaN in the observation, as "no echo" is (the planner contract's convention).
+within ``silent_s`` (else its own latest status with a pose), its heading, and its latest sonar window
+(``pose_packet.SONAR``, beams at ``sonar_angles_deg`` from the heading). A robot is in the observation while its own
+packets (status, sonar windows) keep coming: one silent for ``silent_s`` is left out until it reports again; each
+change is a decision (event ``input``). A window with the wrong beam count, or readings missing (no reading) or
+beyond ``max_range_m`` (garbage), is counted; those readings are NaN in the observation, as "no echo" is (the
+planner contract's convention).
 
 A planner that raises keeps its last plan: the exception is counted and logged (event ``planner_error``) and the last
 plan is broadcast again. A plan the wire cannot carry (too large for a datagram, a parameter without an encoding) is
@@ -94,7 +95,7 @@ class RegionController(GlobalController):
         self.planner = _planner(self.o)
         self.ids = sorted(r.id for r in ctx.robots)
         self.angles = np.radians(self.o.sonar_angles_deg)
-        self.camera: dict[int, pp.PoseEntry] = {}  # the latest valid pose the camera broadcast, per robot
+        self.camera: dict[int, tuple[float, pp.PoseEntry]] = {}  # the camera's latest valid pose per robot, and when
         self.status: dict[int, pp.Status] = {}
         self.windows: dict[int, tuple[float, np.ndarray]] = {}  # arrival time, ranges (units; NaN: none)
         self.heard: dict[int, float] = {}  # when each robot's own packet last arrived (service time)
@@ -130,7 +131,7 @@ class RegionController(GlobalController):
         if isinstance(content, list):
             for e in content:
                 if e.valid:
-                    self.camera[e.id] = e
+                    self.camera[e.id] = (t_s, e)
                     self.counts["camera_poses"] += 1
             return
         assert isinstance(content, pp.SonarWindow)
@@ -179,8 +180,8 @@ class RegionController(GlobalController):
             if not seen:
                 continue
             cam, st = self.camera.get(i), self.status.get(i)
-            if cam is not None:
-                pose = (cam.x_m, cam.y_m, cam.yaw_rad)
+            if cam is not None and t_s - cam[0] <= self.o.silent_s:
+                pose = (cam[1].x_m, cam[1].y_m, cam[1].yaw_rad)
             elif st is not None and st.has_pose:
                 pose = (st.x_m, st.y_m, st.yaw_rad)
             else:
