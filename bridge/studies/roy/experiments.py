@@ -46,7 +46,7 @@ TABLE_3_5 = {  # CI mean, CI COV, success, path length
 TABLE_3_6 = {6: (357, 200), 12: (698, 386), 30: (1225, 812)}  # N: (gathering, BAT) s
 SCALING_N = (6, 12, 30)
 SCALING_TRIALS = {6: 20, 12: 6, 30: 2}  # the open-space cells cost ~N^2 per tick: fewer runs at large N
-BFO_TRIALS = 20  # the BFO family's cells: ~5 x BAT's cost per run
+BFO_TRIALS = 100  # the BFO family's cells: as many runs as the others
 GATHERING_TRIALS = 5  # gathering in roy-ch3-v2: its controllers run one by one (no batch), to the timeout
 FORMED = 0.9  # B1: nearest-neighbour distances >= 2 r_s within 10 %
 SMOKE_S = 20.0  # smoke runs: this much simulated time
