@@ -199,7 +199,7 @@ class RegionScenario(Section):
             if not (0 < t[0] < w and 0 < t[1] < h):
                 raise ValueError(f"mission.targets: target {k} {list(t)} lies outside the world 0..{w} x 0..{h}")
         lo, hi = self.agents.start_lo, self.agents.start_hi
-        if not (0 <= lo[0] and 0 <= lo[1] and hi[0] <= w and hi[1] <= h):
+        if not (lo[0] >= 0 and lo[1] >= 0 and hi[0] <= w and hi[1] <= h):
             raise ValueError(f"agents.start_hi: the start box {list(lo)}..{list(hi)} leaves the world {w} x {h}")
         return self
 

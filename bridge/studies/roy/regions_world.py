@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from bridge.core.rng import stream
-from bridge.studies.roy.metrics import path_lengths, region_statistics, structural_density, travel_variance_index
+from bridge.studies.roy.metrics import region_statistics, structural_density, travel_variance_index
 from bridge.studies.roy.numerical import Mover, crosses, ray_circle, ray_segments, scatter
 from bridge.studies.roy.regions_scenarios import RegionScenario
 from swarm_logic.families.roy.regions.formation import shape_name
@@ -153,7 +153,7 @@ class RegionsWorld:
         q = p + v * self.dt
         cand = self.grid.candidates(p)
         ga, gb = self.grid.a[cand], self.grid.b[cand]
-        hit = crosses(p[:, None], q[:, None], ga[:, None], gb[:, None])[:, 0] if len(p) else np.zeros(0, bool)
+        hit = crosses(p, q, ga, gb) if len(p) else np.zeros(0, bool)
         if hit.any():
             q = self._slide(p, q, hit, ga, gb)
         circ = self.discs()
@@ -177,12 +177,13 @@ class RegionsWorld:
         else stay."""
         rows = np.nonzero(hit)[0]
         pr, qr, a, b = p[rows], q[rows], ga[rows], gb[rows]
-        each = crosses(pr[:, None, None], qr[:, None, None], a[:, :, None], b[:, :, None])  # (R, K)
+        pk, qk = (np.broadcast_to(v[:, None], a.shape) for v in (pr, qr))
+        each = crosses(pk, qk, a[:, :, None], b[:, :, None])  # (R, K): which candidate edge each move crosses
         k = np.argmax(each, axis=1)
         e = b[np.arange(len(rows)), k] - a[np.arange(len(rows)), k]
         e /= np.maximum(np.hypot(e[:, 0], e[:, 1]), 1e-300)[:, None]
         slid = pr + np.sum((qr - pr) * e, axis=1)[:, None] * e
-        again = crosses(pr[:, None], slid[:, None], a, b)
+        again = crosses(pr, slid, a, b)
         out = q.copy()
         out[rows] = np.where(again[:, None], pr, slid)
         return out

@@ -11,7 +11,7 @@ the closed-loop missions measured to work (see the chapter's page, "The planner 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,7 @@ from swarm_logic.families.roy.regions.shapes import Ellipse
 
 AD_MODES = ("always", "off")
 GOALS = ("slots", "centre")
+SCALABLE_GOALS = ("clip", "centre")
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,9 @@ class Ch4Params:
 
     Region: ``r_c`` (the no-failure radius: 2.5 for 6 agents; sqrt(57.65 / pi) for the 50-agent runs),
     ``centre0`` O_c (None: the agents' centroid), ``k_vcir``, ``k_theta``, ``dynamics`` (erratum 10), ``axes`` and
-    ``clearance`` (erratum 11), ``barrier``, ``r_robot``; the region moves at ``region_speed`` x the agents'
+    ``clearance`` (erratum 11), ``barrier`` with ``barrier_fraction`` (N <= ``max_agents``) and
+    ``barrier_fraction_scalable`` (ours: the share of the working agents that must be inside for the region to
+    advance; 1 is the rule as stated, which 50 agents under the scalable law never meet at once), ``r_robot``; the region moves at ``region_speed`` x the agents'
     ``v_max``. Sensing: ``d_min``, ``d_max``, ``eclipse_eps``, ``boundary`` (eq. 4.26's filter). Free space:
     ``gap_mode`` (erratum 12), ``split`` ("sides" or k-means as printed), ``side_test`` (both clusters must flank
     the line toward the target), ``ahead_only`` (ours: only the points ahead of the region's centre, toward the
@@ -59,7 +62,11 @@ class Ch4Params:
     ours), ``goals`` ("slots": each agent to its place in the chosen formation; "centre": the region's centre as
     printed), ``research_tol`` (a new search when an axis changed by this fraction since the last one, or an agent
     is outside the region) and ``formation_hold_s`` (never sooner than this after the last change).
-    Scalable law (N > ``max_agents``): ``k_c_scalable``, ``k_f_scalable``, ``neighbours``, ``k_nearest``."""
+    Scalable law (N > ``max_agents``): ``k_c_scalable``, ``k_f_scalable``, ``neighbours``, ``k_nearest`` and
+    ``scalable_goals``: "centre" pulls every agent to O_e as printed (the swarm keeps the disc the law's balance
+    gives it, which a thin ellipse cannot hold: the barrier then waits for good); "clip" (ours) pulls each agent
+    only to the nearest point of the region shrunk to ``slot_fill`` (an agent inside feels no pull, the repulsion
+    spreads the swarm over the region's shape)."""
 
     r_c: float = 2.5
     centre0: tuple[float, float] | None = None
@@ -72,6 +79,8 @@ class Ch4Params:
     clearance: float = 0.5
     axes_lag: float = 0.0
     barrier: bool = True
+    barrier_fraction: float = 1.0
+    barrier_fraction_scalable: float = 0.9
     r_robot: float = 0.5
     d_min: float = 0.0
     d_max: float = 5.0
@@ -96,8 +105,9 @@ class Ch4Params:
     research_tol: float = 0.1
     formation_hold_s: float = 5.0
     slot_fill: float = 0.7
-    k_c_scalable: float = 1.0
+    k_c_scalable: float = 2.0
     k_f_scalable: float = 5.0
+    scalable_goals: str = "clip"
     neighbours: str = "knn"
     k_nearest: int = 6
 
@@ -111,6 +121,7 @@ class Ch4Params:
             ("mismatch", fm.MISMATCH),
             ("trigger", fm.TRIGGERS),
             ("goals", GOALS),
+            ("scalable_goals", SCALABLE_GOALS),
             ("neighbours", ("knn", "all")),
         ):
             if getattr(self, name) not in allowed:
@@ -132,6 +143,8 @@ class Ch4Params:
                 "k_c_scalable",
                 "k_f_scalable",
                 "slot_fill",
+                "barrier_fraction",
+                "barrier_fraction_scalable",
             ),
         )
         check_fields(
@@ -158,6 +171,14 @@ class Ch4Params:
             raise ValueError(f"centre0: expected two finite numbers, got {self.centre0!r}")
         if self.max_agents < 1 or self.k_nearest < 1:
             raise ValueError("max_agents, k_nearest: must be >= 1")
+
+
+def clip_into(region: Ellipse, x: np.ndarray, fill: float) -> np.ndarray:
+    """Each point (N, 2) moved radially (in the ellipse's normalised frame) onto the region shrunk to ``fill`` when
+    it lies beyond it, else kept: the goals of the scalable law's "clip" mode."""
+    lv = np.sqrt(np.maximum(region.level(x), 1e-300))
+    f = np.where(lv > fill, fill / lv, 1.0)
+    return region.centre + (x - region.centre) * f[:, None]
 
 
 def lattice_graph(n: int, rho: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -294,9 +315,17 @@ class Ch4Planner(RegionPlanner):
         if len(new):
             self.c.detected.append((obs.t, len(new)))
             events.append({"kind": "failure", "agents": new.tolist(), "n_failed": int(failed.sum())})
+        frac = p.barrier_fraction_scalable if self.scalable else p.barrier_fraction
         step = step_region(
             self.state, committed, target, self.period_s, self.region_params, x, ~failed, int(failed.sum()), blocked
         )
+        if p.barrier and frac < 1.0 and step.held == "barrier":
+            inside = float(np.mean(region.contains(x[~failed]))) if (~failed).any() else 1.0
+            if inside >= frac:  # enough of the swarm is in: advance as if the barrier were met
+                free = replace(self.region_params, barrier=False)
+                step = step_region(
+                    self.state, committed, target, self.period_s, free, x, ~failed, int(failed.sum()), blocked
+                )
         held = step.held.split(":")[0]
         if held:
             self.c.held[held] = self.c.held.get(held, 0) + 1
@@ -337,7 +366,9 @@ class Ch4Planner(RegionPlanner):
                 "neighbours": p.neighbours,
                 "k": p.k_nearest,
             }
-            return "scalable", params, np.broadcast_to(region.centre, (self.n, 2)).copy()
+            if p.scalable_goals == "centre":
+                return "scalable", params, np.broadcast_to(region.centre, (self.n, 2)).copy()
+            return "scalable", params, clip_into(region, x, p.slot_fill)
         if region.is_circle:
             adjacency, emb, shape = self.graph, self.base, fm.shape_name(self.base)
             self.last_search = None
