@@ -53,10 +53,10 @@ class MoverCfg(Section):
 class WorldCfg(Section):
     size: Point
     walls: bool = True
-    segments: list[tuple[Point, Point]] = []
-    polygons: list[list[Point]] = []
-    circles: list[tuple[float, float, float]] = []
-    movers: list[MoverCfg] = []
+    segments: list[tuple[Point, Point]] = Field(default_factory=list)
+    polygons: list[list[Point]] = Field(default_factory=list)
+    circles: list[tuple[float, float, float]] = Field(default_factory=list)
+    movers: list[MoverCfg] = Field(default_factory=list)
 
     @field_validator("size")
     @classmethod
@@ -141,7 +141,7 @@ class SensingCfg(Section):
 
 class MissionCfg(Section):
     targets: list[Point] = Field(min_length=1)
-    lanes: list[list[int]] = []
+    lanes: list[list[int]] = Field(default_factory=list)
     arrival_radius: float = Field(gt=0)
     timeout_s: float = Field(gt=0, le=100_000)
     dt: float = Field(0.05, gt=0, le=1)
@@ -157,7 +157,7 @@ class MissionCfg(Section):
 
 class FailuresCfg(Section):
     fraction: float = Field(0.0, ge=0, le=1)
-    times: list[float] = []
+    times: list[float] = Field(default_factory=list)
 
     @model_validator(mode="after")
     def _times(self) -> FailuresCfg:
@@ -175,7 +175,7 @@ class MetricsCfg(Section):
 
 class PlannerCfg(Section):
     name: str
-    params: dict[str, Any] = {}
+    params: dict[str, Any] = Field(default_factory=dict)
 
 
 class RegionScenario(Section):

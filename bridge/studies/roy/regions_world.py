@@ -110,7 +110,7 @@ class RegionsWorld:
         spread over the scheduled times in turn."""
         f = self.sc.failures
         out = np.full(self.n, math.inf)
-        k = int(round(f.fraction * self.n))
+        k = round(f.fraction * self.n)
         if k and f.times:
             who = stream(self.seed, "regions", "failures").choice(self.n, size=k, replace=False)
             out[who] = np.asarray(f.times, float)[np.arange(k) % len(f.times)]
@@ -244,9 +244,9 @@ def run_mission(
     world = RegionsWorld(scenario, seed)
     sc = scenario
     targets = np.asarray(sc.mission.targets, float)
-    period = max(1, int(round(planner.period_s / world.dt)))
+    period = max(1, round(planner.period_s / world.dt))
     timeout = sc.mission.timeout_s if max_time_s is None else min(max_time_s, sc.mission.timeout_s)
-    n_ticks = int(math.ceil(timeout / world.dt - 1e-9))
+    n_ticks = math.ceil(timeout / world.dt - 1e-9)
     ids = np.arange(world.n)
     series: dict[str, list[Any]] = {
         k: [] for k in ("t", "area", "a", "b", "theta", "circle", "shape", "density", "n_failed", "law")

@@ -113,11 +113,11 @@ def test_a_wrong_file_names_file_field_and_reason(tmp_path: Path, body: str, fie
 def test_unknown_planner_and_target_outside(tmp_path: Path) -> None:
     p = _scenario(tmp_path)
     p.write_text(p.read_text().replace('name = "ch4"', 'name = "ch9"'))
-    with pytest.raises(ConfigError, match="planner.name: unknown planner 'ch9'"):
+    with pytest.raises(ConfigError, match=r"planner\.name: unknown planner 'ch9'"):
         load_scenario(p)
     p = _scenario(tmp_path)
     p.write_text(p.read_text().replace("[[18.0, 10.0]]", "[[25.0, 10.0]]"))
-    with pytest.raises(ConfigError, match="target 0 .* lies outside the world"):
+    with pytest.raises(ConfigError, match=r"target 0 .* lies outside the world"):
         load_scenario(p)
 
 

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from scipy.optimize import linear_sum_assignment
+
 from swarm_logic.families.roy.regions import formation as fm
 from swarm_logic.families.roy.regions.ellipse import (
     AXES,
@@ -39,6 +41,7 @@ from swarm_logic.families.roy.regions.shapes import Ellipse
 
 AD_MODES = ("always", "off")
 GOALS = ("slots", "centre")
+ASSIGN = ("hungarian", "index")
 SCALABLE_GOALS = ("clip", "centre")
 
 
@@ -50,16 +53,18 @@ class Ch4Params:
     ``centre0`` O_c (None: the agents' centroid), ``k_vcir``, ``k_theta``, ``dynamics`` (erratum 10), ``axes`` and
     ``clearance`` (erratum 11), ``barrier`` with ``barrier_fraction`` (N <= ``max_agents``) and
     ``barrier_fraction_scalable`` (ours: the share of the working agents that must be inside for the region to
-    advance; 1 is the rule as stated, which 50 agents under the scalable law never meet at once), ``r_robot``; the region moves at ``region_speed`` x the agents'
+    advance; 1 is the rule as stated, which 50 agents under the scalable law never meet at once), ``r_robot``;
+    the region moves at ``region_speed`` x the agents'
     ``v_max``. Sensing: ``d_min``, ``d_max``, ``eclipse_eps``, ``boundary`` (eq. 4.26's filter). Free space:
     ``gap_mode`` (erratum 12), ``split`` ("sides" or k-means as printed), ``side_test`` (both clusters must flank
     the line toward the target), ``ahead_only`` (ours: only the points ahead of the region's centre, toward the
     target, count: the walls behind the swarm are no gap to go through). ``ad_test``: "always" (eqs. 4.36-4.37
     every window) or "off"; ``ad_margin`` (ours): the gap counts as blocked only when AD falls by more than this
-    (the swarm's own approach lowers AD too; 0 is the test as printed). Failures (erratum
+    (the swarm's own approach lowers AD too; 0 is the test as printed). ``gap_memory_s`` (ours): the narrowest gap
+    committed in this window is the one used (0: each window alone). Failures (erratum
     17): ``fail_speed_frac``, ``fail_centre_frac``, ``fail_hold_s``. Formation (N <= ``max_agents``): ``rho``
-    (erratum 14), ``k_f``, ``k_c`` (None: Theorem 1's, erratum 13), ``mismatch`` and ``trigger`` (erratum 15 and
-    ours), ``goals`` ("slots": each agent to its place in the chosen formation; "centre": the region's centre as
+    (erratum 14), ``k_f``, ``k_c`` (None: Theorem 1's, erratum 13), ``mismatch``, ``mismatch_pad`` (the discs
+    drawn round each agent, None: rho / 2) and ``trigger`` (erratum 15 and ours), ``goals`` ("slots": each agent to its place in the chosen formation; "centre": the region's centre as
     printed), ``research_tol`` (a new search when an axis changed by this fraction since the last one, or an agent
     is outside the region) and ``formation_hold_s`` (never sooner than this after the last change).
     Scalable law (N > ``max_agents``): ``k_c_scalable``, ``k_f_scalable``, ``neighbours``, ``k_nearest`` and
@@ -92,16 +97,21 @@ class Ch4Params:
     ahead_only: bool = True
     ad_test: str = "always"
     ad_margin: float = 0.5
+    gap_memory_s: float = 2.0
     fail_speed_frac: float = 0.05
     fail_centre_frac: float = 0.2
     fail_hold_s: float = 2.0
     max_agents: int = 10
     rho: float = 1.0
     k_f: float = 5.0
+    k_f_slots: float = 1.0
     k_c: float | None = None
     mismatch: str = "iou"
+    mismatch_pad: float | None = 1.0
+    safety_factor: float = 1.2
     trigger: str = "fit"
     goals: str = "slots"
+    assign: str = "hungarian"
     research_tol: float = 0.1
     formation_hold_s: float = 5.0
     slot_fill: float = 0.7
@@ -121,6 +131,7 @@ class Ch4Params:
             ("mismatch", fm.MISMATCH),
             ("trigger", fm.TRIGGERS),
             ("goals", GOALS),
+            ("assign", ASSIGN),
             ("scalable_goals", SCALABLE_GOALS),
             ("neighbours", ("knn", "all")),
         ):
@@ -142,6 +153,7 @@ class Ch4Params:
                 "fail_hold_s",
                 "k_c_scalable",
                 "k_f_scalable",
+                "k_f_slots",
                 "slot_fill",
                 "barrier_fraction",
                 "barrier_fraction_scalable",
@@ -157,6 +169,8 @@ class Ch4Params:
                 "eclipse_eps",
                 "research_tol",
                 "ad_margin",
+                "gap_memory_s",
+                "safety_factor",
                 "formation_hold_s",
             ),
             positive=False,
@@ -186,7 +200,7 @@ def lattice_graph(n: int, rho: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     of a triangular lattice nearest its origin, linked at distance rho; (adjacency, positions)."""
     if n == 6:
         return fm.DELTA_TRI.copy(), fm.tri_coordinates(rho)
-    r = int(math.ceil(math.sqrt(n))) + 1
+    r = math.ceil(math.sqrt(n)) + 1
     i, j = np.meshgrid(np.arange(-r, r + 1), np.arange(-r, r + 1), indexing="ij")
     pts = np.stack([i.ravel() + 0.5 * j.ravel(), j.ravel() * math.sqrt(3) / 2], axis=1) * rho
     order = np.lexsort((pts[:, 0], pts[:, 1], np.round(np.hypot(*pts.T), 9)))
@@ -245,6 +259,7 @@ class Ch4Planner(RegionPlanner):
         self.last_search: tuple[float, float] | None = None
         self.last_change = -math.inf
         self.ref_gap: Gap | None = None
+        self.recent: list[tuple[float, Gap]] = []
         self.t = 0.0
         self.held = ""
         self.pos = np.zeros((n, 2))
@@ -308,6 +323,7 @@ class Ch4Planner(RegionPlanner):
                 committed = ref
             else:
                 committed = Gap(math.inf)
+        committed = self._narrowest(obs.t, committed)
         # failures (eq. 4.46, erratum 17) and the shrink (eq. 4.47)
         before = self.detector.failed.copy()
         failed = self.detector.update(obs.t, x, region)
@@ -350,6 +366,14 @@ class Ch4Planner(RegionPlanner):
         law, params, goals = self._law(x, failed, region, events)
         return Plan(obs.t, np.arange(self.n), goals, law, params, regions=(Region(0, region),), events=tuple(events))
 
+    def _narrowest(self, t: float, gap: Gap) -> Gap:
+        """The narrowest gap committed over the last ``gap_memory_s`` (sparse beams make b_fs flicker around the
+        switch threshold; a gap once sensed stays for that long)."""
+        self.recent = [(s, g) for s, g in self.recent if t - s < self.p.gap_memory_s - 1e-9]
+        if gap.sensed:
+            self.recent.append((t, gap))
+        return min((g for _, g in self.recent), key=lambda g: g.b_fs, default=gap)
+
     def _law(
         self, x: np.ndarray, failed: np.ndarray, region: Ellipse, events: list[dict[str, Any]]
     ) -> tuple[str, dict[str, Any], np.ndarray]:
@@ -388,7 +412,7 @@ class Ch4Planner(RegionPlanner):
                     p.rho,
                     region,
                     p.mismatch,
-                    None,
+                    p.mismatch_pad,
                     p.max_agents,
                     p.trigger,
                 )
@@ -409,10 +433,16 @@ class Ch4Planner(RegionPlanner):
             reach = float(np.sqrt(np.max(region.level(goals)))) if len(goals) else 0.0
             if reach > p.slot_fill:  # shrink the formation about the centre until it lies inside the region
                 goals = region.centre + (goals - region.centre) * (p.slot_fill / reach)
+            if p.assign == "hungarian":  # agent i takes slot c[i]; the graph follows its slots
+                _, c = linear_sum_assignment(np.sum((x[:, None] - goals[None]) ** 2, axis=2))
+                goals, adjacency = goals[c], adjacency[np.ix_(c, c)]
         else:
             goals = np.broadcast_to(region.centre, (self.n, 2)).copy()
         desired = fm.desired_distances(adjacency, p.rho)
-        return "formation", {"desired": desired.tolist(), "k_c": self.k_c, "k_f": p.k_f}, goals
+        k_f = p.k_f_slots if p.goals == "slots" else p.k_f
+        params = {"desired": desired.tolist(), "k_c": self.k_c, "k_f": k_f}
+        params["safety"] = {"r_robot": p.r_robot, "factor": p.safety_factor} if p.safety_factor > 0 else None
+        return "formation", params, goals
 
     def summary(self) -> dict[str, Any]:
         return {
