@@ -15,7 +15,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-
 from scipy.optimize import linear_sum_assignment
 
 from swarm_logic.families.roy.regions import formation as fm
@@ -47,31 +46,39 @@ SCALABLE_GOALS = ("clip", "centre")
 
 @dataclass(frozen=True)
 class Ch4Params:
-    """The chapter 4 planner's parameters (Table 4.1, digest §5.3, and each erratum's choice).
+    """The chapter 4 planner's parameters (Table 4.1, digest §5.3, each erratum's choice, and our repairs).
 
-    Region: ``r_c`` (the no-failure radius: 2.5 for 6 agents; sqrt(57.65 / pi) for the 50-agent runs),
-    ``centre0`` O_c (None: the agents' centroid), ``k_vcir``, ``k_theta``, ``dynamics`` (erratum 10), ``axes`` and
-    ``clearance`` (erratum 11), ``barrier`` with ``barrier_fraction`` (N <= ``max_agents``) and
-    ``barrier_fraction_scalable`` (ours: the share of the working agents that must be inside for the region to
-    advance; 1 is the rule as stated, which 50 agents under the scalable law never meet at once), ``r_robot``;
-    the region moves at ``region_speed`` x the agents'
-    ``v_max``. Sensing: ``d_min``, ``d_max``, ``eclipse_eps``, ``boundary`` (eq. 4.26's filter). Free space:
-    ``gap_mode`` (erratum 12), ``split`` ("sides" or k-means as printed), ``side_test`` (both clusters must flank
-    the line toward the target), ``ahead_only`` (ours: only the points ahead of the region's centre, toward the
-    target, count: the walls behind the swarm are no gap to go through). ``ad_test``: "always" (eqs. 4.36-4.37
-    every window) or "off"; ``ad_margin`` (ours): the gap counts as blocked only when AD falls by more than this
-    (the swarm's own approach lowers AD too; 0 is the test as printed). ``gap_memory_s`` (ours): the narrowest gap
-    committed in this window is the one used (0: each window alone). Failures (erratum
-    17): ``fail_speed_frac``, ``fail_centre_frac``, ``fail_hold_s``. Formation (N <= ``max_agents``): ``rho``
-    (erratum 14), ``k_f``, ``k_c`` (None: Theorem 1's, erratum 13), ``mismatch``, ``mismatch_pad`` (the discs
-    drawn round each agent, None: rho / 2) and ``trigger`` (erratum 15 and ours), ``goals`` ("slots": each agent to its place in the chosen formation; "centre": the region's centre as
-    printed), ``research_tol`` (a new search when an axis changed by this fraction since the last one, or an agent
-    is outside the region) and ``formation_hold_s`` (never sooner than this after the last change).
-    Scalable law (N > ``max_agents``): ``k_c_scalable``, ``k_f_scalable``, ``neighbours``, ``k_nearest`` and
-    ``scalable_goals``: "centre" pulls every agent to O_e as printed (the swarm keeps the disc the law's balance
-    gives it, which a thin ellipse cannot hold: the barrier then waits for good); "clip" (ours) pulls each agent
-    only to the nearest point of the region shrunk to ``slot_fill`` (an agent inside feels no pull, the repulsion
-    spreads the swarm over the region's shape)."""
+    Region: ``r_c`` (the no-failure radius: 2.5 for 6 agents, sqrt(57.65 / pi) for 50), ``centre0`` O_c (None: the
+    agents' centroid), ``k_vcir``, ``k_theta``, ``dynamics`` (erratum 10), ``axes``, ``clearance`` and ``axes_lag``
+    (erratum 11), ``r_robot``; the region moves at ``region_speed`` x the agents' ``v_max``. ``barrier``: the region
+    advances only when the share ``barrier_fraction`` (N <= ``max_agents``) or ``barrier_fraction_scalable`` of the
+    working agents is inside (ours: 1 is the rule as stated, which 50 agents never meet at once).
+
+    Sensing and free space: ``d_min``, ``d_max``, ``eclipse_eps``, ``boundary`` (eq. 4.26's filter), ``gap_mode``
+    (erratum 12), ``split`` ("sides", or "kmeans" as printed), ``side_test`` (both clusters must flank the line toward
+    the target), ``ahead_only`` (ours: only the points ahead of the region's centre count; the walls behind the swarm
+    are no gap to pass), ``gap_memory_s`` (ours: the narrowest gap committed in this window is used; sparse beams
+    make b_fs flicker across the switch threshold). ``ad_test``: "always" (eqs. 4.36-4.37 every window) or "off";
+    ``ad_margin`` (ours): blocked only when AD falls by more than this (the swarm's own approach lowers AD too; 0 is
+    the test as printed).
+
+    Failures (erratum 17): ``fail_speed_frac``, ``fail_centre_frac``, ``fail_hold_s``, and ``detect_when_held`` (ours:
+    an agent stopped outside a region that the barrier holds, for ``fail_hold_s``, has failed too; the detector alone
+    needs the centre to move, which the barrier forbids until the failed agents are known: a deadlock).
+
+    Formation (N <= ``max_agents``): ``rho`` (erratum 14), ``k_f`` (Table 4.1) and ``k_c`` (None: Theorem 1's from
+    ``k_f``, erratum 13), ``mismatch``, ``mismatch_pad`` (each agent's disc, None: rho / 2) and ``trigger`` (erratum 15
+    and ours). ``goals``: "slots" (ours: each agent to its place in the chosen formation, with the repulsion gain
+    ``k_f_slots``; ``assign`` "hungarian" gives agents the nearest slots, "index" slot i to agent i) or "centre" (the
+    region's centre, as printed, with ``k_f``). ``slot_fill``: the slots are shrunk about the centre to lie within
+    this fraction of the region. ``safety_factor``: erratum 16's safety term (0: none). ``research_tol``: a new search
+    when an axis changed by this fraction since the last one or an agent is outside; ``formation_hold_s``: never
+    sooner than this after the last change.
+
+    Scalable law (N > ``max_agents``, eq. 4.41): ``k_c_scalable``, ``k_f_scalable``, ``neighbours``, ``k_nearest``
+    and ``scalable_goals``: "centre" pulls every agent to O_e as printed (the kernel r e^(-r / R_s) vanishes at 0, so
+    the swarm collapses to a point); "clip" (ours) pulls each agent only to the nearest point of the region shrunk to
+    ``slot_fill`` (an agent inside feels no pull, the repulsion spreads the swarm over the region's shape)."""
 
     r_c: float = 2.5
     centre0: tuple[float, float] | None = None
@@ -101,6 +108,7 @@ class Ch4Params:
     fail_speed_frac: float = 0.05
     fail_centre_frac: float = 0.2
     fail_hold_s: float = 2.0
+    detect_when_held: bool = True
     max_agents: int = 10
     rho: float = 1.0
     k_f: float = 5.0
@@ -116,7 +124,7 @@ class Ch4Params:
     formation_hold_s: float = 5.0
     slot_fill: float = 0.7
     k_c_scalable: float = 2.0
-    k_f_scalable: float = 5.0
+    k_f_scalable: float = 1.0
     scalable_goals: str = "clip"
     neighbours: str = "knn"
     k_nearest: int = 6
@@ -177,6 +185,11 @@ class Ch4Params:
         )
         if self.k_c is not None:
             check_fields(self, ("k_c",))
+        if self.mismatch_pad is not None:
+            check_fields(self, ("mismatch_pad",))
+        for name in ("barrier_fraction", "barrier_fraction_scalable", "slot_fill"):
+            if not 0 < getattr(self, name) <= 1:
+                raise ValueError(f"{name}: must lie in (0, 1], got {getattr(self, name)}")
         if self.d_max <= self.d_min:
             raise ValueError(f"d_max: must exceed d_min ({self.d_min}), got {self.d_max}")
         if self.split == "sides" and not self.side_test:
@@ -260,6 +273,9 @@ class Ch4Planner(RegionPlanner):
         self.last_change = -math.inf
         self.ref_gap: Gap | None = None
         self.recent: list[tuple[float, Gap]] = []
+        self.last_x: np.ndarray | None = None
+        self.last_t = -math.inf
+        self.stall = np.zeros(n)
         self.t = 0.0
         self.held = ""
         self.pos = np.zeros((n, 2))
@@ -327,6 +343,9 @@ class Ch4Planner(RegionPlanner):
         # failures (eq. 4.46, erratum 17) and the shrink (eq. 4.47)
         before = self.detector.failed.copy()
         failed = self.detector.update(obs.t, x, region)
+        if p.detect_when_held:
+            failed = failed | self._stalled(obs.t, x, region)
+            self.detector.failed |= failed
         new = np.nonzero(failed & ~before)[0]
         if len(new):
             self.c.detected.append((obs.t, len(new)))
@@ -348,6 +367,7 @@ class Ch4Planner(RegionPlanner):
         if held != self.held and held and held != "barrier":
             events.append({"kind": "held", "reason": step.held})
         self.held = held
+        self.last_x, self.last_t = x.copy(), obs.t
         was_circle = region.is_circle
         self.state = step.state
         region = self.state.region
@@ -365,6 +385,19 @@ class Ch4Planner(RegionPlanner):
         self.c.periods += 1
         law, params, goals = self._law(x, failed, region, events)
         return Plan(obs.t, np.arange(self.n), goals, law, params, regions=(Region(0, region),), events=tuple(events))
+
+    def _stalled(self, t: float, x: np.ndarray, region: Ellipse) -> np.ndarray:
+        """Agents stopped outside a region the barrier holds, for ``fail_hold_s``: a working agent outside a region
+        that waits for it moves toward it at speed, and the library's detector (which needs the centre to move)
+        never sees them while the barrier holds the region for them."""
+        p = self.p
+        if self.last_x is None or t <= self.last_t:
+            return np.zeros(self.n, bool)
+        dt = t - self.last_t
+        speed = np.hypot(*(x - self.last_x).T) / dt
+        stuck = (speed < p.fail_speed_frac * p.v_max) & ~region.contains(x) & (self.held == "barrier")
+        self.stall = np.where(stuck, self.stall + dt, 0.0)
+        return self.stall >= p.fail_hold_s - 1e-9
 
     def _narrowest(self, t: float, gap: Gap) -> Gap:
         """The narrowest gap committed over the last ``gap_memory_s`` (sparse beams make b_fs flicker around the
