@@ -205,9 +205,16 @@ class RegionScenario(Section):
 
     def with_failures(self, fraction: float) -> RegionScenario:
         """The same scenario with ``fraction`` of the agents failing at its scheduled times."""
+        if not 0 <= fraction <= 1:
+            raise ValueError(f"failures.fraction: must lie in [0, 1], got {fraction}")
+        if fraction > 0 and not self.failures.times:
+            raise ValueError(f"failures.times: {self.name} schedules no failure time")
         return self.model_copy(update={"failures": FailuresCfg(fraction=fraction, times=self.failures.times)})
 
     def with_v_max(self, v_max: float) -> RegionScenario:
+        """The same scenario with the agents' speed limit ``v_max`` (units/s)."""
+        if not (math.isfinite(v_max) and v_max > 0):
+            raise ValueError(f"agents.v_max: must be finite and > 0, got {v_max}")
         return self.model_copy(update={"agents": self.agents.model_copy(update={"v_max": v_max})})
 
 

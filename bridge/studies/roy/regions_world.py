@@ -314,6 +314,8 @@ def run_mission(
         "tvi": travel_variance_index(track_len[working]) if working.any() else None,
         "contacts": world.contacts,
         "formations": _formation_sequence(series["t"], series["shape"], shape_hold_s) if world.n <= 10 else [],
+        "formation_plan": _changes(events, "formation"),
+        "region_switches": _changes(events, "region"),
         "event_counts": dict(sorted(kinds.items())),
         "events": events,
         "planner": planner.summary(),
@@ -327,6 +329,13 @@ def run_mission(
         "ticks": world.tick,
     }
     return MissionResult(plain(summary), series, plans, perf)
+
+
+def _changes(events: list[dict[str, Any]], kind: str) -> list[dict[str, Any]]:
+    """The planner's ``kind`` events as a sequence of (t, what it changed to), the first row what it started with."""
+    rows = [e for e in events if e.get("kind") == kind]
+    out = [{"t": 0.0, "to": rows[0].get("from", "circle")}] if rows and kind == "formation" else []
+    return out + [{"t": e["t"], "to": e.get("to")} for e in rows]
 
 
 def _mean_sd(values: list[float]) -> dict[str, float | None]:
@@ -358,3 +367,42 @@ def _record(series: dict[str, list[Any]], world: RegionsWorld, plan: Plan, sc: R
     series["density"].append(structural_density(x, scale, rule) if math.isfinite(scale) and scale > 0 else math.nan)
     series["n_failed"].append(int((~working).sum()))
     series["law"].append(plan.law)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bridge.studies.roy.regions_world SCENARIO [--seed S] [--failures F] [--v-max V] [--events]``:
+    run one mission and print its summary as JSON (the events only with ``--events``)."""
+    import argparse
+    import sys
+
+    from bridge.core.config import ConfigError
+    from bridge.studies.roy.regions_scenarios import load_scenario, make_planner
+
+    ap = argparse.ArgumentParser(prog="python -m bridge.studies.roy.regions_world", description=main.__doc__)
+    ap.add_argument("scenario", help="a scenario file, or the name of a shipped one (hil_configs/roy/NAME.toml)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--failures", type=float, default=None, help="the fraction of agents that fail (0..1)")
+    ap.add_argument("--v-max", type=float, default=None, help="the agents' speed limit (units/s)")
+    ap.add_argument("--events", action="store_true", help="include every plan event in the summary")
+    a = ap.parse_args(argv)
+    try:
+        sc = load_scenario(a.scenario)
+        if a.failures is not None:
+            sc = sc.with_failures(a.failures)
+        if a.v_max is not None:
+            sc = sc.with_v_max(a.v_max)
+        planner = make_planner(sc)
+    except (ConfigError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    res = run_mission(sc, planner, a.seed)
+    out = dict(res.summary)
+    if not a.events:
+        out.pop("events")
+    out["perf"] = {k: round(v, 3) for k, v in res.perf.items()}
+    print(json.dumps(out, indent=1, allow_nan=False))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

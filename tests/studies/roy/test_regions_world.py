@@ -122,7 +122,7 @@ def test_unknown_planner_and_target_outside(tmp_path: Path) -> None:
 
 
 def test_shipped_scenarios_load_with_versions() -> None:
-    for name in ("ch4-a", "ch4-maze-50", "ch4-failures-50"):
+    for name in ("ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"):
         sc = load_scenario(name)
         assert sc.version.startswith(name + "-v")
         assert planner_params(sc).v_max == sc.agents.v_max
