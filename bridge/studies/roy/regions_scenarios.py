@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Literal
@@ -30,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from bridge.core.config import ConfigError, Section, _format
+from bridge.core.config import ConfigError, Section, _format, read_toml
 
 SCENARIO_DIR = Path(__file__).resolve().parents[3] / "hil_configs" / "roy"
 PLANNER_GROUP = "swarm_sitl.region_planners"
@@ -257,18 +256,7 @@ def load_scenario(path: str | Path) -> RegionScenario:
     p = Path(path)
     if p.suffix != ".toml" and not p.exists():
         p = SCENARIO_DIR / f"{p.name}.toml"
-    try:
-        raw = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: no such file") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{p}: is a directory, not a scenario file") from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{p}: not a text file (byte {e.start} is not UTF-8): a scenario is a TOML file") from None
-    except OSError as e:
-        raise ConfigError(f"{p}: cannot read it: {e.strerror or e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{p}: not valid TOML: {e}") from None
+    raw = read_toml(p, "scenario")
     try:
         sc = RegionScenario.model_validate(raw)
     except ValidationError as e:
