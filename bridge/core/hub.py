@@ -39,7 +39,7 @@ from bridge.core.entities import entity, robot_of
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.medium import Medium, route_table
 from bridge.core.plan import Plan, plan_offer
-from bridge.core.recorder import Recorder
+from bridge.core.recorder import SCHEMAS, Recorder
 from bridge.core.registry import MEDIA, SERVICES, STUDIES, robot_spec
 from bridge.core.services import SENSES, SERVICE_ROLE
 from bridge.core.world import World
@@ -499,12 +499,16 @@ class Hub:
             hook.on_log(r, topic, values, t)
 
     def _service_log(self, e: str, r: int, t: int, item: list) -> None:
-        """``["log", topic, {values}]`` from a service (``Service.log``): recorded under ``/svc/<name>/log/<topic>``."""
-        _, topic, values = item
+        """``["log", topic, {values}]`` from a service (``Service.log``): recorded under ``/svc/<name>/log/<topic>``;
+        a fourth field names the registered schema to record it with (``register_schema``; unknown: malformed)."""
+        _, topic, values, *schema = item
+        name = schema[0] if schema else "swarm_sitl.Log"
         if not (isinstance(topic, str) and topic.isidentifier() and isinstance(values, dict)):
             raise ValueError
+        if len(schema) > 1 or name not in SCHEMAS:
+            raise ValueError
         json.dumps(values, allow_nan=False)
-        self.rec.write(t, f"/{e}/log/{topic}", "swarm_sitl.Log", values)
+        self.rec.write(t, f"/{e}/log/{topic}", name, values)
 
     def run(self) -> dict[str, Any]:
         q = self.q_ns

@@ -109,9 +109,11 @@ class Service:
         """A datagram to ``dest`` (a robot's ``rNNN``, another service's name) or, with None, to every node."""
         self._out.append(["wifi", dest, bytes(data)])
 
-    def log(self, topic: str, values: dict[str, Any]) -> None:
-        """A record under ``/svc/<name>/log/<topic>`` (plain JSON values)."""
-        self._out.append(["log", topic, values])
+    def log(self, topic: str, values: dict[str, Any], schema: str | None = None) -> None:
+        """A record under ``/svc/<name>/log/<topic>`` (plain JSON values), recorded with ``schema`` when given: a
+        schema the world knows (``recorder.register_schema`` in a module its kind imports, as a scene a viewer
+        draws), else the generic log schema."""
+        self._out.append(["log", topic, values] if schema is None else ["log", topic, values, schema])
 
     def step(self, t_ns: int, datagrams: list[tuple[str, bytes]], sensed: dict[str, Any]) -> int | None:
         """Run at ``t_ns``; returns the next wake time (ns) or None."""

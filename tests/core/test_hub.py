@@ -82,3 +82,29 @@ def test_events_are_recorded(hub: Hub, tmp_path: Path) -> None:
 def test_entity_ids_beyond_999_robots() -> None:
     assert robot_of(entity(3, "llc")) == 3
     assert robot_of(entity(1234, "logic")) == 1234
+
+
+def test_a_service_log_is_recorded_with_the_registered_schema_it_names(tmp_path: Path) -> None:
+    from mcap.reader import make_reader
+
+    from bridge.core.recorder import iter_messages
+    from bridge.services.global_controller.scene import SCENE_SCHEMA
+
+    cfg = Config.model_validate({"robots": [{"count": 1}], "services": [{"kind": "global_controller", "name": "ctl"}]})
+    h = Hub(make_plan(cfg), str(tmp_path), str(tmp_path), "test")
+    try:
+        out = [
+            ["log", "plain", {"a": 1}],
+            ["log", "scene", {"entities": [], "deletions": []}, SCENE_SCHEMA],
+            ["log", "unknown", {"a": 1}, "no.SuchSchema"],
+            ["log", "extra", {"a": 1}, SCENE_SCHEMA, "more"],
+        ]
+        h._outputs(0, {"svc-ctl": reply(**{"svc/ctl": {"out": out, "wake": Q}})}, {}, {"svc-ctl": ["svc/ctl"]})
+        assert h.counts["malformed_items"] == 2 and not h.dead_services
+    finally:
+        h.rec.finish()
+        h.world.close()
+    with open(tmp_path / "session.mcap", "rb") as f:
+        got = {c.topic: s.name for s, c, _ in make_reader(f).iter_messages()}
+    assert got == {"/svc/ctl/log/plain": "swarm_sitl.Log", "/svc/ctl/log/scene": SCENE_SCHEMA}
+    assert [t for t, _, _ in iter_messages(tmp_path / "session.mcap")] == ["/svc/ctl/log/plain", "/svc/ctl/log/scene"]

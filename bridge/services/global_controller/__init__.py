@@ -3,9 +3,10 @@ service on the swarm's Wi-Fi. Every ``period_s`` it steps its controller class, 
 (``pose_packet.MISSION``: run or hold, the target) and takes in the robots' status packets.
 
 The controller class is the extension point: a study gives its own (entry point group
-``swarm_sitl.global_controllers``, or ``module:Class``), a ``GlobalController`` subclass; chapters 4-6 fit their
-regions there. The built-in ``mission`` runs chapter 3's: go to ``target`` from ``start_s`` to ``stop_s``, and it
-scores arrivals from the robots' own status (the first time each reports a pose within ``goal_radius_m``).
+``swarm_sitl.global_controllers``, or ``module:Class``), a ``GlobalController`` subclass. The built-in ``mission``
+runs chapter 3's: go to ``target`` from ``start_s`` to ``stop_s``, and it scores arrivals from the robots' own status
+(the first time each reports a pose within ``goal_radius_m``). The built-in ``region`` (``regions.py``) hosts a
+chapter 4-6 region planner and broadcasts its plans (docs/global-controller.md).
 
     [[services]]
     kind = "global_controller"
@@ -21,21 +22,43 @@ from typing import Any
 from pydantic import Field
 
 from bridge.core.services import Service, ServiceContext, ServiceOptions, ServiceSpec
+from bridge.services.global_controller import scene  # noqa: F401 - the world records its scenes: their schema
 from swarm_logic.plugins import PluginError, Registry
 from swarm_logic.robots.sonpi import pose_packet as pp
 
 
 class GlobalController:
-    """A study's global controller: ``on_status`` for each robot's status packet, ``step`` each period returning the
-    mission to broadcast (None: none this period), ``summary`` its figures. ``ctx`` is the service's context (arena,
-    robots, options), ``options`` the service's options."""
+    """A study's global controller: ``on_status`` for each robot's status packet, ``on_packet`` for the other robot
+    packets it ``accepts`` (their types), ``step`` each period returning the mission to broadcast (None: none this
+    period), ``summary`` its figures; it may ``send`` packets and ``log`` records of its own. ``ctx`` is the
+    service's context (arena, robots, options), ``options`` the service's options. ``check_params`` refuses bad
+    ``options.params`` before the session starts (a ValueError naming ``params.FIELD``)."""
+
+    accepts: tuple[type, ...] = ()
 
     def __init__(self, ctx: ServiceContext, options: Any) -> None:
         self.ctx = ctx
         self.options = options
+        self.service: Service | None = None  # the service hosting it, once it is built
+        self.now_s = 0.0  # the service's time while it hands over the datagrams and steps
+
+    @classmethod
+    def check_params(cls, params: dict[str, Any]) -> None:
+        """ValueError naming the first bad entry of ``params``."""
 
     def on_status(self, t_s: float, status: pp.Status) -> None:
         """A robot's status arrived (``t_s``: the robot's time stamp)."""
+
+    def on_packet(self, t_s: float, head: pp.Header, content: Any) -> None:
+        """A robot's packet of a type in ``accepts`` arrived (``t_s``: the service's time; ``head.t_s`` the robot's)."""
+
+    def send(self, data: bytes, dest: str | None = None) -> None:
+        assert self.service is not None
+        self.service.send(data, dest)
+
+    def log(self, topic: str, values: dict[str, Any], schema: str | None = None) -> None:
+        assert self.service is not None
+        self.service.log(topic, values, schema)
 
     def step(self, t_s: float) -> pp.Mission | None:
         return None
@@ -112,20 +135,28 @@ class GlobalControllerService(Service):
         o = ctx.options
         self.period_ns = round(o.period_s * 1e9)
         self.controller = CONTROLLERS.get(o.controller)(ctx, o)
+        self.controller.service = self
+        self.kinds = (pp.Status, *self.controller.accepts)
         self.address = {r.address: r.id for r in ctx.robots}
         self.seq = 0
         self.counts = {"missions": 0, "status": 0, "ignored": 0, "malformed": 0}
+        if self.controller.accepts:
+            self.counts["packets"] = 0
 
     def step(self, t_ns: int, datagrams: list[tuple[str, bytes]], sensed: dict[str, Any]) -> int | None:
+        t_s = self.controller.now_s = t_ns / 1e9
         for src, data in datagrams:
-            verdict, head, content = pp.accept(data, pp.Status, self.address.get(src))
+            verdict, head, content = pp.accept(data, self.kinds, self.address.get(src))
             if verdict != "ok":
                 self.counts[verdict] += 1  # ignored: another node's broadcast (the camera's poses)
                 continue
-            assert isinstance(content, pp.Status) and head is not None
-            self.counts["status"] += 1
-            self.controller.on_status(head.t_s, content)
-        t_s = t_ns / 1e9
+            assert head is not None
+            if isinstance(content, pp.Status):
+                self.counts["status"] += 1
+                self.controller.on_status(head.t_s, content)
+            else:
+                self.counts["packets"] += 1
+                self.controller.on_packet(t_s, head, content)
         mission = self.controller.step(t_s)
         if mission is not None:
             self.send(pp.encode_mission(self.seq, t_s, mission))
@@ -140,9 +171,10 @@ class GlobalControllerService(Service):
 
 def _check(o: GlobalControllerOptions, cfg: Any) -> None:
     try:
-        CONTROLLERS.get(o.controller)
+        cls = CONTROLLERS.get(o.controller)
     except PluginError as e:
         raise ValueError(f"controller: {e}") from None
+    cls.check_params(o.params)
     if o.stop_s is not None and o.stop_s <= o.start_s:
         raise ValueError(f"stop_s: {o.stop_s} is not after start_s ({o.start_s})")
     tx, ty = o.target

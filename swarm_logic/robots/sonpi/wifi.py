@@ -1,6 +1,7 @@
 """``sonpi_wifi``: the SonPI's Wi-Fi, as its Raspberry Pi sees it: the localisation service's pose broadcasts serve
 ``sonpi_pose`` (this robot's own) and ``sonpi_localisation`` (every other robot's), the global controller's mission
-serves ``sonpi_mission``; the robot sends its encoder odometry to the localisation service (when it has an
+serves ``sonpi_mission`` and a region controller's plan ``sonpi_plan`` (which also sends the robot's sonar windows to
+the controller); the robot sends its encoder odometry to the localisation service (when it has an
 ``sonpi_odometry`` face) and its status to the controller (``pose_packet``'s wire format).
 
 HAL table (``swarm_sitl.devices`` name ``sonpi_wifi``):
@@ -33,6 +34,7 @@ from swarm_logic.robots.sonpi import pose_packet as pp
 from swarm_logic.robots.sonpi.interfaces import LOCALISATION, POSE, AgentPose, NoPose
 
 MISSION = "sonpi_mission"
+PLAN = "sonpi_plan"
 ODOMETRY_FACE = "sonpi_odometry"  # the robot's own odometry (its board's device), if it has one
 
 
@@ -85,6 +87,30 @@ class _Mission:
         return self.dev.mission
 
 
+@dataclass(frozen=True, slots=True)
+class PlanOrder:
+    """The region controller's latest plan (``pose_packet.PlanPacket``) and the controller's time stamp on it."""
+
+    plan: pp.PlanPacket
+    t_s: float
+
+
+class _Plan:
+    def __init__(self, dev: SonpiWifi) -> None:
+        self.dev = dev
+
+    def read(self) -> PlanOrder | None:
+        """The latest plan the controller broadcast (None before the first)."""
+        return self.dev.plan
+
+    def send_sonar(self, t_s: float, ranges_m: list[float | None]) -> None:
+        """Send the sonar window that ended at ``t_s`` to the controller (``inf``: no echo; None or NaN: no reading;
+        ValueError for a negative range or one beyond the wire's 65.533 m)."""
+        d = self.dev
+        d._send(pp.encode_sonar(d._seq, t_s, pp.SonarWindow(d.robot.id, tuple(ranges_m))), d.controller)
+        d.counters["sonar_sent"] += 1
+
+
 class SonpiWifi:
     def __init__(self, cfg: dict[str, Any], robot: Any) -> None:
         known = {
@@ -114,14 +140,17 @@ class SonpiWifi:
         self.own_fresh = False
         self.others: list[AgentPose] = []
         self.mission: MissionOrder | None = None
+        self.plan: PlanOrder | None = None
         self.last_seq: int | None = None
         self.counters = {
             "pose_packets": 0,
             "missions": 0,
+            "plans": 0,
             "malformed": 0,
             "other": 0,
             "odometry_sent": 0,
             "status_sent": 0,
+            "sonar_sent": 0,
         }
         self._odom_face: Any = None
         self._odom_at_own: tuple[float, float, float] | None = None  # the odometry's pose when the last own pose came
@@ -131,7 +160,12 @@ class SonpiWifi:
         self._next_status = 0.0
         self._next_log = 0.0
         self._seq = 0
-        self._faces = {POSE: _OwnPose(self), LOCALISATION: _Localisation(self), MISSION: _Mission(self)}
+        self._faces = {
+            POSE: _OwnPose(self),
+            LOCALISATION: _Localisation(self),
+            MISSION: _Mission(self),
+            PLAN: _Plan(self),
+        }
 
     def faces(self) -> dict[str, Any]:
         return dict(self._faces)
@@ -168,6 +202,10 @@ class SonpiWifi:
             assert isinstance(content, pp.Mission)
             self.counters["missions"] += 1
             self.mission = MissionOrder(content.run, content.target_x_m, content.target_y_m, head.t_s)
+        elif head.type == pp.PLAN:
+            assert isinstance(content, pp.PlanPacket)
+            self.counters["plans"] += 1
+            self.plan = PlanOrder(content, head.t_s)
         else:  # another robot's odometry or status on a broadcast: not for us
             self.counters["other"] += 1
 

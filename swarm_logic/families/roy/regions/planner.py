@@ -19,6 +19,7 @@ import numpy as np
 from swarm_logic.families.roy.regions import laws
 from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.log import plain
+from swarm_logic.plugins import Registry
 
 
 @dataclass(frozen=True)
@@ -124,6 +125,15 @@ class RegionPlanner:
 
     def summary(self) -> dict[str, Any]:
         return {}
+
+
+def _is_planner(obj: Any) -> bool:
+    return isinstance(obj, type) and issubclass(obj, RegionPlanner)
+
+
+# the planners a global controller can host, by name (entry point group ``swarm_sitl.region_planners``, or
+# ``module:Class``); a planner is built with its parameters as keyword arguments
+PLANNERS: Registry[type[RegionPlanner]] = Registry("swarm_sitl.region_planners", "region planner", _is_planner)
 
 
 Law = Callable[..., np.ndarray]
