@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Literal
 
@@ -30,9 +29,10 @@ import numpy as np
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from bridge.core.config import ConfigError, Section, _format, read_toml
+from swarm_logic.families.roy.regions.planner import PLANNERS, RegionPlanner
+from swarm_logic.plugins import PluginError
 
 SCENARIO_DIR = Path(__file__).resolve().parents[3] / "hil_configs" / "roy"
-PLANNER_GROUP = "swarm_sitl.region_planners"
 Point = tuple[float, float]
 
 
@@ -217,38 +217,25 @@ class RegionScenario(Section):
         return self.model_copy(update={"agents": self.agents.model_copy(update={"v_max": v_max})})
 
 
-def planner_classes() -> dict[str, Any]:
-    """The registered region planners by name (entry points of ``swarm_sitl.region_planners``)."""
-    return {ep.name: ep for ep in entry_points(group=PLANNER_GROUP)}
-
-
-def planner_params(scenario: RegionScenario) -> Any:
-    """The scenario's planner's parameter object: its class' ``Params`` from what the scenario fixes (``v_max``,
-    ``d_min``, ``d_max``, when the class has such fields) overridden by ``[planner] params``. A ValueError names the
-    parameter and the reason."""
-    cls = _planner_class(scenario.planner.name)
-    names = params_fields(cls.Params)
-    unknown = sorted(set(scenario.planner.params) - names)
-    if unknown:
-        raise ValueError(f"{unknown[0]}: not a parameter of planner {scenario.planner.name!r}")
+def planner_params(scenario: RegionScenario) -> dict[str, Any]:
+    """The keyword arguments the scenario's planner is built with: what the scenario fixes (``v_max``, ``d_min``,
+    ``d_max``, for a planner whose ``Params`` has such fields) overridden by ``[planner] params``. A ValueError names
+    an unknown parameter."""
+    cls = PLANNERS.get(scenario.planner.name)
+    names = {f.name for f in dataclasses.fields(cls.Params)} if hasattr(cls, "Params") else None
+    if names is not None:
+        unknown = sorted(set(scenario.planner.params) - names)
+        if unknown:
+            raise ValueError(f"{unknown[0]}: not a parameter of planner {scenario.planner.name!r}")
     facts = {"v_max": scenario.agents.v_max, "d_min": scenario.sensing.d_min, "d_max": scenario.sensing.d_max}
-    kw = {k: v for k, v in facts.items() if k in names} | dict(scenario.planner.params)
-    for k, v in kw.items():
-        if isinstance(v, list):
-            kw[k] = tuple(v)
-    return cls.Params(**kw)
+    kw = {k: v for k, v in facts.items() if names is not None and k in names}
+    return kw | dict(scenario.planner.params)
 
 
-def _planner_class(name: str) -> Any:
-    eps = planner_classes()
-    if name not in eps:
-        raise ValueError(f"unknown planner {name!r}; registered: {', '.join(sorted(eps)) or 'none'}")
-    return eps[name].load()
-
-
-def make_planner(scenario: RegionScenario) -> Any:
-    """A fresh planner for ``scenario`` (its ``[planner]`` table) over its ``agents.n`` agents."""
-    return _planner_class(scenario.planner.name)(planner_params(scenario), scenario.agents.n)
+def make_planner(scenario: RegionScenario) -> RegionPlanner:
+    """A fresh planner for ``scenario`` (its ``[planner]`` table: a name of ``swarm_sitl.region_planners`` or
+    ``module:Class``, built with ``planner_params``)."""
+    return PLANNERS.get(scenario.planner.name)(**planner_params(scenario))
 
 
 def load_scenario(path: str | Path) -> RegionScenario:
@@ -262,16 +249,11 @@ def load_scenario(path: str | Path) -> RegionScenario:
     except ValidationError as e:
         raise ConfigError(_format(str(p), e)) from None
     try:
-        _planner_class(sc.planner.name)
-    except ValueError as e:
+        PLANNERS.get(sc.planner.name)
+    except PluginError as e:
         raise ConfigError(f"{p}: planner.name: {e}") from None
     try:
-        planner_params(sc)
+        make_planner(sc)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{p}: planner.params.{e}") from None
     return sc
-
-
-def params_fields(params_cls: Any) -> set[str]:
-    """The field names of a planner's parameter dataclass."""
-    return {f.name for f in dataclasses.fields(params_cls)}

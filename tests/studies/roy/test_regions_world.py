@@ -113,7 +113,7 @@ def test_a_wrong_file_names_file_field_and_reason(tmp_path: Path, body: str, fie
 def test_unknown_planner_and_target_outside(tmp_path: Path) -> None:
     p = _scenario(tmp_path)
     p.write_text(p.read_text().replace('name = "ch4"', 'name = "ch9"'))
-    with pytest.raises(ConfigError, match=r"planner\.name: unknown planner 'ch9'"):
+    with pytest.raises(ConfigError, match=r"planner\.name: unknown region planner 'ch9'"):
         load_scenario(p)
     p = _scenario(tmp_path)
     p.write_text(p.read_text().replace("[[18.0, 10.0]]", "[[25.0, 10.0]]"))
@@ -125,5 +125,6 @@ def test_shipped_scenarios_load_with_versions() -> None:
     for name in ("ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"):
         sc = load_scenario(name)
         assert sc.version.startswith(name + "-v")
-        assert planner_params(sc).v_max == sc.agents.v_max
+        assert planner_params(sc)["v_max"] == sc.agents.v_max
+        assert make_planner(sc).p.v_max == sc.agents.v_max
     assert load_scenario("ch4-failures-50").with_failures(0.2).failures.fraction == 0.2

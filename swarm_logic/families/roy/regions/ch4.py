@@ -235,16 +235,27 @@ class _Counters:
 
 
 class Ch4Planner(RegionPlanner):
-    """Chapter 4's global controller over ``n`` agents (ids 0..n-1; an absent agent keeps its last pose)."""
+    """Chapter 4's global controller, built with ``Ch4Params``' fields as keyword arguments. Its swarm is the first
+    observation's agents (the plan's ``ids``, in id order); an agent absent later keeps its last pose, an unknown
+    one is dropped and reported (event ``input``)."""
 
     Params = Ch4Params
     period_s = 0.25
 
-    def __init__(self, params: Ch4Params, n: int) -> None:
-        if n < 1:
-            raise ValueError(f"n: at least one agent, got {n}")
-        self.p = params
-        self.n = n
+    def __init__(self, **params: Any) -> None:
+        for k in ("centre0",):
+            if isinstance(params.get(k), list):
+                params[k] = tuple(params[k])
+        self.p = Ch4Params(**params)
+        self.ids: np.ndarray | None = None
+        self.n = 0
+        self.c = _Counters()
+
+    def _setup(self, ids: np.ndarray) -> None:
+        """The agents are the first observation's (``ids``, sorted); everything sized by N is built here."""
+        params = self.p
+        self.ids = np.unique(np.asarray(ids, int))
+        n = self.n = len(self.ids)
         self.region_params = RegionParams(
             r_c=params.r_c,
             k_vcir=params.k_vcir,
@@ -281,23 +292,32 @@ class Ch4Planner(RegionPlanner):
         self.pos = np.zeros((n, 2))
         self.heading = np.zeros(n)
         self.ranges: np.ndarray | None = None
-        self.c = _Counters()
 
-    def _rows(self, obs: Observation) -> None:
-        """Merge the reporting agents' rows into the full (n, ...) arrays (an absent agent keeps its last row)."""
+    def _rows(self, obs: Observation) -> int:
+        """Merge the reporting agents' rows into the full (N, ...) arrays, rows in id order (an absent agent keeps
+        its last pose and has no readings); returns how many rows came from an agent the planner does not know."""
         ids = np.asarray(obs.ids, int)
-        ok = (ids >= 0) & (ids < self.n)
-        self.pos[ids[ok]] = obs.positions[ok]
-        self.heading[ids[ok]] = obs.headings[ok]
+        row = np.clip(np.searchsorted(self.ids, ids), 0, self.n - 1)
+        ok = self.ids[row] == ids
+        good = ok & np.isfinite(obs.positions).all(axis=1)
+        self.pos[row[good]] = obs.positions[good]
+        self.heading[row[good]] = np.where(np.isfinite(obs.headings[good]), obs.headings[good], self.heading[row[good]])
         if self.ranges is None or self.ranges.shape[1] != len(obs.angles):
             self.ranges = np.full((self.n, len(obs.angles)), np.nan)
         self.ranges[:] = np.nan
-        self.ranges[ids[ok]] = obs.ranges[ok]
+        self.ranges[row[ok]] = obs.ranges[ok]
+        return int((~ok).sum())
 
     def plan(self, obs: Observation) -> Plan:
         p = self.p
         events: list[dict[str, Any]] = []
-        self._rows(obs)
+        if self.ids is None:
+            if len(obs.ids) == 0:
+                raise ValueError("the first observation has no agent: the planner sizes its swarm from it")
+            self._setup(obs.ids)
+        unknown = self._rows(obs)
+        if unknown:
+            events.append({"kind": "input", "dropped": unknown, "reason": "unknown agent"})
         self.t = obs.t
         x = self.pos
         target = np.asarray(obs.target, float)
@@ -384,7 +404,7 @@ class Ch4Planner(RegionPlanner):
             )
         self.c.periods += 1
         law, params, goals = self._law(x, failed, region, events)
-        return Plan(obs.t, np.arange(self.n), goals, law, params, regions=(Region(0, region),), events=tuple(events))
+        return Plan(obs.t, self.ids.copy(), goals, law, params, regions=(Region(0, region),), events=tuple(events))
 
     def _stalled(self, t: float, x: np.ndarray, region: Ellipse) -> np.ndarray:
         """Agents stopped outside a region the barrier holds, for ``fail_hold_s``: a working agent outside a region
@@ -485,7 +505,7 @@ class Ch4Planner(RegionPlanner):
             "formation_changes": self.c.formation_changes,
             "region_switches": self.c.switches,
             "failures_detected": [{"t": t, "n": k} for t, k in self.c.detected],
-            "n_failed_detected": int(self.detector.failed.sum()),
+            "n_failed_detected": int(self.detector.failed.sum()) if self.ids is not None else 0,
             "dropped": dict(sorted(self.c.dropped.items())),
-            "k_c": self.k_c,
+            "k_c": self.k_c if self.ids is not None else None,
         }

@@ -36,13 +36,19 @@ def test_clip_moves_only_the_points_outside() -> None:
 
 
 def test_absent_and_garbage_readings_do_not_crash() -> None:
-    pl = Ch4Planner(Ch4Params(centre0=(5.0, 5.0)), 6)
+    pl = Ch4Planner(centre0=[5.0, 5.0])
     ang = np.arange(8) * np.pi / 4
+    ids = np.array([3, 5, 8, 13, 21, 34])  # any ids: the plan's rows follow them
     x = fm.tri_coordinates(1.0) + 5.0
-    rng = np.array([[np.inf, -1.0, np.nan, 2.0, 2.0, 2.0, 2.0, 2.0]] * 4)
-    plan = pl.plan(Observation(0.0, np.arange(4), x[:4], np.zeros(4), rng, ang, np.array([35.0, 35.0])))
-    assert plan.goals.shape == (6, 2) and np.isfinite(plan.goals).all()
-    assert {"kind": "input", "dropped": 8, "reason": "garbage"} in plan.events
+    rng = np.array([[np.inf, -1.0, np.nan, 2.0, 2.0, 2.0, 2.0, 2.0]] * 6)
+    target = np.array([35.0, 35.0])
+    plan = pl.plan(Observation(0.0, ids, x, np.zeros(6), rng, ang, target))
+    assert plan.goals.shape == (6, 2) and np.isfinite(plan.goals).all() and list(plan.ids) == list(ids)
+    assert {"kind": "input", "dropped": 12, "reason": "garbage"} in plan.events
+    # later: two agents absent, one unknown id; the plan still covers the swarm
+    plan = pl.plan(Observation(0.25, np.array([3, 5, 8, 99]), x[:4], np.zeros(4), rng[:4], ang, target))
+    assert list(plan.ids) == list(ids) and np.isfinite(plan.goals).all()
+    assert {"kind": "input", "dropped": 1, "reason": "unknown agent"} in plan.events
 
 
 def test_a_gap_switches_circle_ellipse_circle(tmp_path: Path) -> None:
