@@ -11,7 +11,7 @@ the closed-loop missions measured to work (see the chapter's page, "The planner 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -80,23 +80,24 @@ class Ch4Params:
     the swarm collapses to a point); "clip" (ours) pulls each agent only to the nearest point of the region shrunk to
     ``slot_fill`` (an agent inside feels no pull, the repulsion spreads the swarm over the region's shape)."""
 
-    r_c: float = 2.5
+    # the region controller's fields take RegionParams' defaults, the sensing ones SensingParams'
+    r_c: float = RegionParams.r_c
     centre0: tuple[float, float] | None = None
-    v_max: float = 0.3
+    v_max: float = RegionParams.v_max
     region_speed: float = 0.8
-    k_vcir: float = 10.0
-    k_theta: float = 2.0
-    dynamics: str = "repaired"
-    axes: str = "geometric"
-    clearance: float = 0.5
-    axes_lag: float = 0.0
-    barrier: bool = True
+    k_vcir: float = RegionParams.k_vcir
+    k_theta: float = RegionParams.k_theta
+    dynamics: str = RegionParams.dynamics
+    axes: str = RegionParams.axes
+    clearance: float = RegionParams.clearance
+    axes_lag: float = RegionParams.axes_lag
+    barrier: bool = RegionParams.barrier
     barrier_fraction: float = 1.0
     barrier_fraction_scalable: float = 0.9
-    r_robot: float = 0.5
-    d_min: float = 0.0
-    d_max: float = 5.0
-    eclipse_eps: float = 0.1
+    r_robot: float = RegionParams.r_robot
+    d_min: float = SensingParams.d_min
+    d_max: float = SensingParams.d_max
+    eclipse_eps: float = SensingParams.eclipse_eps
     boundary: bool = True
     gap_mode: str = "closest"
     split: str = "sides"
@@ -256,18 +257,8 @@ class Ch4Planner(RegionPlanner):
         params = self.p
         self.ids = np.unique(np.asarray(ids, int))
         n = self.n = len(self.ids)
-        self.region_params = RegionParams(
-            r_c=params.r_c,
-            k_vcir=params.k_vcir,
-            v_max=params.region_speed * params.v_max,
-            k_theta=params.k_theta,
-            dynamics=params.dynamics,
-            axes=params.axes,
-            clearance=params.clearance,
-            axes_lag=params.axes_lag,
-            barrier=params.barrier,
-            r_robot=params.r_robot,
-        )
+        shared = {f.name: getattr(params, f.name) for f in fields(RegionParams) if f.name != "v_max"}
+        self.region_params = RegionParams(**shared, v_max=params.region_speed * params.v_max)
         self.sensing = SensingParams(params.d_min, params.d_max, params.r_robot, params.eclipse_eps)
         self.detector = FailureDetector(
             n, FailureParams(params.v_max, params.fail_speed_frac, params.fail_centre_frac, params.fail_hold_s)
