@@ -181,14 +181,16 @@ def _pose_ok(x: np.ndarray) -> np.ndarray:
 class Ch5Planner(RegionPlanner):
     """The loop of digest §2.3.7, one ``plan`` per period. Its events (each a dict with ``kind`` and ``t``):
 
-    - ``region``: a region update: ``update`` (its number), ``why`` ("start", "released", "retry", "membership"),
-      the region's ``rule`` and ``reason``, ``area`` A_Φ, ``n`` agents packed, ``b_fs`` the gap sensed then (None:
-      none), the packing ``method`` (lattice/relaxed/shrunk), ``lattice_count`` and ``lattice_holds`` (count >= N,
-      B7), ``radius``, ``circles``, ``points`` sensed, the assignment's ``one_to_one``;
+    - ``region``: a region update: ``update`` (its number), ``why`` ("start", "released", "retry", "fallback",
+      "membership"), the region's ``rule`` and ``reason``, ``area`` A_Φ, ``n`` agents packed, ``b_fs`` the gap
+      sensed then (None: none), the packing ``method`` (lattice/relaxed/shrunk), ``lattice_count`` and
+      ``lattice_holds`` (count >= N, B7), ``radius``, ``circles``, ``points`` sensed, the assignment's
+      ``one_to_one``;
     - ``barrier``: the barrier released, ``reason`` "all in circles" (the thesis' timeline events, C6) or
       "timeout", with ``waiting`` (the ids not in their circles) and ``held_s``;
-    - ``infeasible``: a region that cannot hold the swarm (the packing failed): its area, N, the circles fitted; the
-      last feasible plan is kept (``kept``: its time, None when there was none: the agents hold where they are);
+    - ``infeasible``: a region that cannot hold the swarm (``why_not``: less area than N robots, the packing failed,
+      circles smaller than the robots, an agent without a circle), with the ``region`` fields and the ``decision``:
+      "circle rule" (``fallback``), "last plan" (``kept``: its time) or "hold where they are" (none yet);
     - ``input``: ``reason`` "garbage" (readings not finite or negative, by agent), "no_pose" (agents with no finite
       position: not packed, never arrived), "absent" (planned agents missing from the observation: not waited for),
       each when its set of agents changes;
@@ -241,8 +243,8 @@ class Ch5Planner(RegionPlanner):
         outline = self.outline(points, x, heads, ranges, np.asarray(obs.angles, float)) if self.p.frontier else points
         new = {int(i) for i in ids[ok]} - set(self.targets)
         waiting = self.tried_at is not None and t - self.tried_at < self.p.retry_s
-        if self.done_t is not None:
-            pass
+        if self.done_t is not None or not ok.any():
+            pass  # the end; or nobody to pack or wait for (``no_pose`` says so): the plan in force stands
         elif self.region is None or new:
             if not waiting:
                 why = "start" if self.region is None else "membership"

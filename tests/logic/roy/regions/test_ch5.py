@@ -339,3 +339,12 @@ def test_a_region_too_small_for_the_swarm_is_a_logged_decision() -> None:
 def test_no_agent_at_all() -> None:
     plan = Ch5Planner().plan(observe(0.0, np.zeros(0, int), np.zeros((0, 2)), np.zeros((0, 8)), np.zeros(2)))
     assert plan.events[0]["kind"] == "held" and plan.goals.shape == (0, 2)
+
+
+def test_no_agent_with_a_position() -> None:
+    planner = Ch5Planner()
+    x = np.full((3, 2), np.nan)
+    for t in (0.0, 0.25):
+        plan = planner.plan(observe(t, np.arange(3), x, np.full((3, 8), 2.0), np.array([10.0, 0.0])))
+        assert np.isfinite(plan.goals).all() and not [e for e in plan.events if e["kind"] == "region"]
+    assert planner.summary()["updates"] == 0 and planner.summary()["dropped"]["garbage"] == 48
