@@ -1,5 +1,5 @@
-"""``Ch6Planner`` (region planner ``ch6``): chapter 6's split and merge of leader-follower sub-swarms (Roy 2022 §6.2-6.4,
-digest §2.4.8). Every period each sub-swarm's leader gathers its members' sonar points (Table 6.1's window [2, 5],
+"""``Ch6Planner`` (region planner ``ch6``): chapter 6's split and merge of leader-follower sub-swarms (Roy 2022
+§6.2-6.4). Every period each sub-swarm's leader gathers its members' sonar points (Table 6.1's window [2, 5],
 kept for the last ``memory`` periods, with the free ends of the beams that returned nothing) and looks for openings
 ahead (``split_merge.detect_openings``). Two or more, seen in ``confirm`` scans running: the central controller
 splits the sub-swarm (``split_swarm``: sizes, allocation, leaders, sub-regions, lane targets). Otherwise the leader
@@ -58,8 +58,8 @@ class Ch6Params:
     """Chapter 6's planner settings, in thesis units (Table 6.1 where it gives them, the chapter 6 page's
     recommendations elsewhere).
 
-    - Law (eq. 6.5): ``k_c`` 12, ``k_f`` 2.5, ``r_s`` (3.2 and 0.5 in Table 6.1's cases; 1.13 on the SonPI), ``law_mode``
-      "nearest" (erratum 22; "sum": every agent and point within ``radius_scales`` r_s).
+    - Law (eq. 6.5): ``k_c`` 12, ``k_f`` 2.5, ``r_s`` (3.2 and 0.5 in Table 6.1's cases; 1.13 on the SonPI),
+      ``law_mode`` "nearest" (erratum 22; "sum": every agent and point within ``radius_scales`` r_s).
     - Sensing: the window [``d_min``, ``d_max``] = [2, 5] (eqs. 6.1-6.4); ``r_robot``, ``eclipse_eps`` the teammate
       filter; the points of the last ``memory`` periods are kept (the thesis' R~(t + tau); one period of eight beams
       per agent misses most of a wall); a beam clear beyond ``d_max`` gives a free end for the detector, at its echo's
@@ -190,15 +190,17 @@ class _Swarm:
     waypoint: np.ndarray | None = None
     confirm: int = 0
     held: str = ""
+    scan: str = ""
     arrived: bool = False
 
 
 class Ch6Planner(RegionPlanner):
-    """Every period: promotions of missing leaders, the sonar points per sub-swarm, the split or the region step of
-    each sub-swarm, the merge check, then the plan (goals: the sub-region centres; law ``split_merge``; groups,
-    leaders, regions). Events: ``region`` (the first), ``split``, ``merge``, ``promotion``, ``passed`` (a sub-swarm
-    out of its lane), ``held`` (a region step refused, on change), ``input`` (dropped readings or poses, new agents),
-    ``arrived`` (a sub-swarm at its target) and ``done``."""
+    """Every period: the sonar points per sub-swarm, then for each sub-swarm the split, or a missing leader's
+    promotion and the region step, then the merge check, then the plan (goals: the sub-region centres; law
+    ``split_merge``; groups, leaders, regions). Events: ``region`` (the first), ``scan`` (the detector's verdict, on
+    change), ``split``, ``merge``, ``promotion``, ``passed`` (a sub-swarm out of its lane), ``held`` (a region step
+    refused, on change), ``input`` (dropped readings or poses, new agents, a bad target), ``arrived`` (a sub-swarm at
+    its target) and ``done``."""
 
     def __init__(self, **params: Any) -> None:
         for k in ("centre",):
@@ -256,7 +258,7 @@ class Ch6Planner(RegionPlanner):
         ids = np.asarray(obs.ids, dtype=int)[order]
         x = np.asarray(obs.positions, dtype=float)[order].reshape(-1, 2)
         hd = np.asarray(obs.headings, dtype=float)[order]
-        rng = np.asarray(obs.ranges, dtype=float)[order].reshape(len(ids), -1)
+        rng = np.asarray(obs.ranges, dtype=float)[order].reshape(len(ids), len(obs.angles))
         ang = np.asarray(obs.angles, dtype=float)
         n = len(ids)
         ok = np.isfinite(x).all(axis=1) & np.isfinite(hd)
@@ -273,14 +275,9 @@ class Ch6Planner(RegionPlanner):
 
         if not self.swarms:
             if not len(live_ids):
-                return self._plan(obs.t, ids, x, events + [{"kind": "held", "reason": "no agent with a pose"}])
+                return self._plan(obs.t, ids, x, [*events, {"kind": "held", "reason": "no agent with a pose"}])
             self._first(obs.t, live_ids, live_x, events)
         self._join(live_ids, live_x, events)
-        for k, s in enumerate(self.swarms):
-            sub, promo = ensure_leader(s.sub, live_x, live_ids)
-            if promo is not None and promo.promoted != -1:
-                self.swarms[k].sub = replace(s.sub, leader=sub.leader)
-                self._promotions(events, obs.t, "period", (promo,))
 
         # the sonar points (eqs. 6.1-6.4) and the free ends of the beams with no echo in the window
         pts = sense(x, hd, rng, ang, self.sensing) if n and len(ang) else None
@@ -363,10 +360,18 @@ class Ch6Planner(RegionPlanner):
         if s.waypoint is None and len(xs) >= 2 and len(hits):
             scan = detect_openings(hits, e.centre, heading, self.smp, free=free)
             s.confirm = s.confirm + 1 if scan.split else 0
+            if scan.reason != s.scan:
+                s.scan = scan.reason
+                b_fs = [round(o.b_fs, 4) for o in scan.openings]
+                events.append({"kind": "scan", "t": t, "swarm": s.sub.id, "reason": scan.reason, "b_fs": b_fs})
             if s.confirm >= self.p.confirm:
                 children = self._split(t, s, scan, ids, x, events)
                 if children:
                     return children
+        sub, promo = ensure_leader(s.sub, x, ids)  # a missing leader: the member nearest the centre (eq. 6.14)
+        if promo is not None and promo.promoted != -1:
+            s.sub = replace(s.sub, leader=sub.leader)
+            self._promotions(events, t, "period", (promo,))
         # chapter 4's update: the gap beside the region (points within its reach along the heading), the area kept
         c, h = e.centre, np.array([math.cos(heading), math.sin(heading)])
         reach = max(e.a, e.b) + self.p.gap_ahead
@@ -386,6 +391,8 @@ class Ch6Planner(RegionPlanner):
         )
         self._promotions(events, t, "split", d.promotions)
         if not d.split:
+            if d.promotions and d.swarms[0].leader != -1:
+                s.sub = replace(s.sub, leader=d.swarms[0].leader)
             return []
         self.next_id += len(d.swarms)
         self.counts["splits"] += 1
@@ -424,7 +431,7 @@ class Ch6Planner(RegionPlanner):
         if len(free) < 2:
             return
         target = self.mission if self.targets is None else None
-        merged, decisions = merge_all([s.sub for s in free], [s.sub.region for s in free], x, self.smp, ids, target)
+        _, decisions = merge_all([s.sub for s in free], [s.sub.region for s in free], x, self.smp, ids, target)
         if not decisions:
             return
         by_id = {s.sub.id: s for s in free}
@@ -468,7 +475,7 @@ class Ch6Planner(RegionPlanner):
         centre = {s.sub.id: s.sub.region.centre for s in self.swarms}
         groups = np.array([self.group_of.get(int(i), -1) for i in ids.tolist()], dtype=int)
         fallback = self.mission if self.mission is not None else np.zeros(2)
-        goals = np.array([centre[g] if g in centre else fallback for g in groups.tolist()]).reshape(n, 2)
+        goals = np.array([centre.get(g, fallback) for g in groups.tolist()]).reshape(n, 2)
         row = row or {}
         all_in = bool(self.swarms) and bool(row)
         for s in self.swarms:
