@@ -50,6 +50,7 @@ CHOICES = {
     "axes": ("geometric", "literal"),
     "gap_mode": ("closest", "centroid"),
     "gap_split": ("sides", "kmeans"),
+    "passage": ("bearing", "normal"),
 }
 
 
@@ -63,7 +64,8 @@ class Ch6Params:
     - Sensing: the window [``d_min``, ``d_max``] = [2, 5] (eqs. 6.1-6.4); ``r_robot``, ``eclipse_eps`` the teammate
       filter; the points of the last ``memory`` periods are kept (the thesis' R~(t + tau); one period of eight beams
       per agent misses most of a wall); a beam clear beyond ``d_max`` gives a free end for the detector, at its echo's
-      range or, with no echo, at ``free_reach`` (None: ``d_max``; the sensor's reach if known).
+      range or, with no echo, at ``free_reach`` (None: 2 ``d_max``), and never farther (what a beam meets far
+      beyond a lane, the arena's far wall, says nothing of the lane).
     - Detection: ``bin_width`` (None: r_s, the page's figure for sonar input), ``detector`` any other
       ``SplitMergeParams`` field (default ``{"profile": "range"}``: eq. 6.5's gains pack the swarm into a clump a
       few r_s wide, so the lanes fan out from its centre and a beam clear through a lane ends far to its side in the
@@ -73,14 +75,15 @@ class Ch6Params:
     - Lanes (erratum 25): ``targets`` the map's targets (None: the observation's target for every sub-swarm),
       ``lane_map`` lane k (left to right) -> target index (None: the target nearest the lane's bearing);
       ``pass_depth`` (None: ``d_max``) how far beyond its lane's mouth a new sub-swarm's region goes before heading for
-      its target.
+      its target, along ``passage``: "bearing" (from the parent region's centre to the lane's centre: sparse sonar
+      tilts the mouth) or "normal" (the opening's ``theta``, the normal of l1 -> l2).
     - Region (chapter 4's update, ``RegionParams``): ``area`` the first region's (None: N pi r_s^2, eq. 6.8's A_e),
       ``centre`` (None: the first centroid), ``leader`` the first leader (None: the lowest id, the user's arbitrary
       pick), ``dynamics`` (erratum 10), ``axes`` and ``clearance`` (erratum 11), ``v_region`` the region's top speed,
       ``k_vcir``, ``k_theta``, ``barrier``; the gap by ``free_space`` with ``gap_mode`` (erratum 12) and ``gap_split``
-      ("sides" of the line toward the target, the corridor reading; "kmeans" as printed), on the points within the
-      region's larger semi-axis plus ``gap_ahead`` of its centre along the heading (a wall across the way is not a
-      gap: the region holds when it reaches it, and the detector decides).
+      ("sides" of the line toward the target, the corridor reading; "kmeans" as printed), on the points ahead of the
+      region's centre by at most its larger semi-axis plus ``gap_ahead`` along the heading (a wall across the way
+      is not a gap: the region holds when it reaches it, and the detector decides; a wall just passed is behind).
     - ``goal_radius`` (None: the equal-area radius of each sub-swarm's region): done when every agent is this close to
       its sub-swarm's target.
     """
@@ -105,6 +108,7 @@ class Ch6Params:
     targets: tuple[tuple[float, float], ...] | None = None
     lane_map: tuple[int, ...] | None = None
     pass_depth: float | None = None
+    passage: str = "bearing"
     area: float | None = None
     centre: tuple[float, float] | None = None
     leader: int | None = None
@@ -180,7 +184,8 @@ class Ch6Params:
 @dataclass
 class _Swarm:
     """A sub-swarm's planner state: the split/merge record (members, leader, region, target), chapter 4's region
-    state, the sensed points of the last periods, the lane waypoint while it is in transit, the split scans running."""
+    state, the sensed points of the last periods, the lane waypoint and mouth while it is in transit, the split scans
+    running."""
 
     sub: SubSwarm
     state: RegionState
@@ -188,6 +193,7 @@ class _Swarm:
     hits: deque[np.ndarray]
     free: deque[np.ndarray]
     waypoint: np.ndarray | None = None
+    mouth: np.ndarray | None = None
     confirm: int = 0
     held: str = ""
     scan: str = ""
@@ -330,14 +336,14 @@ class Ch6Planner(RegionPlanner):
     def _free_ends(
         self, x: np.ndarray, hd: np.ndarray, rng: np.ndarray, ang: np.ndarray, ok: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The ends of the beams clear beyond the window's top, with the row of the agent whose beam it is: an echo
-        beyond ``d_max`` at its range (clear that far), no echo at ``free_reach`` (None: ``d_max``)."""
+        """The ends of the beams clear beyond the window's top, with the row of the agent whose beam it is: at their
+        echo's range (clear that far) or, with no echo, at ``free_reach`` (None: 2 ``d_max``), never beyond it."""
         with np.errstate(invalid="ignore"):
             far = np.isfinite(rng) & (rng > self.p.d_max)
         clear = (np.isnan(rng) | far) & ok[:, None]
         r, b = np.nonzero(clear)
-        reach = self.p.free_reach if self.p.free_reach is not None else self.p.d_max
-        d = np.where(far[r, b], rng[r, b], reach)
+        reach = self.p.free_reach if self.p.free_reach is not None else 2 * self.p.d_max
+        d = np.where(far[r, b], np.minimum(rng[r, b], reach), reach)
         a = hd[r] + ang[b]
         return x[r] + d[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1), r
 
@@ -347,7 +353,7 @@ class Ch6Planner(RegionPlanner):
         """A sub-swarm's period: out of its lane?, a split (``confirm`` scans running), else chapter 4's region step
         toward its waypoint or target. ``xs``: its present members' positions; ``ids``, ``x``: every live agent's."""
         e = s.state.region
-        if s.waypoint is not None and np.hypot(*(e.centre - s.waypoint)) <= self.p.v_region * self.period_s:
+        if s.waypoint is not None and self._through(s, xs):
             s.waypoint = None
             events.append({"kind": "passed", "t": t, "swarm": s.sub.id, "centre": e.centre.tolist()})
         goal = s.waypoint if s.waypoint is not None else self._final_target(s)
@@ -372,10 +378,11 @@ class Ch6Planner(RegionPlanner):
         if promo is not None and promo.promoted != -1:
             s.sub = replace(s.sub, leader=sub.leader)
             self._promotions(events, t, "period", (promo,))
-        # chapter 4's update: the gap beside the region (points within its reach along the heading), the area kept
+        # chapter 4's update: the gap ahead of the region (points within its reach along the heading), the area kept
         c, h = e.centre, np.array([math.cos(heading), math.sin(heading)])
         reach = max(e.a, e.b) + self.p.gap_ahead
-        near = hits[np.abs((hits - c) @ h) <= reach] if len(hits) else hits
+        ahead = (hits - c) @ h if len(hits) else np.zeros(0)
+        near = hits[(ahead >= 0) & (ahead <= reach)]
         gap = free_space(near, c, self.p.gap_mode, heading=heading, split=self.p.gap_split)
         step = step_region(s.state, gap, goal, self.period_s, self.p.region_params(s.area), xs if len(xs) else None)
         if step.held.startswith("infeasible") and not s.held.startswith("infeasible"):
@@ -384,6 +391,16 @@ class Ch6Planner(RegionPlanner):
         s.state = step.state
         s.sub = replace(s.sub, region=step.state.region)
         return [s]
+
+    def _through(self, s: _Swarm, xs: np.ndarray) -> bool:
+        """Whether a sub-swarm in transit is out of its lane: its region's centre at the waypoint, or every present
+        member beyond the lane's mouth by 2 r_s along the passage."""
+        assert s.waypoint is not None
+        if np.hypot(*(s.state.region.centre - s.waypoint)) <= self.p.v_region * self.period_s:
+            return True
+        along = s.waypoint - s.mouth
+        length = float(np.hypot(*along))
+        return bool(len(xs)) and length > 0 and bool(np.all((xs - s.mouth) @ (along / length) >= 2 * self.p.r_s))
 
     def _split(self, t: float, s: _Swarm, scan: Any, ids: np.ndarray, x: np.ndarray, events: list) -> list[_Swarm]:
         d = split_swarm(
@@ -399,8 +416,11 @@ class Ch6Planner(RegionPlanner):
         depth = self.p.pass_depth if self.p.pass_depth is not None else self.p.d_max
         out = []
         for child, op in zip(d.swarms, [o for o in scan.openings if _used(o, d.swarms)], strict=True):
-            way = child.region.centre + depth * np.array([math.cos(op.theta), math.sin(op.theta)])
+            along = child.region.centre - s.sub.region.centre
+            theta = math.atan2(along[1], along[0]) if self.p.passage == "bearing" and np.any(along) else op.theta
+            way = child.region.centre + depth * np.array([math.cos(theta), math.sin(theta)])
             c = self._new_swarm(child, way)
+            c.mouth = child.region.centre
             c.hits.extend(s.hits)
             c.free.extend(s.free)
             for m in child.members:
