@@ -69,7 +69,9 @@ class Ch6Params:
     - Detection: ``bin_width`` (None: r_s, the page's figure for sonar input), ``detector`` any other
       ``SplitMergeParams`` field (default ``{"profile": "range"}``: eq. 6.5's gains pack the swarm into a clump a
       few r_s wide, so the lanes fan out from its centre and a beam clear through a lane ends far to its side in the
-      depth profile); a split needs ``confirm`` scans running that say so.
+      depth profile); a split needs ``confirm`` scans running that say so, with every opening's centre within
+      ``opening_reach`` of the region's centre (None: ``d_max`` plus its larger semi-axis; a lane farther than the
+      window reaches is made of far echoes).
     - Split and merge: ``semi_minor`` (erratum 11: "literal" b^i = b_fs^i, "half"), ``allocation`` (eq. 6.13:
       "nearest", "assignment"), ``merge_centre`` (erratum 24: "area_weighted", "mean").
     - Lanes (erratum 25): ``targets`` the map's targets (None: the observation's target for every sub-swarm),
@@ -102,6 +104,7 @@ class Ch6Params:
     bin_width: float | None = None
     detector: dict[str, Any] = field(default_factory=lambda: {"profile": "range"})
     confirm: int = 2
+    opening_reach: float | None = None
     semi_minor: str = "literal"
     allocation: str = "nearest"
     merge_centre: str = "area_weighted"
@@ -128,7 +131,7 @@ class Ch6Params:
     def __post_init__(self) -> None:
         check_fields(self, ("r_s", "k_c", "radius_scales", "d_max", "v_region", "k_vcir", "k_theta", "period_s"))
         check_fields(self, ("k_f", "d_min", "r_robot", "eclipse_eps", "clearance", "gap_ahead"), positive=False)
-        for name in ("bin_width", "free_reach", "pass_depth", "area", "goal_radius"):
+        for name in ("bin_width", "free_reach", "opening_reach", "pass_depth", "area", "goal_radius"):
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be finite and > 0 (or None for the default), got {v!r}")
@@ -365,6 +368,10 @@ class Ch6Planner(RegionPlanner):
         free = np.concatenate(list(s.free)) if s.free else np.zeros((0, 2))
         if s.waypoint is None and len(xs) >= 2 and len(hits):
             scan = detect_openings(hits, e.centre, heading, self.smp, free=free)
+            reach = self.p.opening_reach if self.p.opening_reach is not None else self.p.d_max + max(e.a, e.b)
+            far = [o for o in scan.openings if np.hypot(*(o.centre - e.centre)) > reach]
+            if scan.split and far:  # a lane farther than the window reaches is built of far echoes: not yet a lane
+                scan = replace(scan, split=False, reason=f"{scan.reason}, {len(far)} beyond {reach:.3g}: no split")
             s.confirm = s.confirm + 1 if scan.split else 0
             if scan.reason != s.scan:
                 s.scan = scan.reason
