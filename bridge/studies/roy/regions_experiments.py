@@ -126,11 +126,18 @@ def region_metrics(res: MissionResult) -> dict[str, Any]:
     }
 
 
-def formation_metrics(res: MissionResult) -> dict[str, Any]:
-    """B4, for a swarm the planner forms (N <= 10): the planned sequence, its first shape, when it first changed,
-    the shape in force where the region was narrowest (the corridor), and the shapes the agents made."""
+def formation_plan(res: MissionResult, kept: str = "") -> list[dict[str, Any]]:
+    """The planner's formations over the mission (``formation_plan``); a mission without a change of formation
+    kept its first one all along: ``kept`` (the planner's shape at the end, "" for none) from t = 0."""
+    plan = res.summary["formation_plan"]
+    return plan if plan or not kept else [{"t": 0.0, "to": kept}]
+
+
+def formation_metrics(res: MissionResult, plan: list[dict[str, Any]]) -> dict[str, Any]:
+    """B4, for a swarm the planner forms (N <= 10; ``plan`` from ``formation_plan``): the planned sequence, its first
+    shape, when it first changed, the shape in force where the region was narrowest (the corridor), and the shapes
+    the agents made."""
     s, ser = res.summary, res.series
-    plan = s["formation_plan"]
     if not plan:
         return {}
     t = np.asarray(ser["t"], float)
@@ -212,10 +219,12 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     """One mission of the cell's scenario in the point model from the trial's seed (``SMOKE_S`` of it in a smoke
     run): its metrics, and per planner period the region's area, a, b, D(t) and (N <= 10) the formation's code."""
     sc = scenario_of(cell)
+    planner = make_planner(sc)
     res = run_mission(
-        sc, make_planner(sc), trial.seed, max_time_s=SMOKE_S if trial.smoke else None, keep_plans=bool(sc.world.movers)
+        sc, planner, trial.seed, max_time_s=SMOKE_S if trial.smoke else None, keep_plans=bool(sc.world.movers)
     )
     s, perf = res.summary, res.perf
+    plan = formation_plan(res, str(getattr(planner, "shape", "") or ""))
     metrics: dict[str, Any] = {
         "n": s["n"],
         "arrived": s["arrived"],
@@ -228,15 +237,15 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
         "path_mean": s["path_mean"],
         "contacts": s["contacts"],
         **{f"held_{k.replace(' ', '_')}": v for k, v in sorted(s["planner"].get("held", {}).items())},
-        **formation_metrics(res),
+        **formation_metrics(res, plan),
         **failure_metrics(res, sc),
         **mover_metrics(res, sc),
     }
     ser = res.series
     t = [float(x) for x in ser["t"]]
     curves = {k: [float(v) for v in ser[k]] for k in ("area", "a", "b", "density")}
-    if s["formation_plan"]:
-        curves["formation"] = [float(_code(n)) for n in planned_formation(np.asarray(t), s["formation_plan"])]
+    if plan:
+        curves["formation"] = [float(_code(n)) for n in planned_formation(np.asarray(t), plan)]
         curves["shape"] = [float(_code(n)) for n in ser["shape"]]
     return TrialResult(metrics, curves, {k: t for k in curves})
 
@@ -263,6 +272,12 @@ def runs(outcomes: list[Outcome], scenario: str, **cell: Any) -> list[TrialResul
     """The results of a scenario's whole missions that ran (any kind unless given): a smoke run's missions stop
     early, so its targets are not judged."""
     return ok([o for o in outcomes if not o.trial.smoke], scenario=scenario, **cell)
+
+
+def no_runs(outcomes: list[Outcome], need: str) -> Verdict:
+    """Not judged for want of whole missions: a smoke run's stop early, else ``need`` says what is missing."""
+    smoke = any(o.trial.smoke for o in outcomes)
+    return "no runs", None, f"smoke run: the missions stop at {SMOKE_S:g} s" if smoke else need
 
 
 def missing(scenario: str) -> str | None:
@@ -293,14 +308,14 @@ def judge_b3(outcomes: list[Outcome]) -> Verdict:
         parts.append(f"{sc}: {n_ok}/{len(res)}")
         good = good and n_ok == len(res)
     if not parts:
-        return "no runs", None, "needs the chapter 4 cells"
+        return no_runs(outcomes, "needs the chapter 4 cells")
     return "; ".join(parts), good, "runs that start a circle, become an ellipse and end a circle"
 
 
 def judge_b4(outcomes: list[Outcome]) -> Verdict:
     res = runs(outcomes, "ch4-a")
     if not res:
-        return "no runs", None, "needs ch4-a"
+        return no_runs(outcomes, "needs ch4-a")
     first = sum(r.metrics.get("formation_first") == "triangle" for r in res)
     other = sum(r.metrics.get("formation_at_narrowest") not in (None, "", "triangle") for r in res)
     t = values(res, "formation_change_s")
@@ -335,14 +350,14 @@ def judge_b5(outcomes: list[Outcome]) -> Verdict:
             f"/{len(res)}"
         )
     if not parts:
-        return "no runs", None, "needs the ch4-failures-50 cells"
+        return no_runs(outcomes, "needs the ch4-failures-50 cells")
     return "; ".join(parts), good, "every run"
 
 
 def judge_b6(outcomes: list[Outcome]) -> Verdict:
     res = [r for r in runs(outcomes, "ch4-mover") if "mover_in_periods" in r.metrics]
     if not res:
-        return "no runs", None, "needs ch4-mover"
+        return no_runs(outcomes, "needs ch4-mover")
     n_in, n_out = (int(values(res, k).sum()) for k in ("mover_in_periods", "mover_out_periods"))
     h_in, h_out = (int(values(res, k).sum()) for k in ("blocked_mover_in", "blocked_mover_out"))
     rate_in = h_in / n_in if n_in else math.nan
@@ -364,7 +379,7 @@ def _time_target(scenario: str, **cell: Any) -> Callable[[list[Outcome]], Verdic
     def judge(outcomes: list[Outcome]) -> Verdict:
         res = runs(outcomes, scenario, **cell)
         if not res:
-            return "no runs", None, missing(scenario) or f"needs {scenario}"
+            return no_runs(outcomes, missing(scenario) or f"needs {scenario}")
         t = values([r for r in res if r.metrics.get("arrived")], "arrival_s")
         th = THESIS_TIMES[scenario]
         if not len(t):
@@ -379,7 +394,7 @@ def _time_target(scenario: str, **cell: Any) -> Callable[[list[Outcome]], Verdic
 def judge_c4_cov(outcomes: list[Outcome]) -> Verdict:
     res = runs(outcomes, "ch4-maze-50")
     if not res:
-        return "no runs", None, "needs ch4-maze-50"
+        return no_runs(outcomes, "needs ch4-maze-50")
     cov = mean(res, "area_cov")
     sd, m = mean(res, "area_sd"), mean(res, "area_mean")
     good = abs(cov - THESIS_AREA_COV) <= COV_TOL * THESIS_AREA_COV
@@ -400,7 +415,7 @@ def judge_c5_density(outcomes: list[Outcome]) -> Verdict:
         parts.append(f"{sc}: D {_f(e, 3)} in the ellipse, {_f(c, 3)} in the circle")
         good = good and e > c
     if not parts:
-        return "no runs", None, "needs runs with both an ellipse and a circle after the first 10 s"
+        return no_runs(outcomes, "needs runs with both an ellipse and a circle after the first 10 s")
     return "; ".join(parts), good, "D(t) eq. 4.50, means over the periods after 10 s; the ellipse = among obstacles"
 
 
@@ -410,11 +425,12 @@ def judge_c5_tvi(outcomes: list[Outcome]) -> Verdict:
 
 
 def _by_n(outcomes: list[Outcome], metric: str) -> dict[float, np.ndarray]:
-    """A metric's values per agent count over the numerical trials that ran whole (not smoke runs)."""
+    """A metric's values per agent count over the numerical trials that ran whole missions (a smoke run's own when
+    it has only those, for its plots)."""
+    done = [o for o in outcomes if o.result is not None and o.trial.cell.get("kind") == "numerical"]
+    whole = [o for o in done if not o.trial.smoke] or done
     out: dict[float, list[float]] = {}
-    for o in outcomes:
-        if o.result is None or o.trial.cell.get("kind") != "numerical" or o.trial.smoke:
-            continue
+    for o in whole:
         n, v = o.result.metrics.get("n"), o.result.metrics.get(metric)
         if n is not None and v is not None:
             out.setdefault(float(n), []).append(float(v))
