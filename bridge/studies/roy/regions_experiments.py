@@ -10,9 +10,9 @@ raises. ``CELLS`` lists them, one ``CellSpec`` a line: adding a scenario (chapte
 
 Each trial records the mission's figures (arrival, region area and axes, D(t), TVI, formations, failures, the AD
 test's holds around a mover) and its execution time: the wall-clock seconds of the planner, the world and the sonar
-casts (``exec_s``, erratum 29: the thesis' "execution time" is compute time, not the simulated ``sim_s``); it is the
-one column that differs between two runs of the same command. A target whose scenario, baseline or kind does not
-exist yet is "not judged" with the reason; none passes without runs.
+casts (``exec_s``, erratum 29: the thesis' "execution time" is compute time, not the simulated ``sim_s``; ``plan_s``
+the planner's part): the two columns that differ between two runs of the same command. A target whose scenario,
+baseline or kind does not exist yet is "not judged" with the reason; none passes without runs.
 """
 
 from __future__ import annotations
@@ -250,13 +250,9 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     return TrialResult(metrics, curves, {k: t for k in curves})
 
 
-def numerical_trials(cell: dict[str, Any], trials: list[Trial]) -> list[TrialResult]:
-    return [numerical_trial(cell, t) for t in trials]
-
-
-# the scenario kinds a cell can name, each a function running a cell's trials ("cosim": still to be written)
-SCENARIO_KINDS: dict[str, Callable[[dict[str, Any], list[Trial]], list[TrialResult]]] = {
-    "numerical": numerical_trials,
+# the scenario kinds a cell can name, each a function running one trial of a cell ("cosim": still to be written)
+SCENARIO_KINDS: dict[str, Callable[[dict[str, Any], Trial], TrialResult]] = {
+    "numerical": numerical_trial,
 }
 
 
@@ -467,9 +463,9 @@ class RoyRegionsExperiment(Experiment):
         "Table 4.1), ch4-maze-50 (50 agents, the scalable law), ch4-failures-50 at 5, 10 and 20 % actuator "
         "failures, ch4-mover (a circle sweeping across the first gap). Each trial is one mission from its own seed "
         "(deployment, failing agents). exec_s is the wall-clock time of the planner, the world and the sonar casts "
-        "(the thesis' execution time, erratum 29): the only column that differs between two runs of the same "
-        "command. Targets of chapters 5 and 6 and of the hardware analogs (D) are not judged until their scenarios, "
-        "baselines or co-simulated cells exist."
+        "(the thesis' execution time, erratum 29), plan_s the planner's part: the only columns that differ between "
+        "two runs of the same command (any --jobs gives the same trials.csv otherwise). Targets of chapters 5 and 6 "
+        "and of the hardware analogs (D) are not judged until their scenarios, baselines or co-simulated cells exist."
     )
     trials = 20
     smoke_trials = 1
@@ -487,13 +483,10 @@ class RoyRegionsExperiment(Experiment):
         return min(n, spec.max_trials) if spec is not None and spec.max_trials else n
 
     def run(self, trial: Trial) -> TrialResult:
-        return self.run_batch([trial])[0]
-
-    def run_batch(self, trials: list[Trial]) -> list[TrialResult]:
-        cell = trials[0].cell
-        if cell.get("kind") not in SCENARIO_KINDS:
-            raise ValueError(f"kind: no scenario kind {cell.get('kind')!r}; known: {', '.join(SCENARIO_KINDS)}")
-        return SCENARIO_KINDS[cell["kind"]](cell, trials)
+        run_kind = SCENARIO_KINDS.get(trial.cell.get("kind"))
+        if run_kind is None:
+            raise ValueError(f"kind: no scenario kind {trial.cell.get('kind')!r}; known: {', '.join(SCENARIO_KINDS)}")
+        return run_kind(trial.cell, trial)
 
     def targets(self) -> list[Target]:
         ch5 = "needs chapter 5's scenario (14 agents, 50 x 50, Table 5.1) and its cells"
@@ -696,7 +689,7 @@ class RoyRegionsExperiment(Experiment):
                 if spec.failures is not None
                 else (AREA_0 if spec.scenario == "ch4-maze-50" else None)
             )
-            label = spec.scenario + (f" {100 * spec.failures:g} %" if spec.failures is not None else "")
+            label = cell_label(spec.cell())
             lines.append(
                 f"| {label} | {len(res)} | {len(arr)} | {th_t or '-'} | {_f(mean(arr, 'arrival_s'), 1)} | "
                 f"{th_a or '-'} | {_f(mean(res, 'final_area'))} | {_f(mean(res, 'area_formula'))} | "
@@ -739,98 +732,111 @@ class RoyRegionsExperiment(Experiment):
         return lines
 
     def figures(self, outcomes: list[Outcome], plots: Path) -> list[str]:
-        import matplotlib.pyplot as plt
-
-        lines: list[str] = []
+        """The region's area and axes per cell, the formation sequence, D(t) (one trial per cell each) and the
+        execution time against N with its linear fit."""
         reps = representatives(outcomes)
+        lines: list[str] = []
         for label, res in reps.items():
-            if "area" not in res.curves:
-                continue
-            fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.0, 5.0), dpi=110, sharex=True)
-            t = res.curve_x["area"]
-            ax1.plot(t, res.curves["area"], lw=1.2)
-            ax1.set_ylabel("area pi a b (unit^2)")
-            ax2.plot(t, res.curves["a"], lw=1.2, label="a")
-            ax2.plot(t, res.curves["b"], lw=1.2, label="b")
-            ax2.set_ylabel("semi-axes (unit)")
-            ax2.set_xlabel("t (s)")
-            ax2.legend(fontsize=7)
-            for ax in (ax1, ax2):
-                ax.grid(alpha=0.3)
-            ax1.set_title(f"{self.name}: region of {label}", fontsize=9)
-            fig.tight_layout()
-            name = f"region-{_file(label)}.png"
-            fig.savefig(plots / name)
-            plt.close(fig)
-            lines.append(f"![region, {label}](plots/{name})")
+            if "area" in res.curves:
+                lines += region_plot(label, res, plots / f"region-{_file(label)}.png")
         form = {k: r for k, r in reps.items() if "formation" in r.curves}
         if form:
-            fig, axes = plt.subplots(len(form), 1, figsize=(7.0, 2.6 * len(form)), dpi=110, squeeze=False)
-            for ax, (label, res) in zip(axes[:, 0], form.items(), strict=True):
-                ax.step(res.curve_x["formation"], res.curves["formation"], where="post", lw=1.4, label="planned")
-                ax.plot(res.curve_x["shape"], res.curves["shape"], ".", ms=2, alpha=0.5, label="the agents' shape")
-                ax.set_yticks(range(len(SHAPES) + 1), [*SHAPES, "other"], fontsize=7)
-                ax.set_title(f"{label}: formation over time", fontsize=9)
-                ax.set_xlabel("t (s)")
-                ax.grid(alpha=0.3)
-                ax.legend(fontsize=7)
-            fig.tight_layout()
-            fig.savefig(plots / "formations.png")
-            plt.close(fig)
-            lines.append("![formations](plots/formations.png)")
+            lines += formation_plot(form, plots / "formations.png")
         dens = {k: r for k, r in reps.items() if "density" in r.curves}
         if dens:
-            fig, ax = plt.subplots(figsize=(7.0, 4.0), dpi=110)
-            for label, res in dens.items():
-                ax.plot(res.curve_x["density"], res.curves["density"], lw=1.0, label=label)
-            ax.set_xlabel("t (s)")
-            ax.set_ylabel("structural density D(t)")
-            ax.set_title(f"{self.name}: D(t), one trial per cell", fontsize=9)
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
-            fig.tight_layout()
-            fig.savefig(plots / "density.png")
-            plt.close(fig)
-            lines.append("![D(t)](plots/density.png)")
+            lines += density_plot(dens, plots / "density.png")
         by_n, fit = exec_fit(outcomes)
         if by_n:
-            fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
-            for n, v in by_n.items():
-                ax.plot(np.full(len(v), n), v, "o", ms=3, alpha=0.5, color="C0")
-            ax.plot(list(by_n), [float(np.mean(v)) for v in by_n.values()], "s", color="C1", label="mean")
-            if fit is not None:
-                xs = np.linspace(0, max(by_n) * 1.05, 50)
-                ax.plot(
-                    xs,
-                    fit.intercept + fit.slope * xs,
-                    "--",
-                    color="C2",
-                    label=f"{fit.intercept:.3f} + {fit.slope:.4f} N (R^2 {fit.r2:.3f})",
-                )
-            ax.set_xlabel("agents N")
-            ax.set_ylabel("execution time (s, planner + world, wall clock)")
-            ax.set_title(f"{self.name}: execution time against N", fontsize=9)
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
-            fig.tight_layout()
-            fig.savefig(plots / "exec-time-vs-n.png")
-            plt.close(fig)
-            lines.append("![execution time against N](plots/exec-time-vs-n.png)")
+            lines += exec_plot(by_n, fit, plots / "exec-time-vs-n.png")
         return lines
+
+
+def cell_label(cell: dict[str, Any]) -> str:
+    """A cell's name in tables and plots: its scenario, with its failure fraction when it sets one."""
+    return cell["scenario"] + (f" {100 * cell['failures']:g} %" if cell.get("failures") is not None else "")
 
 
 def representatives(outcomes: list[Outcome]) -> dict[str, TrialResult]:
     """One trial per cell for the time plots: the cell's lowest-numbered trial that ran, by the cell's label."""
     out: dict[str, tuple[int, TrialResult]] = {}
     for o in outcomes:
-        if o.result is None:
-            continue
-        c = o.trial.cell
-        label = c["scenario"] + (f" {100 * c['failures']:g} %" if c.get("failures") is not None else "")
-        if label not in out or o.trial.index < out[label][0]:
+        label = cell_label(o.trial.cell)
+        if o.result is not None and (label not in out or o.trial.index < out[label][0]):
             out[label] = (o.trial.index, o.result)
     return {k: v[1] for k, v in out.items()}
 
 
 def _file(label: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-." else "-" for ch in label).strip("-")
+
+
+def _finish(fig: Any, axes: list[Any], title: str, path: Path, what: str) -> list[str]:
+    """Grid and legend on each axes, the title on the first, the figure saved to ``path``; its report line."""
+    import matplotlib.pyplot as plt
+
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    axes[0].set_title(f"{RoyRegionsExperiment.name}: {title}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return [f"![{what}](plots/{path.name})"]
+
+
+def region_plot(label: str, res: TrialResult, path: Path) -> list[str]:
+    """The region's area (top) and semi-axes a, b (bottom) over a mission."""
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.0, 5.0), dpi=110, sharex=True)
+    t = res.curve_x["area"]
+    ax1.plot(t, res.curves["area"], lw=1.2)
+    ax1.set_ylabel("area pi a b (unit^2)")
+    ax2.plot(t, res.curves["a"], lw=1.2, label="a")
+    ax2.plot(t, res.curves["b"], lw=1.2, label="b")
+    ax2.set_ylabel("semi-axes (unit)")
+    ax2.set_xlabel("t (s)")
+    return _finish(fig, [ax1, ax2], f"region of {label}", path, f"region, {label}")
+
+
+def formation_plot(runs: dict[str, TrialResult], path: Path) -> list[str]:
+    """Per cell, the planner's formation (a step) and the shape the agents made (dots) over a mission."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(runs), 1, figsize=(7.0, 2.6 * len(runs)), dpi=110, squeeze=False)
+    for ax, (label, res) in zip(axes[:, 0], runs.items(), strict=True):
+        ax.step(res.curve_x["formation"], res.curves["formation"], where="post", lw=1.4, label=f"{label}: planned")
+        ax.plot(res.curve_x["shape"], res.curves["shape"], ".", ms=2, alpha=0.5, label="the agents' shape")
+        ax.set_yticks(range(len(SHAPES) + 1), [*SHAPES, "other"], fontsize=7)
+        ax.set_xlabel("t (s)")
+    return _finish(fig, list(axes[:, 0]), "formation over time", path, "formations")
+
+
+def density_plot(runs: dict[str, TrialResult], path: Path) -> list[str]:
+    """D(t) over a mission, one trial per cell."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.0, 4.0), dpi=110)
+    for label, res in runs.items():
+        ax.plot(res.curve_x["density"], res.curves["density"], lw=1.0, label=label)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("structural density D(t)")
+    return _finish(fig, [ax], "D(t), one trial per cell", path, "D(t)")
+
+
+def exec_plot(by_n: dict[float, np.ndarray], fit: Any, path: Path) -> list[str]:
+    """Execution time per mission against N: each run, the means and the line through them."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
+    for n, v in by_n.items():
+        ax.plot(np.full(len(v), n), v, "o", ms=3, alpha=0.5, color="C0")
+    ax.plot(list(by_n), [float(np.mean(v)) for v in by_n.values()], "s", color="C1", label="mean")
+    if fit is not None:
+        xs = np.linspace(0, max(by_n) * 1.05, 50)
+        label = f"{fit.intercept:.3f} + {fit.slope:.4f} N (R^2 {fit.r2:.3f})"
+        ax.plot(xs, fit.intercept + fit.slope * xs, "--", color="C2", label=label)
+    ax.set_xlabel("agents N")
+    ax.set_ylabel("execution time (s, planner + world, wall clock)")
+    return _finish(fig, [ax], "execution time against N", path, "execution time against N")
