@@ -44,6 +44,7 @@ AREA_TOL = 0.02  # B5 (as A5): the final area within 2 % of the thesis' ...
 FORMULA_TOL = 1e-6  # ... or exactly pi r_c^2 (N - N') / N
 CONVERGE_S = 10.0  # C5's D comparison leaves out the first seconds (the swarm converging into the first circle)
 GAP_HALF_WIDTH = 2.0  # ch4-mover: the first wall's gap is 4 units wide, centred on the middle of the mover's sweep
+SEQUENCES_SHOWN = 3  # the report lists the formation sequences of each cell's first trials
 # the planner's formation (and the agents' observed shape) as a curve: its index here, ``len(SHAPES)`` for another
 SHAPES = ("line", "column", "row", "triangle", "quadrilateral", "pentagon", "hexagon")
 
@@ -697,15 +698,22 @@ class RoyRegionsExperiment(Experiment):
                 f"{_f(mean(res, 'contacts'), 0)} | {_f(mean(res, 'exec_s'), 3)} |"
             )
         seqs = [
-            (o.trial.cell["scenario"], o.trial.index, o.result.metrics)
+            (cell_label(o.trial.cell), o.trial.index, o.result.metrics)
             for o in outcomes
-            if o.result is not None and o.result.metrics.get("formation_sequence")
+            if o.result is not None and o.result.metrics.get("formation_sequence") and o.trial.index < SEQUENCES_SHOWN
         ]
         if seqs:
-            lines += ["", "## Formation sequences (the planner's, shape@time s)", ""]
             lines += [
-                f"- {sc} trial {i}: {m['formation_sequence']}; the agents made: {m.get('shapes_observed') or '-'}"
-                for sc, i, m in seqs
+                "",
+                "## Formation sequences (the planner's, shape@time s)",
+                "",
+                f"The first {SEQUENCES_SHOWN} trials of each cell; every trial's in trials.csv "
+                "(`formation_sequence`, `shapes_observed`).",
+                "",
+            ]
+            lines += [
+                f"- {label} trial {i}: {m['formation_sequence']}; the agents made: {m.get('shapes_observed') or '-'}"
+                for label, i, m in seqs
             ]
         by_n, fit = exec_fit(outcomes)
         if by_n:
