@@ -43,7 +43,9 @@ COV_TOL = 0.5  # C4's area COV: within 50 % of the thesis' (ours and theirs come
 AREA_TOL = 0.02  # B5 (as A5): the final area within 2 % of the thesis' ...
 FORMULA_TOL = 1e-6  # ... or exactly pi r_c^2 (N - N') / N
 CONVERGE_S = 10.0  # C5's D comparison leaves out the first seconds (the swarm converging into the first circle)
-GAP_HALF_WIDTH = 2.0  # ch4-mover: the first wall's gap is 4 units wide, centred on the middle of the mover's sweep
+# B6's scenarios, each with the half-width of the gap its first mover sweeps across (centred on the middle of the
+# sweep): ch4-mover's first wall has a 4-unit gap
+GAP_MOVERS = {"ch4-mover": 2.0}
 SEQUENCES_SHOWN = 3  # the report lists the formation sequences of each cell's first trials
 # the planner's formation (and the agents' observed shape) as a curve: its index here, ``len(SHAPES)`` for another
 SHAPES = ("line", "column", "row", "triangle", "quadrilateral", "pentagon", "hexagon")
@@ -172,16 +174,17 @@ def failure_metrics(res: MissionResult, sc: RegionScenario) -> dict[str, Any]:
 
 
 def mover_metrics(res: MissionResult, sc: RegionScenario) -> dict[str, Any]:
-    """B6, in a scenario with a mover sweeping across a gap (its first mover; the gap centred on the middle of its
-    sweep, ``GAP_HALF_WIDTH`` wide either side): over the periods while the region's centre is still on the start's
+    """B6, in a scenario of ``GAP_MOVERS`` (its first mover sweeps across a gap centred on the middle of its sweep,
+    of the half-width given there): over the periods while the region's centre is still on the start's
     side of the mover's line, how often the AD test held the region ("gap blocked") with the mover in the gap and
     with it away, and whether the region's centre crossed the line while the mover was in the gap."""
-    if not sc.world.movers or not res.plans:
+    half = GAP_MOVERS.get(sc.name)
+    if half is None or not sc.world.movers or not res.plans:
         return {}
     m = sc.world.movers[0]
     mv = Mover(tuple(m.a), tuple(m.b), m.radius, m.speed)
     a, b = np.asarray(m.a, float), np.asarray(m.b, float)
-    gap, reach = (a + b) / 2, GAP_HALF_WIDTH + m.radius
+    gap, reach = (a + b) / 2, half + m.radius
     start = (np.asarray(sc.agents.start_lo, float) + np.asarray(sc.agents.start_hi, float)) / 2
 
     def side(p: np.ndarray) -> float:
@@ -222,7 +225,7 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     sc = scenario_of(cell)
     planner = make_planner(sc)
     res = run_mission(
-        sc, planner, trial.seed, max_time_s=SMOKE_S if trial.smoke else None, keep_plans=bool(sc.world.movers)
+        sc, planner, trial.seed, max_time_s=SMOKE_S if trial.smoke else None, keep_plans=sc.name in GAP_MOVERS
     )
     s, perf = res.summary, res.perf
     plan = formation_plan(res, str(getattr(planner, "shape", "") or ""))
