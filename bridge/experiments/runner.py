@@ -134,6 +134,12 @@ class Experiment:
         """Extra markdown lines for report.md, after the targets (e.g. a comparison table); none by default."""
         return []
 
+    def figures(self, outcomes: list[Outcome], plots: Path) -> list[str]:
+        """Plots of the experiment's own into ``plots`` (matplotlib's Agg backend is set), after the curves, boxes and
+        means; returns the report lines showing them (``![what](plots/NAME.png)``); none by default. Should it raise,
+        the report says so and keeps the other plots."""
+        return []
+
 
 class UnknownExperimentError(ValueError):
     pass
@@ -524,8 +530,10 @@ def _band(series: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.n
         return grid, np.nanpercentile(ys, [25, 50, 75], axis=0)
 
 
-def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outcome]], plots: Path) -> list[str]:
-    """Draw the experiment's curves and boxes; returns report lines (links, or why a plot is missing)."""
+def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outcome]], plots: Path,
+           outcomes: list[Outcome] | None = None) -> list[str]:
+    """Draw the experiment's curves, boxes, means and own figures; returns report lines (links, or why a plot is
+    missing)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -592,6 +600,12 @@ def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outc
             plt.close("all")
             lines.append(f"- box plot of `{metric}` failed: {_md(_error_text(e).splitlines()[0])}")
     lines += _mean_plots(exp, cells, by_cell, plots, plt)
+    try:
+        lines += exp.figures(outcomes if outcomes is not None else [o for outs in by_cell for o in outs], plots)
+    except Exception as e:
+        lines.append(f"- figures() raised {_md(_error_text(e).splitlines()[0])}")
+    finally:
+        plt.close("all")
     return lines
 
 
@@ -759,9 +773,9 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         by_cell[cell_of[k]].append(o)  # plan is cell-major
     metric_keys = _write_tables(out_dir, plan, done, cells, outcomes, by_cell)
     plot_lines: list[str] = []
-    if exp.curves or exp.boxes or exp.means:
+    if exp.curves or exp.boxes or exp.means or type(exp).figures is not Experiment.figures:
         (out_dir / "plots").mkdir()
-        plot_lines = _plots(exp, cells, by_cell, out_dir / "plots")
+        plot_lines = _plots(exp, cells, by_cell, out_dir / "plots", outcomes)
     verdicts, target_error = _judge(exp, outcomes)
     failed = sum(o.error is not None for o in outcomes)
     wall = time.monotonic() - t_start

@@ -362,3 +362,43 @@ def test_batched_trials_and_per_cell_counts_keep_the_rows_and_seeds(tmp_path: Pa
     with open(tmp_path / "per-cell" / "trials.csv") as f:
         assert list(_csv.reader(f)) == rows[0]
     assert BATCH_CALLS == [3, 2]  # cell_batch: cell 2's trials one at a time (each through run), the same rows
+
+
+@register
+class OwnFigure(Experiment):
+    name = "test-figures"
+    title = "An experiment drawing its own figure"
+    description = "y = k x index; figures() draws y against the index per cell."
+    trials = 3
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"k": 1}, {"k": 2}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        return TrialResult({"y": trial.cell["k"] * trial.index})
+
+    def figures(self, outcomes: list[Outcome], plots: Path) -> list[str]:
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots()
+        for k in (1, 2):
+            pts = [(o.trial.index, o.result.metrics["y"]) for o in outcomes if o.result and o.trial.cell["k"] == k]
+            ax.plot(*zip(*pts, strict=True), marker="o")
+        fig.savefig(plots / "y.png")
+        return ["![y](plots/y.png)"]
+
+
+def test_an_experiments_own_figures_are_drawn_and_one_that_raises_is_reported(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run = ex.execute_experiment("test-figures", jobs=1, out=tmp_path / "a", progress=False)
+    report = (run.out / "report.md").read_text()
+    assert (run.out / "plots" / "y.png").stat().st_size > 1000 and "![y](plots/y.png)" in report
+
+    def broken(self: Experiment, outcomes: list[Outcome], plots: Path) -> list[str]:
+        raise RuntimeError("no axes today")
+
+    monkeypatch.setattr(OwnFigure, "figures", broken)
+    run = ex.execute_experiment("test-figures", jobs=1, out=tmp_path / "b", progress=False)
+    report = (run.out / "report.md").read_text()
+    assert "figures() raised RuntimeError: no axes today" in report and "| y |" in report
