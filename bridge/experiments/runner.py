@@ -60,6 +60,9 @@ class TrialResult:
     metrics: dict[str, Scalar | None]  # one trials.csv row (None: left empty)
     curves: dict[str, list[float]] = field(default_factory=dict)  # time series per curve name
     curve_x: dict[str, list[float]] = field(default_factory=dict)  # x values per curve (default 0..n-1)
+    # wall-clock measurements of the trial (compute time of its parts, s): timings.csv, never trials.csv, so that
+    # trials.csv stays the same bytes for the same seed on any machine
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -267,7 +270,8 @@ def _clean(res: Any, trial: Trial) -> TrialResult:
         curve_x[str(k)] = np.asarray(x, dtype=float).reshape(-1).tolist()
         if len(curve_x[k]) != len(curves[k]):
             raise ValueError(f"curve {k!r}: {len(curves[k])} values but {len(curve_x[k])} x values")
-    return TrialResult(metrics, curves, curve_x)
+    timings = {str(k): round(float(v), 6) for k, v in res.timings.items()}
+    return TrialResult(metrics, curves, curve_x, timings)
 
 
 def _run_trials(ref: _Ref, trials: list[Trial]) -> list[_Done]:
@@ -846,8 +850,11 @@ def _write_tables(out_dir: Path, plan: list[Trial], done: dict[int, tuple], cell
                [[*(o.trial.cell.get(k) for k in cell_keys), o.trial.index, o.trial.seed,
                  o.error.splitlines()[0] if o.error else "",
                  *((o.result.metrics.get(k) if o.result else None) for k in metric_keys)] for o in outcomes])
-    _write_csv(out_dir / "timings.csv", [*cell_keys, "index", "wall_s"],
-               [[*(plan[k].cell.get(c) for c in cell_keys), plan[k].index, round(done[k][2], 3)]
+    by_index = {(o.trial.index, _slug(o.trial.cell)): o.result.timings for o in outcomes if o.result}
+    timing_keys = list(dict.fromkeys(k for t in by_index.values() for k in t))
+    _write_csv(out_dir / "timings.csv", [*cell_keys, "index", "wall_s", *timing_keys],
+               [[*(plan[k].cell.get(c) for c in cell_keys), plan[k].index, round(done[k][2], 3),
+                 *(by_index.get((plan[k].index, _slug(plan[k].cell)), {}).get(t) for t in timing_keys)]
                 for k in sorted(done)])
     for cell, outs in zip(cells, by_cell, strict=True):
         rows = [[o.trial.index, x, curve, v] for o in outs if o.result for curve, ys in o.result.curves.items()

@@ -46,11 +46,13 @@ class MonteCarloPi(Experiment):
 
     def run(self, trial: Trial) -> TrialResult:
         n = trial.cell["n"]
+        t0 = time.perf_counter()
         xy = np.random.default_rng(trial.seed).random((n, 2))
         est = 4 * np.cumsum((xy**2).sum(axis=1) <= 1) / np.arange(1, n + 1)
         return TrialResult(metrics={"estimate": est[-1], "abs_error": abs(est[-1] - math.pi),
                                     "close": bool(abs(est[-1] - math.pi) < 0.1), "size": "small" if n < 500 else "big"},
-                           curves={"estimate": est.tolist()}, curve_x={"estimate": list(range(1, n + 1))})
+                           curves={"estimate": est.tolist()}, curve_x={"estimate": list(range(1, n + 1))},
+                           timings={"draw_s": time.perf_counter() - t0})
 
     def targets(self) -> list[Target]:
         def loose(outs: list[Outcome]) -> tuple[str, bool | None, str]:
@@ -153,6 +155,10 @@ def test_results_do_not_depend_on_jobs_and_seeds_are_stable(tmp_path: Path) -> N
     assert ex.trial_seed(1, "test-pi", {"n": 100}, 0) != seeds[0]
     assert ex.trial_seed(0, "test-pi", {"n": 100}, 0) == 4474581379651440175  # stable across runs and machines
     assert {"index", "x", "curve", "value"} <= set(_rows(a / "curves" / "n-100.csv")[0])
+    # a trial's wall-clock figures go to timings.csv, beside its wall time, never to trials.csv
+    timings = _rows(a / "timings.csv")
+    assert list(timings[0]) == ["n", "index", "wall_s", "draw_s"] and len(timings) == 8
+    assert all(float(r["draw_s"]) >= 0 for r in timings)
 
 
 def test_report_targets_plots_and_clearing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
