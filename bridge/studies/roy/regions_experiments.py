@@ -234,8 +234,6 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
         "arrived": s["arrived"],
         "arrival_s": s["arrival_s"],
         "sim_s": s["t_end_s"],
-        "exec_s": round(perf["plan_s"] + perf["world_s"] + perf["cast_s"], 4),
-        "plan_s": round(perf["plan_s"], 4),
         **region_metrics(res),
         "tvi": s["tvi"],
         "path_mean": s["path_mean"],
@@ -251,7 +249,8 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     if plan:
         curves["formation"] = [float(_code(n)) for n in planned_formation(np.asarray(t), plan)]
         curves["shape"] = [float(_code(n)) for n in ser["shape"]]
-    return TrialResult(metrics, curves, {k: t for k in curves})
+    timings = {"exec_s": perf["plan_s"] + perf["world_s"] + perf["cast_s"], "plan_s": perf["plan_s"]}
+    return TrialResult(metrics, curves, {k: t for k in curves}, timings)
 
 
 # the scenario kinds a cell can name, each a function running one trial of a cell ("cosim": still to be written)
@@ -424,23 +423,29 @@ def judge_c5_tvi(outcomes: list[Outcome]) -> Verdict:
     return ours or "no runs", None, "needs the no-communication aggregation baseline (Shah & Vachhani 2019), not built"
 
 
-def _by_n(outcomes: list[Outcome], metric: str) -> dict[float, np.ndarray]:
-    """A metric's values per agent count over the numerical trials that ran whole missions (a smoke run's own when
-    it has only those, for its plots)."""
+def _by_n(outcomes: list[Outcome], metric: str, timing: bool = False) -> dict[float, np.ndarray]:
+    """A metric's values (a timing's, with ``timing``) per agent count over the numerical trials that ran whole
+    missions (a smoke run's own when it has only those, for its plots)."""
     done = [o for o in outcomes if o.result is not None and o.trial.cell.get("kind") == "numerical"]
     whole = [o for o in done if not o.trial.smoke] or done
     out: dict[float, list[float]] = {}
     for o in whole:
-        n, v = o.result.metrics.get("n"), o.result.metrics.get(metric)
+        n = o.result.metrics.get("n")
+        v = (o.result.timings if timing else o.result.metrics).get(metric)
         if n is not None and v is not None:
             out.setdefault(float(n), []).append(float(v))
     return {k: np.asarray(v) for k, v in sorted(out.items())}
 
 
+def _mean_timing(res: list[TrialResult], key: str) -> float:
+    vals = [r.timings[key] for r in res if key in r.timings]
+    return float(np.mean(vals)) if vals else math.nan
+
+
 def exec_fit(outcomes: list[Outcome]) -> tuple[dict[float, np.ndarray], Any]:
     """Execution time (``exec_s``) per N and the least-squares line through the means (None with fewer than two
     distinct N)."""
-    by_n = _by_n(outcomes, "exec_s")
+    by_n = _by_n(outcomes, "exec_s", timing=True)
     if len(by_n) < 2:
         return by_n, None
     return by_n, linear_fit(list(by_n), [float(np.mean(v)) for v in by_n.values()])
@@ -466,9 +471,8 @@ class RoyRegionsExperiment(Experiment):
         "(docs/roy-ch4.md: our resolutions, v_max 0.3 units/s frozen for chapter 4). Cells: ch4-a (6 agents, "
         "Table 4.1), ch4-maze-50 (50 agents, the scalable law), ch4-failures-50 at 5, 10 and 20 % actuator "
         "failures, ch4-mover (a circle sweeping across the first gap). Each trial is one mission from its own seed "
-        "(deployment, failing agents). exec_s is the wall-clock time of the planner, the world and the sonar casts "
-        "(the thesis' execution time, erratum 29), plan_s the planner's part: the only columns that differ between "
-        "two runs of the same command (any --jobs gives the same trials.csv otherwise). Targets of chapters 5 and 6 "
+        "(deployment, failing agents). timings.csv's exec_s is the wall-clock time of the planner, the world and the "
+        "sonar casts (the thesis' execution time, erratum 29), plan_s the planner's part. Targets of chapters 5 and 6 "
         "and of the hardware analogs (D) are not judged until their scenarios, baselines or co-simulated cells exist."
     )
     trials = 20
@@ -698,7 +702,7 @@ class RoyRegionsExperiment(Experiment):
                 f"| {label} | {len(res)} | {len(arr)} | {th_t or '-'} | {_f(mean(arr, 'arrival_s'), 1)} | "
                 f"{th_a or '-'} | {_f(mean(res, 'final_area'))} | {_f(mean(res, 'area_formula'))} | "
                 f"{_f(mean(res, 'area_cov'), 4)} | {_f(mean(res, 'density_mean'), 3)} | {_f(mean(res, 'tvi'), 3)} | "
-                f"{_f(mean(res, 'contacts'), 0)} | {_f(mean(res, 'exec_s'), 3)} |"
+                f"{_f(mean(res, 'contacts'), 0)} | {_f(_mean_timing(res, 'exec_s'), 3)} |"
             )
         seqs = [
             (cell_label(o.trial.cell), o.trial.index, o.result.metrics)

@@ -38,17 +38,14 @@ def test_smoke_trials_record_the_region_formation_failures_and_the_mover() -> No
     a = exp.run_batch([Trial("roy-regions", {"kind": "numerical", "scenario": "ch4-a"}, 0, 5, True, "")])[0]
     m = a.metrics
     assert m["sim_s"] == pytest.approx(rx.SMOKE_S) and not m["arrived"] and m["arrival_s"] is None
-    assert m["n"] == 6 and m["exec_s"] > 0 and m["plan_s"] <= m["exec_s"]
+    assert m["n"] == 6 and "exec_s" not in m and 0 < a.timings["plan_s"] <= a.timings["exec_s"]
     assert m["circle_start"] is True and m["formation_first"] == "triangle"
     assert m["final_area"] == pytest.approx(3.14159265 * 2.5**2) and m["area_cov"] == pytest.approx(0.0, abs=1e-12)
     assert 0 < m["density_mean"] <= 1 and m["n_failed"] == 0 and "mover_in_periods" not in m
     assert len(a.curves["area"]) == len(a.curve_x["area"]) == 81  # every 0.25 s over 20 s
     assert set(a.curves) == {"area", "a", "b", "density", "formation", "shape"}
     again = exp.run_batch([Trial("roy-regions", {"kind": "numerical", "scenario": "ch4-a"}, 0, 5, True, "")])[0]
-    timing = {"exec_s", "plan_s"}
-    assert {k: v for k, v in again.metrics.items() if k not in timing} == {
-        k: v for k, v in m.items() if k not in timing
-    }
+    assert again.metrics == m  # the same seed, the same row (the wall-clock figures are timings, apart)
     fail = {"kind": "numerical", "scenario": "ch4-failures-50", "failures": 0.2}
     f = exp.run_batch([Trial("roy-regions", fail, 0, 5, True, "")])[0].metrics
     assert f["n"] == 50 and f["n_failed"] == 5 and "formation_first" not in f  # 10 fail: 5 at 14 s, 5 at 80 s
