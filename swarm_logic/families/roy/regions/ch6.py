@@ -211,6 +211,8 @@ class Ch6Planner(RegionPlanner):
     refused, on change), ``input`` (dropped readings or poses, new agents, a bad target), ``arrived`` (a sub-swarm at
     its target) and ``done``."""
 
+    Params = Ch6Params
+
     def __init__(self, **params: Any) -> None:
         for k in ("centre",):
             if isinstance(params.get(k), list):
