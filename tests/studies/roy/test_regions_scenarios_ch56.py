@@ -5,10 +5,12 @@ its first seconds should (chapter 5: the first regions packed and released; chap
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
-from bridge.studies.roy.regions_scenarios import load_scenario, make_planner, planner_params
+from bridge.core.config import ConfigError
+from bridge.studies.roy.regions_scenarios import SCENARIO_DIR, load_scenario, make_planner, planner_params
 from bridge.studies.roy.regions_world import run_mission
 
 NAMES = ("ch5-a", "ch6-case1", "ch6-case2", "ch6-case3")
@@ -73,3 +75,14 @@ def test_ch6_first_seconds_one_region_of_the_swarms_area_deterministically() -> 
     assert first["area"] == pytest.approx(100 * math.pi * 0.25)  # eq. 6.8's A_e
     assert "split" not in s["event_counts"]  # the wall is 7 units ahead of the swarm, beyond its window
     assert s["density"]["mean"] is not None and 0.0 <= s["density"]["mean"] <= 1.0
+
+
+def test_a_wrong_chapter_5_or_6_parameter_is_named(tmp_path: Path) -> None:
+    for name in ("ch5-a", "ch6-case2"):
+        src = load_scenario(name)
+        text = (SCENARIO_DIR / f"{name}.toml").read_text(encoding="utf-8")
+        p = tmp_path / f"{name}.toml"
+        p.write_text(text.replace("params = { r_s", "params = { nonsense = 1, r_s"), encoding="utf-8")
+        with pytest.raises(ConfigError) as e:
+            load_scenario(p)
+        assert str(p) in str(e.value) and "planner.params.nonsense" in str(e.value) and src.name == name
