@@ -8,6 +8,8 @@ a ``version`` string that changes whenever the layout does. One schema covers th
   ``[[world.movers]]`` (``a``, ``b``, ``radius``, ``speed``: a circle going back and forth, chapter 6 case 3).
 - ``[agents]``: ``n``, the start box ``start_lo`` .. ``start_hi``, ``min_sep``, ``v_max`` (units/s, calibrated per
   scenario, digest §5.3).
+  ``RegionScenario.with_agents(n)`` is the same map with n agents (r_s scaled to keep N pi r_s^2: chapter 6's
+  scaling runs).
 - ``[sensing]``: ``beams`` m, ``spacing_deg`` z (m z = 360: a ring), the window ``d_min`` .. ``d_max``.
 - ``[mission]``: ``targets`` (one or more [x, y]), ``lanes`` (optional: the target indices each lane visits in order,
   chapter 6), ``arrival_radius``, ``timeout_s``, ``dt`` (0.05 s, erratum 1).
@@ -216,18 +218,48 @@ class RegionScenario(Section):
             raise ValueError(f"agents.v_max: must be finite and > 0, got {v_max}")
         return self.model_copy(update={"agents": self.agents.model_copy(update={"v_max": v_max})})
 
+    def with_agents(self, n: int) -> RegionScenario:
+        """The same map with ``n`` agents (the scaling runs of chapter 6, targets C7, C8). The swarm's total area
+        N pi r_s^2 is kept, so that any N fits the map and the lanes: r_s (the planner's and the metrics'), the
+        planner's ``r_robot`` and the agents' ``min_sep`` scale by sqrt(n0 / n). Thresholds given in the file in
+        units (the detector's, ``bin_width``) stay as they are: the lanes keep their widths."""
+        if not (isinstance(n, int) and 0 < n <= 100_000):
+            raise ValueError(f"agents.n: must be an integer in 1..100000, got {n!r}")
+        f = math.sqrt(self.agents.n / n)
+        params = dict(self.planner.params)
+        for key in ("r_s", "r_robot"):
+            if key in params:
+                params[key] = params[key] * f
+        return self.model_copy(
+            update={
+                "agents": self.agents.model_copy(update={"n": n, "min_sep": self.agents.min_sep * f}),
+                "metrics": self.metrics.model_copy(update={"r_s": self.metrics.r_s * f}),
+                "planner": self.planner.model_copy(update={"params": params}),
+            }
+        )
+
 
 def planner_params(scenario: RegionScenario) -> dict[str, Any]:
     """The keyword arguments the scenario's planner is built with: what the scenario fixes (``v_max``, ``d_min``,
-    ``d_max``, for a planner whose ``Params`` has such fields) overridden by ``[planner] params``. A ValueError names
-    an unknown parameter."""
+    ``d_max``; with several targets ``targets``, and with ``lanes`` the ``lane_map`` of each lane's last target; for
+    a planner whose ``Params`` has such fields) overridden by ``[planner] params`` (a planner window narrower than
+    the sonar's reach, for one). A ValueError names an unknown parameter."""
     cls = PLANNERS.get(scenario.planner.name)
     names = {f.name for f in dataclasses.fields(cls.Params)} if hasattr(cls, "Params") else None
     if names is not None:
         unknown = sorted(set(scenario.planner.params) - names)
         if unknown:
             raise ValueError(f"{unknown[0]}: not a parameter of planner {scenario.planner.name!r}")
-    facts = {"v_max": scenario.agents.v_max, "d_min": scenario.sensing.d_min, "d_max": scenario.sensing.d_max}
+    facts: dict[str, Any] = {
+        "v_max": scenario.agents.v_max,
+        "d_min": scenario.sensing.d_min,
+        "d_max": scenario.sensing.d_max,
+    }
+    mission = scenario.mission
+    if len(mission.targets) > 1:
+        facts["targets"] = [list(t) for t in mission.targets]
+    if mission.lanes:
+        facts["lane_map"] = [lane[-1] for lane in mission.lanes]
     kw = {k: v for k, v in facts.items() if names is not None and k in names}
     return kw | dict(scenario.planner.params)
 

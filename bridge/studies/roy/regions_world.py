@@ -370,7 +370,8 @@ def _record(series: dict[str, list[Any]], world: RegionsWorld, plan: Plan, sc: R
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m bridge.studies.roy.regions_world SCENARIO [--seed S] [--failures F] [--v-max V] [--events]``:
+    """``python -m bridge.studies.roy.regions_world SCENARIO [--seed S] [--failures F] [--v-max V] [--agents N]
+    [--events]``:
     run one mission and print its summary as JSON (the events only with ``--events``)."""
     import argparse
     import sys
@@ -383,6 +384,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--failures", type=float, default=None, help="the fraction of agents that fail (0..1)")
     ap.add_argument("--v-max", type=float, default=None, help="the agents' speed limit (units/s)")
+    ap.add_argument("--agents", type=int, default=None, help="the same map with this many agents (r_s scaled)")
     ap.add_argument("--events", action="store_true", help="include every plan event in the summary")
     a = ap.parse_args(argv)
     try:
@@ -391,6 +393,8 @@ def main(argv: list[str] | None = None) -> int:
             sc = sc.with_failures(a.failures)
         if a.v_max is not None:
             sc = sc.with_v_max(a.v_max)
+        if a.agents is not None:
+            sc = sc.with_agents(a.agents)
         planner = make_planner(sc)
     except (ConfigError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)

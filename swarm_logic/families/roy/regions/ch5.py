@@ -197,6 +197,8 @@ class Ch5Planner(RegionPlanner):
     - ``done``: the end (``done_rule``), once.
     """
 
+    Params = Ch5Params
+
     def __init__(self, **params: Any) -> None:
         self.p = Ch5Params(**params)
         self.period_s = self.p.period_s

@@ -60,7 +60,8 @@ class Ch6Params:
     recommendations elsewhere).
 
     - Law (eq. 6.5): ``k_c`` 12, ``k_f`` 2.5, ``r_s`` (3.2 and 0.5 in Table 6.1's cases; 1.13 on the SonPI),
-      ``law_mode`` "nearest" (erratum 22; "sum": every agent and point within ``radius_scales`` r_s).
+      ``law_mode`` "nearest" (erratum 22; "sum": every agent and point within ``radius_scales`` r_s; "knn": the
+      ``law_neighbours`` nearest of those, the sum's spacing at a cost linear in N for large swarms).
     - Sensing: the window [``d_min``, ``d_max``] = [2, 5] (eqs. 6.1-6.4); ``r_robot``, ``eclipse_eps`` the teammate
       filter; the points of the last ``memory`` periods are kept (the thesis' R~(t + tau); one period of eight beams
       per agent misses most of a wall); a beam clear beyond ``d_max`` gives a free end for the detector, at its echo's
@@ -95,6 +96,7 @@ class Ch6Params:
     k_f: float = 2.5
     law_mode: str = "nearest"
     radius_scales: float = 3.0
+    law_neighbours: int = 8
     d_min: float = 2.0
     d_max: float = 5.0
     r_robot: float = 0.5
@@ -135,7 +137,7 @@ class Ch6Params:
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be finite and > 0 (or None for the default), got {v!r}")
-        for name in ("memory", "confirm"):
+        for name in ("memory", "confirm", "law_neighbours"):
             if not (isinstance(getattr(self, name), int) and getattr(self, name) >= 1):
                 raise ValueError(f"{name}: must be an integer >= 1, got {getattr(self, name)!r}")
         for name, allowed in CHOICES.items():
@@ -210,6 +212,8 @@ class Ch6Planner(RegionPlanner):
     change), ``split``, ``merge``, ``promotion``, ``passed`` (a sub-swarm out of its lane), ``held`` (a region step
     refused, on change), ``input`` (dropped readings or poses, new agents, a bad target), ``arrived`` (a sub-swarm at
     its target) and ``done``."""
+
+    Params = Ch6Params
 
     def __init__(self, **params: Any) -> None:
         for k in ("centre",):
@@ -528,6 +532,8 @@ class Ch6Planner(RegionPlanner):
             "mode": self.p.law_mode,
             "radius_scales": self.p.radius_scales,
         }
+        if self.p.law_mode == "knn":
+            params["neighbours"] = self.p.law_neighbours
         return Plan(
             t,
             ids,
