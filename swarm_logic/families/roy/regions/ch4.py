@@ -35,7 +35,8 @@ from swarm_logic.families.roy.regions.ellipse import (
 )
 from swarm_logic.families.roy.regions.laws import theorem1_kc
 from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
-from swarm_logic.families.roy.regions.sensing import SensingParams, check_fields, sense
+from swarm_logic.families.roy.regions.records import check_fields
+from swarm_logic.families.roy.regions.sensing import SensingParams, sense
 from swarm_logic.families.roy.regions.shapes import Ellipse
 
 AD_MODES = ("always", "off")

@@ -52,7 +52,8 @@ from swarm_logic.families.roy.regions.packing import (
     plan_circles,
 )
 from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
-from swarm_logic.families.roy.regions.sensing import SensingParams, check_fields, sense
+from swarm_logic.families.roy.regions.records import check_fields
+from swarm_logic.families.roy.regions.sensing import SensingParams, sense
 
 DONE_RULES = ("region", "agents")
 FALLBACKS = ("circle", "keep")

@@ -30,7 +30,8 @@ import numpy as np
 from swarm_logic.families.roy.regions.ellipse import RegionParams, RegionState, free_space, step_region
 from swarm_logic.families.roy.regions.laws import CH6_MODES
 from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
-from swarm_logic.families.roy.regions.sensing import DROP_REASONS, SensingParams, check_fields, sense
+from swarm_logic.families.roy.regions.records import check_fields
+from swarm_logic.families.roy.regions.sensing import DROP_REASONS, SensingParams, sense
 from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.families.roy.regions.split_merge import (
     SplitMergeParams,

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarm_logic.families.roy.regions.sensing import check_fields
+from swarm_logic.families.roy.regions.records import check_fields
 
 NEIGHBOURS = ("knn", "all")
 CH6_MODES = ("nearest", "sum", "knn")
