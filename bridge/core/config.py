@@ -853,21 +853,27 @@ def _format(path: str, err: ValidationError) -> str:
     return "\n".join(lines)
 
 
-def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
-    """Read and validate ``path``; ``overrides`` are command-line values (``session.seed`` etc.)."""
-    p = Path(path)
+def read_toml(p: Path, what: str = "config") -> dict[str, Any]:
+    """The TOML file ``p`` as a dict, or a ConfigError naming the file and why it cannot be read (``what`` names the
+    kind of file in the messages)."""
     try:
-        raw = tomllib.loads(p.read_text(encoding="utf-8"))
+        return tomllib.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{p}: no such file") from None
     except IsADirectoryError:
-        raise ConfigError(f"{p}: is a directory, not a config file") from None
+        raise ConfigError(f"{p}: is a directory, not a {what} file") from None
     except UnicodeDecodeError as e:
-        raise ConfigError(f"{p}: not a text file (byte {e.start} is not UTF-8): a config is a TOML file") from None
+        raise ConfigError(f"{p}: not a text file (byte {e.start} is not UTF-8): a {what} is a TOML file") from None
     except OSError as e:
         raise ConfigError(f"{p}: cannot read it: {e.strerror or e}") from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{p}: not valid TOML: {e}") from None
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
+    """Read and validate ``path``; ``overrides`` are command-line values (``session.seed`` etc.)."""
+    p = Path(path)
+    raw = read_toml(p)
     _refuse_hal_config(p, raw)
     for dotted, value in (overrides or {}).items():
         if value is None:

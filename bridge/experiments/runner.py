@@ -60,6 +60,9 @@ class TrialResult:
     metrics: dict[str, Scalar | None]  # one trials.csv row (None: left empty)
     curves: dict[str, list[float]] = field(default_factory=dict)  # time series per curve name
     curve_x: dict[str, list[float]] = field(default_factory=dict)  # x values per curve (default 0..n-1)
+    # wall-clock measurements of the trial (compute time of its parts, s): timings.csv, never trials.csv, so that
+    # trials.csv stays the same bytes for the same seed on any machine
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -132,6 +135,12 @@ class Experiment:
 
     def sections(self, outcomes: list[Outcome]) -> list[str]:
         """Extra markdown lines for report.md, after the targets (e.g. a comparison table); none by default."""
+        return []
+
+    def figures(self, outcomes: list[Outcome], plots: Path) -> list[str]:
+        """Plots of the experiment's own into ``plots`` (matplotlib's Agg backend is set), after the curves, boxes and
+        means; returns the report lines showing them (``![what](plots/NAME.png)``); none by default. Should it raise,
+        the report says so and keeps the other plots."""
         return []
 
 
@@ -261,7 +270,8 @@ def _clean(res: Any, trial: Trial) -> TrialResult:
         curve_x[str(k)] = np.asarray(x, dtype=float).reshape(-1).tolist()
         if len(curve_x[k]) != len(curves[k]):
             raise ValueError(f"curve {k!r}: {len(curves[k])} values but {len(curve_x[k])} x values")
-    return TrialResult(metrics, curves, curve_x)
+    timings = {str(k): round(float(v), 6) for k, v in res.timings.items()}
+    return TrialResult(metrics, curves, curve_x, timings)
 
 
 def _run_trials(ref: _Ref, trials: list[Trial]) -> list[_Done]:
@@ -524,8 +534,10 @@ def _band(series: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.n
         return grid, np.nanpercentile(ys, [25, 50, 75], axis=0)
 
 
-def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outcome]], plots: Path) -> list[str]:
-    """Draw the experiment's curves and boxes; returns report lines (links, or why a plot is missing)."""
+def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outcome]], plots: Path,
+           outcomes: list[Outcome] | None = None) -> list[str]:
+    """Draw the experiment's curves, boxes, means and own figures; returns report lines (links, or why a plot is
+    missing)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -592,6 +604,12 @@ def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outc
             plt.close("all")
             lines.append(f"- box plot of `{metric}` failed: {_md(_error_text(e).splitlines()[0])}")
     lines += _mean_plots(exp, cells, by_cell, plots, plt)
+    try:
+        lines += exp.figures(outcomes if outcomes is not None else [o for outs in by_cell for o in outs], plots)
+    except Exception as e:
+        lines.append(f"- figures() raised {_md(_error_text(e).splitlines()[0])}")
+    finally:
+        plt.close("all")
     return lines
 
 
@@ -759,9 +777,9 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         by_cell[cell_of[k]].append(o)  # plan is cell-major
     metric_keys = _write_tables(out_dir, plan, done, cells, outcomes, by_cell)
     plot_lines: list[str] = []
-    if exp.curves or exp.boxes or exp.means:
+    if exp.curves or exp.boxes or exp.means or type(exp).figures is not Experiment.figures:
         (out_dir / "plots").mkdir()
-        plot_lines = _plots(exp, cells, by_cell, out_dir / "plots")
+        plot_lines = _plots(exp, cells, by_cell, out_dir / "plots", outcomes)
     verdicts, target_error = _judge(exp, outcomes)
     failed = sum(o.error is not None for o in outcomes)
     wall = time.monotonic() - t_start
@@ -832,8 +850,11 @@ def _write_tables(out_dir: Path, plan: list[Trial], done: dict[int, tuple], cell
                [[*(o.trial.cell.get(k) for k in cell_keys), o.trial.index, o.trial.seed,
                  o.error.splitlines()[0] if o.error else "",
                  *((o.result.metrics.get(k) if o.result else None) for k in metric_keys)] for o in outcomes])
-    _write_csv(out_dir / "timings.csv", [*cell_keys, "index", "wall_s"],
-               [[*(plan[k].cell.get(c) for c in cell_keys), plan[k].index, round(done[k][2], 3)]
+    by_index = {(o.trial.index, _slug(o.trial.cell)): o.result.timings for o in outcomes if o.result}
+    timing_keys = list(dict.fromkeys(k for t in by_index.values() for k in t))
+    _write_csv(out_dir / "timings.csv", [*cell_keys, "index", "wall_s", *timing_keys],
+               [[*(plan[k].cell.get(c) for c in cell_keys), plan[k].index, round(done[k][2], 3),
+                 *(by_index.get((plan[k].index, _slug(plan[k].cell)), {}).get(t) for t in timing_keys)]
                 for k in sorted(done)])
     for cell, outs in zip(cells, by_cell, strict=True):
         rows = [[o.trial.index, x, curve, v] for o in outs if o.result for curve, ys in o.result.curves.items()

@@ -8,8 +8,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-# what a companion computer would run (cantools decodes the robot's DBC; smbus2 is a Zebro's I2C bus to its legs)
-ALLOWED = {"numpy", "can", "serial", "pymavlink", "filterpy", "cantools", "digi", "smbus2", "swarm_logic"}
+# what a companion computer would run (cantools decodes the robot's DBC; smbus2 is a Zebro's I2C bus to its legs;
+# scipy, shapely, networkx and pyefd are the geometry of the virtual-region planners, which run on a PC or a Pi)
+ALLOWED = {"numpy", "can", "serial", "pymavlink", "filterpy", "cantools", "digi", "smbus2", "swarm_logic", "scipy",
+           "shapely", "networkx", "pyefd"}
 
 
 def imports_of(path: Path) -> set[str]:

@@ -46,11 +46,13 @@ class MonteCarloPi(Experiment):
 
     def run(self, trial: Trial) -> TrialResult:
         n = trial.cell["n"]
+        t0 = time.perf_counter()
         xy = np.random.default_rng(trial.seed).random((n, 2))
         est = 4 * np.cumsum((xy**2).sum(axis=1) <= 1) / np.arange(1, n + 1)
         return TrialResult(metrics={"estimate": est[-1], "abs_error": abs(est[-1] - math.pi),
                                     "close": bool(abs(est[-1] - math.pi) < 0.1), "size": "small" if n < 500 else "big"},
-                           curves={"estimate": est.tolist()}, curve_x={"estimate": list(range(1, n + 1))})
+                           curves={"estimate": est.tolist()}, curve_x={"estimate": list(range(1, n + 1))},
+                           timings={"draw_s": time.perf_counter() - t0})
 
     def targets(self) -> list[Target]:
         def loose(outs: list[Outcome]) -> tuple[str, bool | None, str]:
@@ -153,6 +155,10 @@ def test_results_do_not_depend_on_jobs_and_seeds_are_stable(tmp_path: Path) -> N
     assert ex.trial_seed(1, "test-pi", {"n": 100}, 0) != seeds[0]
     assert ex.trial_seed(0, "test-pi", {"n": 100}, 0) == 4474581379651440175  # stable across runs and machines
     assert {"index", "x", "curve", "value"} <= set(_rows(a / "curves" / "n-100.csv")[0])
+    # a trial's wall-clock figures go to timings.csv, beside its wall time, never to trials.csv
+    timings = _rows(a / "timings.csv")
+    assert list(timings[0]) == ["n", "index", "wall_s", "draw_s"] and len(timings) == 8
+    assert all(float(r["draw_s"]) >= 0 for r in timings)
 
 
 def test_report_targets_plots_and_clearing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -362,3 +368,43 @@ def test_batched_trials_and_per_cell_counts_keep_the_rows_and_seeds(tmp_path: Pa
     with open(tmp_path / "per-cell" / "trials.csv") as f:
         assert list(_csv.reader(f)) == rows[0]
     assert BATCH_CALLS == [3, 2]  # cell_batch: cell 2's trials one at a time (each through run), the same rows
+
+
+@register
+class OwnFigure(Experiment):
+    name = "test-figures"
+    title = "An experiment drawing its own figure"
+    description = "y = k x index; figures() draws y against the index per cell."
+    trials = 3
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"k": 1}, {"k": 2}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        return TrialResult({"y": trial.cell["k"] * trial.index})
+
+    def figures(self, outcomes: list[Outcome], plots: Path) -> list[str]:
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots()
+        for k in (1, 2):
+            pts = [(o.trial.index, o.result.metrics["y"]) for o in outcomes if o.result and o.trial.cell["k"] == k]
+            ax.plot(*zip(*pts, strict=True), marker="o")
+        fig.savefig(plots / "y.png")
+        return ["![y](plots/y.png)"]
+
+
+def test_an_experiments_own_figures_are_drawn_and_one_that_raises_is_reported(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run = ex.execute_experiment("test-figures", jobs=1, out=tmp_path / "a", progress=False)
+    report = (run.out / "report.md").read_text()
+    assert (run.out / "plots" / "y.png").stat().st_size > 1000 and "![y](plots/y.png)" in report
+
+    def broken(self: Experiment, outcomes: list[Outcome], plots: Path) -> list[str]:
+        raise RuntimeError("no axes today")
+
+    monkeypatch.setattr(OwnFigure, "figures", broken)
+    run = ex.execute_experiment("test-figures", jobs=1, out=tmp_path / "b", progress=False)
+    report = (run.out / "report.md").read_text()
+    assert "figures() raised RuntimeError: no axes today" in report and "| y |" in report

@@ -136,31 +136,39 @@ SCENARIOS = {"roy-ch3-v2": Ch3Scenario(), "roy-ch3-v1": Ch3Scenario.v1()}
 def deploy(sc: Ch3Scenario, seed: int) -> np.ndarray:
     """``sc.n`` start points uniform in the start box, ``min_sep`` apart, from ``stream(seed, "deploy")``;
     ValueError naming the box when they do not fit."""
-    rng = stream(seed, "deploy")
-    out = np.zeros((sc.n, 2))
+    return scatter(stream(seed, "deploy"), sc.n, sc.start_lo, sc.start_hi, sc.min_sep)
+
+
+def scatter(
+    rng: np.random.Generator, n: int, lo: tuple[float, float], hi: tuple[float, float], min_sep: float
+) -> np.ndarray:
+    """``n`` points (n, 2) drawn uniform in the box ``lo``..``hi``, each kept if ``min_sep`` from those before it;
+    ValueError naming the box when they do not fit."""
+    out = np.zeros((n, 2))
     k = tries = 0
-    while k < sc.n:
-        q = rng.uniform(sc.start_lo, sc.start_hi)
-        if k == 0 or np.min(np.hypot(*(out[:k] - q).T)) >= sc.min_sep:
+    while k < n:
+        q = rng.uniform(lo, hi)
+        if k == 0 or np.min(np.hypot(*(out[:k] - q).T)) >= min_sep:
             out[k] = q
             k += 1
         else:
             tries += 1
-            if tries > 1000 * sc.n:
-                raise ValueError(f"start box {sc.start_lo}..{sc.start_hi}: cannot hold {sc.n} agents "
-                                 f"{sc.min_sep} units apart")
+            if tries > 1000 * n:
+                raise ValueError(f"start box {lo}..{hi}: cannot hold {n} agents {min_sep} units apart")
     return out
 
 
 def ray_segments(o: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance along the unit rays o + s d (..., 2) to each segment ab (G, 2) -> (..., G); inf where it misses."""
+    """Distance along the unit rays o + s d (..., 2) to each segment ab (G, 2) -> (..., G); inf where it misses.
+    ``a``, ``b`` may also carry leading dimensions that broadcast against the rays' (per-ray candidates, e.g.
+    (N, 1, G, 2) for N agents' m rays (N, m, 2))."""
     e = b - a
     o0, o1, d0, d1 = o[..., 0, None], o[..., 1, None], d[..., 0, None], d[..., 1, None]
-    den = d0 * e[:, 1] - d1 * e[:, 0]
+    den = d0 * e[..., 1] - d1 * e[..., 0]
     ok = np.abs(den) >= 1e-12
     den = np.where(ok, den, 1.0)
-    w0, w1 = a[:, 0] - o0, a[:, 1] - o1
-    s = (w0 * e[:, 1] - w1 * e[:, 0]) / den
+    w0, w1 = a[..., 0] - o0, a[..., 1] - o1
+    s = (w0 * e[..., 1] - w1 * e[..., 0]) / den
     u = (w0 * d1 - w1 * d0) / den
     return np.where(ok & (s >= 0) & (u >= 0) & (u <= 1), s, np.inf)
 
@@ -176,11 +184,12 @@ def ray_circle(o: np.ndarray, d: np.ndarray, c: np.ndarray, r: float) -> np.ndar
 
 
 def crosses(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Whether each move p -> q (..., 2) crosses (or touches) any segment ab (G, 2) -> (...)."""
+    """Whether each move p -> q (..., 2) crosses (or touches) any segment ab (G, 2) -> (...); ``a``, ``b`` may carry
+    leading dimensions that broadcast against the moves' (per-move candidates, e.g. (N, G, 2) for N moves)."""
     def orient(u0: Any, u1: Any, v0: Any, v1: Any, w0: Any, w1: Any) -> Any:
         return (v0 - u0) * (w1 - u1) - (v1 - u1) * (w0 - u0)
     p0, p1, q0, q1 = p[..., 0, None], p[..., 1, None], q[..., 0, None], q[..., 1, None]
-    a0, a1, b0, b1 = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
+    a0, a1, b0, b1 = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
     d1, d2 = orient(a0, a1, b0, b1, p0, p1), orient(a0, a1, b0, b1, q0, q1)
     d3, d4 = orient(p0, p1, q0, q1, a0, a1), orient(p0, p1, q0, q1, b0, b1)
     hit = (d1 * d2 <= 0) & (d3 * d4 <= 0) & ~((d1 == d2) & (d2 == 0))

@@ -19,7 +19,7 @@ import numpy as np
 from swarm_logic.families.roy.regions.formation import DELTA_TRI, desired_distances
 from swarm_logic.families.roy.regions.laws import Safety, theorem1_kc
 from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
-from swarm_logic.families.roy.regions.sensing import check_fields
+from swarm_logic.families.roy.regions.records import check_fields
 from swarm_logic.families.roy.regions.shapes import Ellipse
 
 GRAPHS = ("auto", "tri", "all")

@@ -27,6 +27,7 @@ import pyefd
 import shapely
 from shapely.geometry import Polygon
 
+from swarm_logic.families.roy.regions.records import require
 from swarm_logic.families.roy.regions.shapes import Ellipse
 
 ORDERINGS = ("polar", "given")
@@ -35,12 +36,6 @@ SORT_CENTRES = ("points", "swarm")
 RULES = ("circle", "efa_disc", "efa")
 DUPLICATE_TOL = 1e-9  # points closer than this (units) count as one
 GROW_BISECTIONS = 16  # the clip disc's radius to 2^-16 of its range
-
-
-def require(ok: bool, name: str, reason: str, value: object) -> None:
-    """A parameter check: ValueError naming the field, the reason and the value."""
-    if not ok:
-        raise ValueError(f"{name}: {reason}, got {value!r}")
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.cluster.vq import ClusterError, kmeans2
 from scipy.spatial import cKDTree
 
-from swarm_logic.families.roy.regions.sensing import Logged, check_fields
+from swarm_logic.families.roy.regions.records import Logged, check_fields
 from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.geometry import wrap
 

@@ -16,7 +16,7 @@ import networkx as nx
 import numpy as np
 from shapely.geometry import MultiPoint, Polygon
 
-from swarm_logic.families.roy.regions.sensing import Logged
+from swarm_logic.families.roy.regions.records import Logged
 from swarm_logic.families.roy.regions.shapes import Ellipse
 
 MISMATCH = ("iou", "literal")

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarm_logic.families.roy.regions.sensing import check_fields
+from swarm_logic.families.roy.regions.records import check_fields
 
 NEIGHBOURS = ("knn", "all")
-CH6_MODES = ("nearest", "sum")
+CH6_MODES = ("nearest", "sum", "knn")
 
 
 def saturate(u: np.ndarray, v_max: float | None) -> np.ndarray:
@@ -179,11 +179,13 @@ def split_merge_law(
     r_s: float = 1.0,
     radius_scales: float = 3.0,
     v_max: float | None = None,
+    neighbours: int = 8,
 ) -> np.ndarray:
     """Eq. 6.5: u_i = -k_c (x_i - O_e) + k_f exp(-|x_i - r| / r_s) (x_i - r), Table 6.1's gains; ``centre`` (2,) or
     each agent's sub-region centre (N, 2). The printed sum over j does not depend on j (erratum 22): ``mode``
     "nearest", r the closest agent or obstacle point; "sum", every agent and obstacle point within ``radius_scales``
-    r_s."""
+    r_s; "knn", the ``neighbours`` nearest of those (nearest first): the sum's spacing at a cost linear in N, where
+    a dense swarm's full sum has hundreds of pairs per agent."""
     if mode not in CH6_MODES:
         raise ValueError(f"mode: expected one of {', '.join(CH6_MODES)}, got {mode!r}")
     x = np.asarray(x, dtype=float)
@@ -199,6 +201,15 @@ def split_merge_law(
         _, idx = tree.query(x, k=2)
         other = np.where(idx[:, 0] == np.arange(n), idx[:, 1], idx[:, 0])
         u = u + k_f * kernel_sum(pts[:n], np.arange(n), other, r_s, others=pts)
+    elif mode == "knn":
+        if not (isinstance(neighbours, int) and neighbours >= 1):
+            raise ValueError(f"neighbours: must be an integer >= 1, got {neighbours!r}")
+        k = min(neighbours + 1, len(pts))
+        _, idx = tree.query(x, k=k, distance_upper_bound=radius_scales * r_s)
+        idx = idx.reshape(n, k)
+        i = np.repeat(np.arange(n), k).reshape(n, k)
+        keep = (idx < len(pts)) & (idx != i)
+        u = u + k_f * kernel_sum(x, i[keep], idx[keep], r_s, others=pts)
     else:
         lists = tree.query_ball_point(x, radius_scales * r_s)
         i = np.repeat(np.arange(n), [len(v) for v in lists])

@@ -29,7 +29,8 @@ from scipy.sparse.csgraph import maximum_bipartite_matching
 from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
-from swarm_logic.families.roy.regions.efa import largest_polygon, require
+from swarm_logic.families.roy.regions.efa import largest_polygon
+from swarm_logic.families.roy.regions.records import require
 
 ASSIGNMENTS = ("hungarian", "bottleneck", "literal")
 SELECTIONS = ("central", "all")

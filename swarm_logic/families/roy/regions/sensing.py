@@ -10,12 +10,12 @@ Every dropped reading is counted under the first reason that applies, so a calle
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarm_logic.log import plain
+from swarm_logic.families.roy.regions.records import Logged, check_fields
 
 DROP_REASONS = ("no_echo", "garbage", "out_of_window", "boundary", "eclipse")
 
@@ -32,21 +32,6 @@ def fan_angles(count: int, spacing: float) -> np.ndarray:
     if count < 1:
         raise ValueError(f"count (beam count): must be >= 1, got {count}")
     return (np.arange(count) - (count - 1) / 2.0) * spacing
-
-
-class Logged:
-    """A record a planner logs: ``as_dict`` gives it as strict JSON (arrays as lists, NaN and infinities as None)."""
-
-    def as_dict(self) -> dict[str, object]:
-        return plain(asdict(self))
-
-
-def check_fields(obj: object, names: tuple[str, ...], positive: bool = True) -> None:
-    """A ValueError naming the first of the dataclass' ``names`` that is not finite and > 0 (``positive``) or >= 0."""
-    for name in names:
-        v = getattr(obj, name)
-        if not (math.isfinite(v) and (v > 0 if positive else v >= 0)):
-            raise ValueError(f"{name}: must be finite and {'>' if positive else '>='} 0, got {v}")
 
 
 @dataclass(frozen=True)

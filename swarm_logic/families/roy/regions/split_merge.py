@@ -53,6 +53,10 @@ class SplitMergeParams:
     - ``empty_bins``: a bin with neither a hit nor a free beam end is unknown: it takes the value of the "nearest"
       sampled bin (the default; the lower on a tie) or is open to the ``horizon`` (default the deepest point plus
       twice ``prominence``: for callers without free ends, where a bin no beam hit is taken as open).
+    - ``span``: the profile's extent: the "hits" (the default: free ends beyond the hits' extent are left out, so the
+      clear beams along a closed corridor's sides make no false lane) or "all", the hits and the free ends ahead (a
+      lane beside the hits, seen only through beams that ran clear through it, as when the swarm faces the wall
+      between two lanes, is then part of the profile).
     - ``edges``: "minimum" (eq. 6.6: from the peak across its top, then down while the profile falls by more than
       ``edge_tolerance`` per sample, default r_s / 4) or "foot" (the first sample beyond the half-prominence
       point). Default "minimum" for the depth profile, "foot" for the range profile (a straight wall across the
@@ -75,6 +79,7 @@ class SplitMergeParams:
     min_width: float | None = None
     min_split_gap: float | None = None
     empty_bins: Literal["nearest", "horizon"] = "nearest"
+    span: Literal["hits", "all"] = "hits"
     horizon: float | None = None
     edges: Literal["minimum", "foot"] | None = None
     edge_tolerance: float | None = None
@@ -104,6 +109,7 @@ class SplitMergeParams:
             "profile": ("depth", "range"),
             "semi_minor": ("literal", "half"),
             "empty_bins": ("nearest", "horizon"),
+            "span": ("hits", "all"),
             "edges": (None, "minimum", "foot"),
             "allocation": ("nearest", "assignment"),
             "merge_centre": ("area_weighted", "mean"),
@@ -298,18 +304,22 @@ def detect_openings(
     x, y, pts = x[ahead], y[ahead], pts[ahead]
     if not len(x):
         return _no_scan("no points ahead: no opening", 0, nonfinite, behind)
-    lo = float(x.min())
-    idx = np.floor((x - lo) / step).astype(int)
-    nb = int(idx.max()) + 1
-    raw = np.full(nb, np.inf)
-    np.minimum.at(raw, idx, y)
+    fu = fv = np.zeros(0)
     if free is not None and len(free):
         fu, fv, fa = frame(np.asarray(free, dtype=float).reshape(-1, 2))
         ok = fa & np.isfinite(fu) & np.isfinite(fv)
-        fb = np.floor((fu[ok] - lo) / step).astype(int)
+        fu, fv = fu[ok], fv[ok]
+    # the profile spans the hits ("hits") or the hits and the free ends ahead ("all")
+    lo = float(x.min()) if params.span == "hits" else float(min(x.min(), fu.min(initial=np.inf)))
+    idx = np.floor((x - lo) / step).astype(int)
+    fb = np.floor((fu - lo) / step).astype(int)
+    nb = int(idx.max() if params.span == "hits" else max(idx.max(), fb.max(initial=0))) + 1
+    raw = np.full(nb, np.inf)
+    np.minimum.at(raw, idx, y)
+    if len(fu):
         inside = (fb >= 0) & (fb < nb)
         reach = np.full(nb, -np.inf)
-        np.maximum.at(reach, fb[inside], fv[ok][inside])
+        np.maximum.at(reach, fb[inside], fv[inside])
         seen_free = ~np.isfinite(raw) & np.isfinite(reach)
         raw[seen_free] = reach[seen_free]  # no hit, but a beam ran this far clear
     empty = ~np.isfinite(raw)

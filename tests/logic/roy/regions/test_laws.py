@@ -151,3 +151,19 @@ def test_theorem1_a3():
         assert np.all(bare <= tau + dt)
     assert 0.01 < max(late[0::2]) < 0.05  # spread starts: eq. 4.21 missed by up to a few tens of ms
     assert max(late[1::2]) > 0.05  # clustered starts: missed by more
+
+
+def test_split_merge_law_knn_is_the_sum_over_the_k_nearest():
+    """Mode "knn": with k at least every neighbour within 3 r_s it is the full sum; with k = 1 the nearest term only
+    (within the radius); a bad k is refused by name."""
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0.0, 4.0, (60, 2))
+    obs = rng.uniform(0.0, 4.0, (40, 2))
+    total = split_merge_law(x, np.zeros(2), obs, mode="sum", r_s=0.5)
+    assert np.allclose(split_merge_law(x, np.zeros(2), obs, mode="knn", r_s=0.5, neighbours=99), total, atol=1e-12)
+    few = split_merge_law(x, np.zeros(2), obs, mode="knn", r_s=0.5, neighbours=2)
+    assert not np.allclose(few, total)  # most agents have more than two neighbours within 1.5
+    one = split_merge_law(x, np.zeros(2), obs, mode="knn", r_s=0.5, neighbours=1, radius_scales=100.0)
+    assert np.allclose(one, split_merge_law(x, np.zeros(2), obs, mode="nearest", r_s=0.5), atol=1e-12)
+    with pytest.raises(ValueError, match="neighbours"):
+        split_merge_law(x, np.zeros(2), obs, mode="knn", neighbours=0)

@@ -343,3 +343,25 @@ def test_sonar_density_gathered_over_four_periods():
     two = [sonar_scan([(-6.0, -3.0), (1.0, 5.0)], seed) for seed in range(10)]
     split = [s.b_fs for s in two if s.split and len(s.openings) == 2]
     assert len(split) >= 5 and np.allclose(split, [3.0, 4.0], atol=0.5)
+
+
+def test_span_all_finds_lanes_seen_only_through_clear_beams():
+    """A swarm facing the wall between two lanes 3 wide: hits only on that wall (x = 5, |y| <= 1.2), the lanes seen
+    through beams clear to 10, the outer walls through echoes beyond the window (6.5). With ``span="hits"`` the
+    profile covers the wall alone; with ``"all"`` both lanes are found, b_fs within 0.1 of 3."""
+    hits = np.stack([np.full(40, 5.0), np.linspace(-1.2, 1.2, 40)], axis=1)
+
+    def ray(deg: np.ndarray, r: float) -> np.ndarray:
+        a = np.radians(deg)
+        return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+    lanes = np.concatenate([np.linspace(15, 39, 30), -np.linspace(15, 39, 30)])
+    outer = np.concatenate([np.linspace(41, 70, 30), -np.linspace(41, 70, 30)])
+    free = np.concatenate([ray(lanes, 10.0), ray(outer, 6.5)])
+    kw = {"r_s": 0.5, "profile": "range", "bin_width": 0.5, "prominence": 1.0, "min_width": 1.0, "edge_tolerance": 0.5}
+    narrow = detect_openings(hits, np.zeros(2), 0.0, SplitMergeParams(**kw), free=free)
+    assert narrow.openings == () and not narrow.split
+    wide = detect_openings(hits, np.zeros(2), 0.0, SplitMergeParams(**kw, span="all"), free=free)
+    assert wide.split and np.allclose(wide.b_fs, 3.0, atol=0.1)
+    with pytest.raises(ValueError, match="span"):
+        SplitMergeParams(r_s=1.0, span="everything")
