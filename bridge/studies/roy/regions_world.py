@@ -33,6 +33,7 @@ from bridge.studies.roy.numerical import Mover, crosses, ray_circle, ray_segment
 from bridge.studies.roy.regions_scenarios import RegionScenario
 from swarm_logic.families.roy.regions.formation import shape_name
 from swarm_logic.families.roy.regions.planner import Observation, Plan, RegionPlanner, velocities
+from swarm_logic.families.roy.regions.sensing import beam_points
 from swarm_logic.log import plain
 
 FAR = 1e9  # where the padding edge lies (degenerate, never hit)
@@ -264,11 +265,8 @@ def run_mission(
             ranges = world.cast()
             t_cast += time.perf_counter() - c0
             obs = Observation(world.t, ids, world.pos.copy(), world.heading.copy(), ranges, world.angles, targets[0])
-            ok = np.isfinite(ranges)
-            a = world.heading[:, None] + world.angles[None]
-            obstacles = (world.pos[:, None] + np.nan_to_num(ranges)[..., None] * np.stack([np.cos(a), np.sin(a)], -1))[
-                ok
-            ]
+            owner, beam = np.nonzero(np.isfinite(ranges))
+            obstacles = beam_points(world.pos, world.heading, world.angles, owner, beam, ranges[owner, beam])
             p0 = time.perf_counter()
             plan = planner.plan(obs)
             t_plan += time.perf_counter() - p0

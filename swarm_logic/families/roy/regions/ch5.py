@@ -53,7 +53,7 @@ from swarm_logic.families.roy.regions.packing import (
 )
 from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
 from swarm_logic.families.roy.regions.records import check_fields
-from swarm_logic.families.roy.regions.sensing import SensingParams, sense
+from swarm_logic.families.roy.regions.sensing import SensingParams, beam_points, sense
 
 DONE_RULES = ("region", "agents")
 FALLBACKS = ("circle", "keep")
@@ -362,8 +362,7 @@ class Ch5Planner(RegionPlanner):
         with np.errstate(invalid="ignore"):
             free = ok[:, None] & (np.isnan(ranges) | (ranges > self.p.d_max))
         owner, beam = np.nonzero(free)
-        a = angles[beam] + heads[owner]
-        frontier = x[owner] + self.p.d_max * np.stack([np.cos(a), np.sin(a)], axis=1)
+        frontier = beam_points(x, heads, angles, owner, beam, self.p.d_max)
         pts = np.vstack([echoes.reshape(-1, 2), frontier])
         is_echo = np.arange(len(pts)) < len(echoes.reshape(-1, 2))
         if len(pts) == 0:

@@ -31,7 +31,7 @@ from swarm_logic.families.roy.regions.ellipse import RegionParams, RegionState, 
 from swarm_logic.families.roy.regions.laws import CH6_MODES
 from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
 from swarm_logic.families.roy.regions.records import check_fields
-from swarm_logic.families.roy.regions.sensing import DROP_REASONS, SensingParams, sense
+from swarm_logic.families.roy.regions.sensing import DROP_REASONS, SensingParams, beam_points, sense
 from swarm_logic.families.roy.regions.shapes import Ellipse
 from swarm_logic.families.roy.regions.split_merge import (
     SplitMergeParams,
@@ -352,8 +352,7 @@ class Ch6Planner(RegionPlanner):
         r, b = np.nonzero(clear)
         reach = self.p.free_reach if self.p.free_reach is not None else 2 * self.p.d_max
         d = np.where(far[r, b], np.minimum(rng[r, b], reach), reach)
-        a = hd[r] + ang[b]
-        return x[r] + d[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1), r
+        return beam_points(x, hd, ang, r, b, d), r
 
     def _decide(
         self, t: float, s: _Swarm, xs: np.ndarray, ids: np.ndarray, x: np.ndarray, events: list

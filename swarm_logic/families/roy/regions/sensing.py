@@ -65,6 +65,17 @@ class ObstaclePoints(Logged):
         return int(self.points.shape[0])
 
 
+def beam_points(
+    positions: np.ndarray, headings: np.ndarray, angles: np.ndarray, owner: np.ndarray, beam: np.ndarray,
+    lengths: np.ndarray | float,
+) -> np.ndarray:
+    """The world points (K, 2) ``lengths`` along beams (``owner``, ``beam``): x_i + d [cos(angle_j + heading_i),
+    sin(angle_j + heading_i)] (eq. 5.4; eq. 4.27's "+" is a "x", erratum 9)."""
+    a = np.asarray(angles, dtype=float)[beam] + np.asarray(headings, dtype=float)[owner]
+    d = np.broadcast_to(np.asarray(lengths, dtype=float), a.shape)
+    return np.asarray(positions, dtype=float)[owner] + d[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
+
+
 def sense(
     positions: np.ndarray,
     headings: np.ndarray,
@@ -109,8 +120,7 @@ def sense(
         dropped["boundary"] = int((keep & ~beyond).sum())
         keep = beyond
     owner, beam = np.nonzero(keep)
-    a = ang[beam] + h[owner]
-    pts = x[owner] + d[owner, beam][:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
+    pts = beam_points(x, h, ang, owner, beam, d[owner, beam])
     idx = np.nonzero(pose_ok)[0]
     if len(pts) and len(idx) > 1:
         dist, near = cKDTree(x[idx]).query(pts, k=2)
