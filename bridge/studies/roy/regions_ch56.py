@@ -429,8 +429,11 @@ def judge_c6(outcomes: list[Outcome]) -> Verdict:
     return ours, t_ok and n_ok, f"time {'ok' if t_ok else 'off'}; count {'ok' if n_ok else 'off'} (events in order)"
 
 
-def _case_parts(outcomes: list[Outcome], part: Callable[[str, list[TrialResult]], tuple[str, bool | None]]) -> Verdict:
-    """A target over chapter 6's three cases: each case's text and verdict (None: not judged there), joined."""
+def _case_parts(
+    outcomes: list[Outcome], part: Callable[[str, list[TrialResult]], tuple[str, bool | None]], note: str
+) -> Verdict:
+    """A target over chapter 6's three cases: each case's text and verdict (None: not judged there), joined, with
+    ``note``."""
     parts, verdicts = [], []
     for case in CH6_CASES:
         res = whole(outcomes, case, agents=None)
@@ -442,7 +445,7 @@ def _case_parts(outcomes: list[Outcome], part: Callable[[str, list[TrialResult]]
     if not parts:
         return _none(outcomes, "needs the ch6 cells")
     judged = [v for v in verdicts if v is not None]
-    return "; ".join(parts), (all(judged) if judged else None), ""
+    return "; ".join(parts), (all(judged) if judged else None), note
 
 
 def _split_part(case: str, res: list[TrialResult]) -> tuple[str, bool | None]:
@@ -468,8 +471,9 @@ def _split_part(case: str, res: list[TrialResult]) -> tuple[str, bool | None]:
 
 
 def judge_b9(outcomes: list[Outcome]) -> Verdict:
-    ours, good, _ = _case_parts(outcomes, _split_part)
-    return ours, good, "every split; a case whose runs never split fails (the thesis splits all three)"
+    return _case_parts(
+        outcomes, _split_part, "every split; a case whose runs never split fails (the thesis splits all three)"
+    )
 
 
 def _merge_part(case: str, res: list[TrialResult]) -> tuple[str, bool | None]:
@@ -493,8 +497,7 @@ def _merge_part(case: str, res: list[TrialResult]) -> tuple[str, bool | None]:
 
 
 def judge_b10(outcomes: list[Outcome]) -> Verdict:
-    ours, good, _ = _case_parts(outcomes, _merge_part)
-    return ours, good, "every merge (the merge decision is taken on the proposed next regions)"
+    return _case_parts(outcomes, _merge_part, "every merge; case 2 must merge (cases 1 and 3: three targets, no merge)")
 
 
 def judge_b11(outcomes: list[Outcome]) -> Verdict:
@@ -542,8 +545,11 @@ def _d_part(case: str, res: list[TrialResult]) -> tuple[str, bool | None]:
 
 
 def judge_b12(outcomes: list[Outcome]) -> Verdict:
-    ours, good, _ = _case_parts(outcomes, _d_part)
-    return ours, good, f"means of D(t) (eq. 6.25): the first {START_S:g} s, the {START_S:g} s before the split, ..."
+    return _case_parts(
+        outcomes,
+        _d_part,
+        f"means of D(t) (eq. 6.25) over the first {START_S:g} s, the {START_S:g} s before the split, ...",
+    )
 
 
 def scaling(outcomes: list[Outcome], scenario: str, metric: str, timing: bool = False) -> dict[int, np.ndarray]:
@@ -583,7 +589,7 @@ def judge_c7(outcomes: list[Outcome]) -> Verdict:
         )
         parts.append(f"{name} ({case}): {text}; falling {'yes' if falls else 'no'}")
     if not parts:
-        return _none(outcomes, "needs the ch6 scaling cells")
+        return _none(outcomes, "needs chapter 6's scaling cells")
     return "; ".join(parts), good and judged > 0, f"+-{D_TOL} at the thesis' N, means falling with N"
 
 
@@ -642,8 +648,7 @@ def _time_part(case: str, res: list[TrialResult]) -> tuple[str, bool | None]:
 
 
 def judge_c9(outcomes: list[Outcome]) -> Verdict:
-    ours, good, _ = _case_parts(outcomes, _time_part)
-    return ours, good, "means over the runs; a run without the event fails it"
+    return _case_parts(outcomes, _time_part, "means over the runs; a run without the event fails it")
 
 
 # -- figures ---------------------------------------------------------------------------------------------------------
