@@ -120,8 +120,8 @@ def test_chapter_6_judges_pass_and_fail() -> None:
     assert c56.judge_b9([*good, split_run(2, "ch6-case2", split_widest_most=False)])[1] is False
     assert c56.judge_b9([*good, split_run(2, "ch6-case2", split_area_err=1e-3)])[1] is False
     assert c56.judge_b9([*good, split_run(2, "ch6-case2", split_leaders_nearest=False)])[1] is False
-    never = c56.judge_b9([*good, split_run(2, "ch6-case1", splits=0, scan_last="one opening")])
-    assert never[1] is False and "ch6-case1: no split in 1 runs (last scan: one opening)" in never[0]
+    never = c56.judge_b9([*good, split_run(2, "ch6-case1", splits=0, scan_max_openings=1)])
+    assert never[1] is False and "ch6-case1: no split in 1 runs: at most 1 opening(s) in a scan" in never[0]
     assert c56.judge_b10([*good, split_run(2, "ch6-case2", merge_theorem1=False)])[1] is False
     assert c56.judge_b10([*good, split_run(2, "ch6-case2", merges=0)])[1] is False  # case 2 must merge
     assert c56.judge_b10([*good, split_run(2, "ch6-case1", merges=0)])[1] is True  # case 1 need not
