@@ -75,6 +75,9 @@ THESIS_CH6_TIMES = {
 }
 START_S = 5.0  # B12: D while converging = its mean over the first seconds; "before the split" the same span before
 REL = 1e-9  # B9, B10, B11: areas equal to this relative tolerance
+# B7: a circle is inside the region when its centre is at least (1 - CLEAR_TOL) radii from the boundary: the
+# packing erodes the region with arcs drawn as chords (0.0012 r_s), so 1e-3 r is its own accuracy
+CLEAR_TOL = 1e-3
 
 Verdict = tuple[str, bool | None, str]
 
@@ -169,7 +172,8 @@ class Recorder(RegionPlanner):
             gap = math.inf
         inside = shapely.contains_xy(poly, g[:, 0], g[:, 1])
         edge = shapely.distance(poly.exterior, shapely.points(g))
-        fits = bool(inside.all() and (edge >= radius * (1 - 1e-6)).all())
+        clearance = float(edge.min()) / radius if len(g) else math.inf
+        fits = bool(inside.all() and clearance >= 1 - CLEAR_TOL)
         event = next(e for e in plan.events if e.get("kind") == "region")
         return {
             "t": plan.t,
@@ -177,6 +181,7 @@ class Recorder(RegionPlanner):
             "radius": radius,
             "disjoint": gap >= 2 * radius * (1 - 1e-9),
             "inside": fits,
+            "clearance": clearance,
             "at_r_s": radius >= self.r_s * (1 - 1e-9),
             "method": event.get("method"),
             "lattice_count": event.get("lattice_count"),
@@ -248,6 +253,7 @@ def ch5_metrics(res: MissionResult, rec: Recorder) -> dict[str, Any]:
         "b7_held": sum(u["disjoint"] and u["inside"] and u["at_r_s"] for u in up),
         "b7_overlap_or_out": sum(not (u["disjoint"] and u["inside"]) for u in up),
         "b7_shrunk": sum(not u["at_r_s"] for u in up),
+        "b7_min_clearance": min((u["clearance"] for u in up), default=None),
         "b7_lattice_short": len(short),
         "b7_fallback_held": sum(u["disjoint"] and u["inside"] and u["at_r_s"] for u in short),
         "ua_bfs_rho": rho,
@@ -384,12 +390,15 @@ def judge_b7(outcomes: list[Outcome]) -> Verdict:
     n_up, held = _sum(res, "region_updates"), _sum(res, "b7_held")
     short, fb = _sum(res, "b7_lattice_short"), _sum(res, "b7_fallback_held")
     bad, shrunk = _sum(res, "b7_overlap_or_out"), _sum(res, "b7_shrunk")
+    clear = [r.metrics["b7_min_clearance"] for r in res if r.metrics.get("b7_min_clearance") is not None]
+    nearest = _f(min(clear) if clear else None, 4)
     rho = [r.metrics["ua_bfs_rho"] for r in res if r.metrics.get("ua_bfs_rho") is not None]
     rho = [v for v in rho if math.isfinite(v)]
     rank = [r.metrics["ua_rank_at_min_bfs"] for r in res if r.metrics.get("ua_rank_at_min_bfs") is not None]
     ours = (
         f"{held}/{n_up} updates with N disjoint r_s circles inside the region ({bad} overlapping or outside, "
-        f"{shrunk} at a shrunk radius); lattice short of N in {short}, the fallback held N at r_s in {fb}; "
+        f"{shrunk} at a shrunk radius; the nearest a centre came to the boundary: {nearest} "
+        f"radii); lattice short of N in {short}, the fallback held N at r_s in {fb}; "
         f"UA against b_fs: Spearman {_f(float(np.mean(rho)) if rho else None)} (mean of {len(rho)} runs), at the "
         f"narrowest b_fs {_f(100 * float(np.mean(rank)) if rank else None, 0)} % of the updates had less UA"
     )
