@@ -4,6 +4,7 @@ ways, and short real missions of ch5-a and ch6-case2 with their recorded metrics
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -21,7 +22,7 @@ def outcome(
     cell: dict[str, Any] = {"kind": "numerical", "scenario": scenario}
     if agents is not None:
         cell["agents"] = agents
-    timings = {} if exec_s is None else {"exec_s": exec_s}
+    timings = {} if exec_s is None else {"exec_s": 2 * exec_s, "cpu_s": exec_s}
     return Outcome(Trial("roy-regions", cell, i, i, smoke, ""), TrialResult(dict(metrics), timings=timings), None)
 
 
@@ -184,3 +185,18 @@ def test_short_real_missions_record_the_chapters_metrics() -> None:
     assert m["merges"] == 1 and m["merge_area_err"] <= 1e-9 and m["merge_one_leader"] and m["merge_theorem1"]
     assert m["sub_area_dev"] <= 1e-9 and m["d_split"] < m["d_pre_split"]  # ours falls after the split (B12)
     assert res.summary == run_mission(sc, make_planner(sc), 1, max_time_s=30.0).summary  # the recorder changes nothing
+
+
+def test_chapter_6_figures_draw_the_sub_swarms_d_and_the_execution_time(tmp_path: Path) -> None:
+    t = [0.25 * k for k in range(40)]
+    curves = {"density": [0.3 + 0.01 * k for k in range(40)], "sub0_area": [78.5] * 20, "sub0_a": [5.0] * 20}
+    curves |= {"sub0_b": [5.0] * 20, "sub1_area": [35.0] * 20, "sub1_a": [3.0] * 20, "sub1_b": [2.8] * 20}
+    xs = {k: (t[:20] if k.startswith("sub0") else t[20:]) for k in curves} | {"density": t}
+    res = TrialResult({"split_times": "5", "merge_times": "", "n": 100}, curves, xs, {"cpu_s": 1.0})
+    outcomes = [
+        Outcome(Trial("roy-regions", {"kind": "numerical", "scenario": "ch6-case2"}, 0, 0, False, ""), res, None)
+    ]
+    outcomes += scaling("ch6-case2", dict.fromkeys((50, 250), 0.5), {50: [0.5, 0.6], 250: [2.5, 2.6]})
+    lines = c56.ch6_figures(outcomes, tmp_path)
+    for png in ("subswarms-ch6-case2.png", "density-ch6.png", "exec-time-ch6-case2.png"):
+        assert (tmp_path / png).stat().st_size > 1000 and any(f"(plots/{png})" in line for line in lines)
