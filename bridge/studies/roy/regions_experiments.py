@@ -888,8 +888,8 @@ def exec_plot(
     ax.plot(list(by_n), [float(np.mean(v)) for v in by_n.values()], "s", color="C1", label="mean")
     if fit is not None:
         xs = np.linspace(0, max(by_n) * 1.05, 50)
-        label = f"{fit.intercept:.3f} + {fit.slope:.4f} N (R^2 {fit.r2:.3f})"
-        ax.plot(xs, fit.intercept + fit.slope * xs, "--", color="C2", label=label)
+        line = f"{fit.intercept:.3f} + {fit.slope:.4f} N (R^2 {fit.r2:.3f})"
+        ax.plot(xs, fit.intercept + fit.slope * xs, "--", color="C2", label=line)
     ax.set_xlabel("agents N")
     ax.set_ylabel(ylabel)
     what = f"execution time against N{', ' + label if label else ''}"

@@ -200,3 +200,4 @@ def test_chapter_6_figures_draw_the_sub_swarms_d_and_the_execution_time(tmp_path
     lines = c56.ch6_figures(outcomes, tmp_path)
     for png in ("subswarms-ch6-case2.png", "density-ch6.png", "exec-time-ch6-case2.png"):
         assert (tmp_path / png).stat().st_size > 1000 and any(f"(plots/{png})" in line for line in lines)
+    assert "![execution time against N, scenario 1 (ch6-case2)](plots/exec-time-ch6-case2.png)" in lines
