@@ -502,10 +502,12 @@ class RoyRegionsExperiment(Experiment):
         "scenario a versioned look-alike of a lost map (hil_configs/roy/), its planner and parameters the file's "
         "(docs/roy-ch4.md: our resolutions, v_max 0.3 units/s frozen for chapter 4). Cells: ch4-a (6 agents, "
         "Table 4.1), ch4-maze-50 (50 agents, the scalable law), ch4-failures-50 at 5, 10 and 20 % actuator "
-        "failures, ch4-mover (a circle sweeping across the first gap). Each trial is one mission from its own seed "
-        "(deployment, failing agents). timings.csv's exec_s is the wall-clock time of the planner, the world and the "
-        "sonar casts (the thesis' execution time, erratum 29), plan_s the planner's part. Targets of chapters 5 and 6 "
-        "and of the hardware analogs (D) are not judged until their scenarios, baselines or co-simulated cells exist."
+        "failures, ch4-mover (a circle sweeping across the first gap), ch5-a (14 agents, Table 5.1), ch6-case1..3 "
+        "(Table 6.1) and chapter 6's scaling scenarios 1 (ch6-case2's map) and 2 (ch6-case3's) at N = 50-1000 "
+        "(r_s scaled to keep N pi r_s^2). Each trial is one mission from its own seed (deployment, failing agents). "
+        "timings.csv's exec_s is the wall-clock time of the planner, the world and the sonar casts (the thesis' "
+        "execution time, erratum 29), plan_s the planner's part, cpu_s the mission's CPU seconds (C8's measure). "
+        "Targets whose baselines or co-simulated cells do not exist yet are not judged."
     )
     trials = 20
     smoke_trials = 1
