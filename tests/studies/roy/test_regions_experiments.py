@@ -21,11 +21,18 @@ def test_the_cells_are_the_scenario_files_with_their_kind_and_failure_fractions(
 ) -> None:
     exp = get_experiment("roy-regions")()
     cells = exp.cells(smoke=False)
-    assert {c["scenario"] for c in cells} == {"ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"}
+    assert {c["scenario"] for c in cells} == {"ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"} | {
+        "ch5-a",
+        "ch6-case1",
+        "ch6-case2",
+        "ch6-case3",
+    }
     assert sorted(c["failures"] for c in cells if "failures" in c) == [0.05, 0.10, 0.20]
     assert all(c["kind"] in SCENARIO_KINDS for c in cells) and exp.cells(smoke=True) == cells
     for c in cells:
-        assert rx.scenario_of(c).name == c["scenario"] and exp.cell_trials(c, 7) == 7
+        assert rx.scenario_of(c).name == c["scenario"]
+        assert rx.scenario_of(c).agents.n == c.get("agents", rx.scenario_of(c).agents.n)
+        assert exp.cell_trials(c, 7) == 7
     assert rx.scenario_of({"scenario": "ch4-failures-50", "failures": 0.2}).failures.fraction == 0.2
     # a new scenario is one line, with a cap on its trials when its runs are dear
     monkeypatch.setattr(rx, "CELLS", (*CELLS, CellSpec("ch4-a", failures=0.5, max_trials=3)))
