@@ -8,7 +8,9 @@ camera's fixes (noise mode, 10 fps, the comparator's default gains) off by ``POS
 ``--duration`` simulated seconds, measures the COV of the region's area over the planner's periods, and picks the s
 whose COVs lie nearest the thesis' (the smallest sum of squared log ratios over the two N). With ``--write`` the
 chosen profile becomes ``d1`` in ``hil_configs/sonpi/noise_profiles.toml``, with the sweep's figures as its
-provenance; ``ideal`` there (exact poses, the ideal firing, no sonar noise) is the thesis' simulation.
+provenance; ``noiseless`` there (exact poses, no sonar noise) is the thesis' simulation's sensing. When no level
+scatters the area at all (every COV 0: chapter 4's repaired region keeps pi a b = pi r_c^2 exactly, target A4, so
+noise moves its axes but never its area), nothing is chosen, nothing is written, and the command exits 1.
 
     python -m bridge.studies.roy.calibrate_d1 --scales 0 1 2 4 --duration 60 [--write]
 """
@@ -90,6 +92,9 @@ def main(argv: list[str] | None = None) -> int:
         rows.append((sc, s, cov))
         print(f"| {s:g} | {SONAR_M * s:.4f} | {POSE_M * s:.4f} | {_g(cov[3])} | {_g(cov[6])} | {sc:.3f} |", flush=True)
     best = min(rows, key=lambda r: r[0])
+    if not math.isfinite(best[0]):
+        print("no level: at every s some session's region kept its area exactly (COV 0 or none); nothing chosen")
+        return 1
     print(f"chosen: s = {best[1]:g} (COV {_g(best[2][3])} with 3 robots, {_g(best[2][6])} with 6)")
     if a.write:
         chosen = profile(best[1])

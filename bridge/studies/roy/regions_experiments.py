@@ -76,8 +76,8 @@ CELLS: tuple[CellSpec, ...] = (
     CellSpec("ch4-mover"),  # B6
     CellSpec("d3-ch4-3", kind="cosim", max_trials=3),  # D1 (noisy, 3), D3 (251 s): SonPI sessions, regions_cosim
     CellSpec("d3-ch4-6", kind="cosim", max_trials=3),  # D1 (noisy, 6), D3 (615 s)
-    CellSpec("d1-ch4-3-ideal", kind="cosim", max_trials=2),  # D1 (noiseless, 3)
-    CellSpec("d1-ch4-6-ideal", kind="cosim", max_trials=2),  # D1 (noiseless, 6)
+    CellSpec("d1-ch4-3-noiseless", kind="cosim", max_trials=2),  # D1 (noiseless, 3)
+    CellSpec("d1-ch4-6-noiseless", kind="cosim", max_trials=2),  # D1 (noiseless, 6)
     *(CellSpec(f"d4-ch6-{n}", kind="cosim", max_trials=3) for n in (4, 5, 6)),  # D4 (two lanes; N = 4, 5, 6)
     CellSpec("d5-ch5-3", kind="cosim", max_trials=3),  # D5 (polygon regions)
 )

@@ -34,8 +34,8 @@ def test_a_cells_session_is_its_file_with_n_robots_seeded_poses_and_its_sensing_
     assert noisy["robots"][0]["sonar_noise_m"] == rc.noise_profiles()["d1"]["sonar"]["sonar_noise_m"]
     (cam,) = [s for s in noisy["services"] if s["kind"] == "overhead_camera"]
     assert cam["options"]["mode"] == "noise" and Path(cam["options"]["noise_model"]).parent == tmp_path
-    ideal = rc.session_config("d1-ch4-6-ideal", 1, tmp_path)
-    assert ideal["robots"][0]["count"] == 6 and ideal["robots"][0]["sonar_firing"] == "ideal"
+    ideal = rc.session_config("d1-ch4-6-noiseless", 1, tmp_path)
+    assert ideal["robots"][0]["count"] == 6 and ideal["robots"][0]["sonar_noise_m"] == 0.0
     model = json.loads(Path(ideal["services"][0]["options"]["noise_model"]).read_text())["model"]
     assert model["x_std_m"] == 0.0 and ideal["services"][0]["options"]["position_gain"] == 1.0
     with pytest.raises(ValueError, match="scenario: no co-simulated scenario 'd9'; known: d3-ch4-3"):
@@ -105,13 +105,15 @@ def test_the_d_targets_pass_and_fail_on_synthetic_outcomes() -> None:
         assert smoke[1] is None and smoke[2].startswith("smoke run")
 
     def d1(c3: float, c6: float, i3: float = 0.02, i6: float = 0.001) -> list[Outcome]:
-        cells = {"d3-ch4-3": c3, "d3-ch4-6": c6, "d1-ch4-3-ideal": i3, "d1-ch4-6-ideal": i6}
+        cells = {"d3-ch4-3": c3, "d3-ch4-6": c6, "d1-ch4-3-noiseless": i3, "d1-ch4-6-noiseless": i6}
         return [_out(s, 0, area_cov=v) for s, v in cells.items()]
 
     assert targets["D1"].evaluate(d1(0.09, 0.025))[1] is True
     assert targets["D1"].evaluate(d1(0.03, 0.025))[1] is False  # 3 robots scatter far less than the hardware
     assert targets["D1"].evaluate(d1(0.09, 0.025, i6=0.03))[1] is False  # noiseless above noisy
     assert targets["D1"].evaluate(d1(0.09, 0.025)[:2])[1] is None  # the noiseless cells missing
+    exact = targets["D1"].evaluate(d1(0.0, 0.0, 0.0, 0.0))
+    assert exact[1] is False and "keeps pi a b" in exact[2]
 
     def d3(g3: float, g6: float, line: str = "line") -> list[Outcome]:
         return [
