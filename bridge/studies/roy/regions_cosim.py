@@ -41,6 +41,7 @@ NOISE_FILE = SONPI_DIR / "noise_profiles.toml"
 SMOKE_S = 20.0  # smoke trials: this much simulated time per session
 JITTER_M = 0.03  # start poses jittered by up to this (m), and their headings by up to JITTER_DEG, from the seed
 JITTER_DEG = 10.0
+UNIT_M = 0.1  # the thesis' length unit (digest §5.4)
 UNIT_CM2 = 100.0  # one thesis unit^2 (0.1 m squared) in cm^2
 TIME_TOL = 0.2  # D3-D5: +-20 % on times after the speed calibration
 AREA_TOL = 0.2  # D4: +-20 % on areas
@@ -60,22 +61,26 @@ THESIS_D5 = {"circles_1": 42.0, "circles_2": 100.0, "boundary": 112.0, "goal": 3
 class CosimScenario:
     """A co-simulated cell's session: ``config`` a file of ``hil_configs/sonpi/``, ``n`` its robots (the file's first
     ``n`` poses; None: all), ``noise`` a profile of ``NOISE_FILE`` (None: the file's own sensing), ``target`` the
-    D target it serves."""
+    D target it serves, ``jitter`` whether the trial's seed jitters the start poses (else only the sensors' noise
+    differs between trials)."""
 
     config: str
     target: str
     n: int | None = None
     noise: str | None = None
+    jitter: bool = True
 
 
+# the two-lane session splits from its file's start poses, not from every jittered one (a start 3 cm and 10 degrees
+# off kept the detector from seeing both lanes in a trial): its trials differ by the sensors' noise alone
 COSIM: dict[str, CosimScenario] = {
     "d3-ch4-3": CosimScenario("regions_ch4_d3.toml", "D1, D3", noise="d1"),
     "d3-ch4-6": CosimScenario("regions_ch4_d3_6.toml", "D1, D3", noise="d1"),
     "d1-ch4-3-noiseless": CosimScenario("regions_ch4_d3.toml", "D1", noise="noiseless"),
     "d1-ch4-6-noiseless": CosimScenario("regions_ch4_d3_6.toml", "D1", noise="noiseless"),
-    "d4-ch6-4": CosimScenario("regions_ch6.toml", "D4", n=4),
-    "d4-ch6-5": CosimScenario("regions_ch6.toml", "D4", n=5),
-    "d4-ch6-6": CosimScenario("regions_ch6.toml", "D4", n=6),
+    "d4-ch6-4": CosimScenario("regions_ch6.toml", "D4", n=4, jitter=False),
+    "d4-ch6-5": CosimScenario("regions_ch6.toml", "D4", n=5, jitter=False),
+    "d4-ch6-6": CosimScenario("regions_ch6.toml", "D4", n=6, jitter=False),
     "d5-ch5-3": CosimScenario("regions_ch5.toml", "D5"),
 }
 
@@ -122,7 +127,7 @@ def session_config(
     if n > len(poses):
         raise ValueError(f"n: {sc.config} places {len(poses)} robots, not {n}")
     rng = stream(seed, "roy-regions", "cosim", name)
-    jit = rng.uniform(-1.0, 1.0, (n, 3)) * [JITTER_M, JITTER_M, JITTER_DEG]
+    jit = rng.uniform(-1.0, 1.0, (n, 3)) * [JITTER_M, JITTER_M, JITTER_DEG] * sc.jitter
     group["count"] = n
     group["placement"]["poses"] = [
         [round(p + d, 4) for p, d in zip(pose, j, strict=True)] for pose, j in zip(poses[:n], jit.tolist(), strict=True)
@@ -130,6 +135,10 @@ def session_config(
     cfg["session"].update(seed=seed, robots_per_process=n, name=f"{cfg['session']['name']}-{name}")
     if max_s is not None:
         cfg["session"]["duration_s"] = min(float(cfg["session"]["duration_s"]), max_s)
+    if "formation" not in cfg:  # the study's loop functions: the formation scored, the session ended after "done"
+        (ctl,) = [v["options"] for v in cfg["services"] if v["kind"] == "global_controller"]
+        target, r_s = ctl["target"], ctl["params"]["planner_params"]["r_s"] * UNIT_M
+        cfg["formation"] = {"target": target, "r_s_m": r_s, "end_on_event": "controller/done", "end_after_event_s": 1.0}
     if profile is None and sc.noise is not None:
         profile = noise_profiles()[sc.noise]
     if profile is not None:
@@ -264,7 +273,7 @@ def cosim_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     metrics, ser = session_metrics(s, out)
     t = ser["t"].tolist()
     curves = {k: ser[k].tolist() for k in ("area", "a", "b")}
-    timings = {"wall_s": float(s["wall_time_s"]), "cpu_s": float(s.get("cpu_s_total") or 0.0)}
+    timings = {"session_wall_s": float(s["wall_time_s"]), "cpu_s": float(s.get("cpu_s_total") or 0.0)}
     return TrialResult(metrics, curves, {k: t for k in curves}, timings)
 
 

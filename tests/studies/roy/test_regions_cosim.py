@@ -19,16 +19,24 @@ from bridge.studies.roy.regions_experiments import RoyRegionsExperiment
 
 
 def test_a_cells_session_is_its_file_with_n_robots_seeded_poses_and_its_sensing_profile(tmp_path: Path) -> None:
-    cfg = rc.session_config("d4-ch6-4", 11, tmp_path, max_s=20.0)
+    cfg = rc.session_config("d3-ch4-6", 11, tmp_path, max_s=20.0)
     (group,) = cfg["robots"]
-    assert group["count"] == 4 and len(group["placement"]["poses"]) == 4
+    assert group["count"] == 6 and len(group["placement"]["poses"]) == 6
     assert cfg["session"]["seed"] == 11 and cfg["session"]["duration_s"] == 20.0
-    assert cfg["session"]["name"] == "sonpi-regions-ch6-d4-ch6-4" and "sonar_noise_m" not in group  # the file's
-    file_poses = np.array([[0.4, 0.55, 0.0], [0.4, 0.85, 0.0], [0.4, 1.15, 0.0], [0.75, 0.55, 0.0]])
+    assert cfg["session"]["name"] == "sonpi-regions-ch4-d3-6-d3-ch4-6" and cfg["session"]["robots_per_process"] == 6
+    file_poses = np.array([[0.25 + 0.3 * (i // 3), 0.6 + 0.275 * (i % 3), 0.0] for i in range(6)])
     d = np.abs(np.array(group["placement"]["poses"]) - file_poses)
     assert (d[:, :2] <= rc.JITTER_M).all() and (d[:, 2] <= rc.JITTER_DEG).all() and d.max() > 0
-    assert rc.session_config("d4-ch6-4", 11, tmp_path) == {**cfg, "session": {**cfg["session"], "duration_s": 120}}
-    assert rc.session_config("d4-ch6-4", 12, tmp_path)["robots"][0]["placement"] != group["placement"]
+    assert rc.session_config("d3-ch4-6", 11, tmp_path) == {**cfg, "session": {**cfg["session"], "duration_s": 400}}
+    assert rc.session_config("d3-ch4-6", 12, tmp_path)["robots"][0]["placement"] != group["placement"]
+    four = rc.session_config("d4-ch6-4", 11, tmp_path)  # the two-lane file's first four robots, not jittered
+    assert four["robots"][0]["count"] == 4 and "sonar_noise_m" not in four["robots"][0]  # the file's sensing
+    assert four["robots"][0]["placement"]["poses"] == [
+        [0.4, 0.55, 0.0],
+        [0.4, 0.85, 0.0],
+        [0.4, 1.15, 0.0],
+        [0.75, 0.55, 0.0],
+    ]
     Config.model_validate(tomllib_roundtrip(cfg))  # a valid session config
     noisy = rc.session_config("d3-ch4-3", 1, tmp_path)
     assert noisy["robots"][0]["sonar_noise_m"] == rc.noise_profiles()["d1"]["sonar"]["sonar_noise_m"]
@@ -38,6 +46,14 @@ def test_a_cells_session_is_its_file_with_n_robots_seeded_poses_and_its_sensing_
     assert ideal["robots"][0]["count"] == 6 and ideal["robots"][0]["sonar_noise_m"] == 0.0
     model = json.loads(Path(ideal["services"][0]["options"]["noise_model"]).read_text())["model"]
     assert model["x_std_m"] == 0.0 and ideal["services"][0]["options"]["position_gain"] == 1.0
+    d5 = rc.session_config("d5-ch5-3", 1, tmp_path)["formation"]  # a file without one: ended 1 s after "done"
+    assert d5 == {
+        "target": [2.4, 2.4],
+        "r_s_m": pytest.approx(0.15),
+        "end_on_event": "controller/done",
+        "end_after_event_s": 1.0,
+    }
+    assert four["formation"]["end_after_event_s"] == 0.5  # the file's own
     with pytest.raises(ValueError, match="scenario: no co-simulated scenario 'd9'; known: d3-ch4-3"):
         rc.session_config("d9", 1, tmp_path)
 
