@@ -26,7 +26,14 @@ from typing import Any
 
 from bridge.core.config import to_toml
 from bridge.experiments.sessions import run_config
-from bridge.studies.roy.regions_cosim import NOISE_FILE, THESIS_COV, noise_profiles, session_config, session_metrics
+from bridge.studies.roy.regions_cosim import (
+    NO_SCATTER,
+    NOISE_FILE,
+    THESIS_COV,
+    noise_profiles,
+    session_config,
+    session_metrics,
+)
 
 SONAR_M = 0.01  # per unit of s: the ping's 1-sigma range error (m)
 POSE_M = 0.01  # ... the camera's fix error in x and y (m)
@@ -65,8 +72,9 @@ def measure(n: int, prof: dict[str, Any], seed: int, duration: float) -> dict[st
 
 
 def score(cov: dict[int, float | None]) -> float:
-    """The sum over N of the squared log ratio of our COV to the thesis' (inf when one is missing or 0)."""
-    if any(not v for v in cov.values()):
+    """The sum over N of the squared log ratio of our COV to the thesis' (inf when one is missing or 0 to rounding:
+    an area kept exactly reads 1e-16)."""
+    if any(v is None or v < NO_SCATTER for v in cov.values()):
         return math.inf
     return sum(math.log(cov[n] / THESIS_COV[n]) ** 2 for n in cov)
 

@@ -46,6 +46,7 @@ UNIT_CM2 = 100.0  # one thesis unit^2 (0.1 m squared) in cm^2
 TIME_TOL = 0.2  # D3-D5: +-20 % on times after the speed calibration
 AREA_TOL = 0.2  # D4: +-20 % on areas
 COV_TOL = 0.5  # D1: the area's COV within 50 % of the thesis' (as C4-COV)
+NO_SCATTER = 1e-9  # D1: a COV below this is an area kept exactly (rounding leaves 1e-16)
 LINES = ("line", "column", "row")  # the line formations (Algorithm 1's shapes)
 
 # the thesis' figures (digest §6 D1, D3-D5; §4.5.2)
@@ -326,7 +327,7 @@ def judge_d1(outcomes: list[Outcome]) -> Verdict:
     above = all(cov[n, "d1"] > cov[n, "noiseless"] for n in (3, 6))
     falls = cov[6, "d1"] < cov[3, "d1"]
     good = near and above and falls
-    if max(cov.values()) < 1e-9:
+    if max(cov.values()) < NO_SCATTER:
         return ours, False, "no scatter at all: chapter 4's repaired region keeps pi a b = pi r_c^2 exactly (A4)"
     why = (
         f"noisy COV within {100 * COV_TOL:g} % of the thesis' {'yes' if near else 'no'}, above noiseless "

@@ -69,7 +69,9 @@ def test_the_calibration_profiles_scale_both_noises_and_score_by_log_ratio() -> 
     assert p0["sonar"]["sonar_noise_m"] == 0.0 and p0["camera"]["model"]["x_std_m"] == 0.0
     assert p2["sonar"]["sonar_noise_m"] == pytest.approx(0.02) and p2["camera"]["model"]["y_std_m"] == 0.02
     assert score({3: 0.097, 6: 0.02}) == pytest.approx(0.0)
-    assert score({3: 0.0, 6: 0.02}) == math.inf and score({3: 0.05, 6: 0.02}) > score({3: 0.09, 6: 0.02})
+    assert score({3: 0.0, 6: 0.02}) == score({3: 1e-16, 6: 0.02}) == math.inf and score({3: 0.05, 6: 0.02}) > score(
+        {3: 0.09, 6: 0.02}
+    )
 
 
 def _plan(t: float, *areas: float, a: float = 2.0, b: float = 1.0) -> dict:
