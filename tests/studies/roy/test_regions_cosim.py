@@ -159,3 +159,14 @@ def test_the_d_targets_pass_and_fail_on_synthetic_outcomes() -> None:
     assert targets["D5"].evaluate(d5(11.5, 27.0, 30.5))[1] is True  # x 3.67: 42, 99, 112 s
     assert targets["D5"].evaluate(d5(5.0, 27.0, 30.5))[1] is False
     assert targets["D5"].evaluate(d5(11.5, 31.0, 30.5))[1] is False  # the boundary before the release
+
+
+def test_a_bad_end_on_event_is_refused_naming_the_field(tmp_path: Path) -> None:
+    from bridge.core.config import ConfigError, load_config
+
+    text = (rc.SONPI_DIR / "regions_ch6.toml").read_text()
+    assert 'end_on_event = "controller/done"' in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace('end_on_event = "controller/done"', 'end_on_event = "done"'))
+    with pytest.raises((ConfigError, ValueError), match=r"formation.*end_on_event"):
+        load_config(path).section("formation")
