@@ -72,8 +72,9 @@ class CosimScenario:
     jitter: bool = True
 
 
-# the two-lane session splits from its file's start poses, not from every jittered one (a start 3 cm and 10 degrees
-# off kept the detector from seeing both lanes in a trial): its trials differ by the sensors' noise alone
+# the two-lane cells keep the file's start poses (a start 3 cm and 10 degrees off kept the ch6 detector from seeing
+# both lanes): their trials differ by the seed's sensor noise alone, which can keep it from splitting too
+# (docs/roy-regions.md, "What the co-simulated runs show")
 COSIM: dict[str, CosimScenario] = {
     "d3-ch4-3": CosimScenario("regions_ch4_d3.toml", "D1, D3", noise="d1"),
     "d3-ch4-6": CosimScenario("regions_ch4_d3_6.toml", "D1, D3", noise="d1"),
