@@ -48,6 +48,7 @@ from bridge.studies.roy.regions_ch56 import (
     judge_c9,
     recorder_for,
 )
+from bridge.studies.roy.regions_cosim import cosim_trial, judge_d1, judge_d3, judge_d4, judge_d5
 from bridge.studies.roy.regions_scenarios import SCENARIO_DIR, RegionScenario, load_scenario, make_planner
 from bridge.studies.roy.regions_world import MissionResult, run_mission
 
@@ -103,6 +104,12 @@ CELLS: tuple[CellSpec, ...] = (
     # C7, C8: scenario 1 (ch6-case2's map) and scenario 2 (ch6-case3's) at the other N of Tables 6.2 and 6.3
     *(CellSpec("ch6-case2", agents=n, max_trials=SCALING_TRIALS.get(n)) for n in SCALING_N if n != 100),
     *(CellSpec("ch6-case3", agents=n, max_trials=SCALING_TRIALS.get(n)) for n in SCALING_N if n != 50),
+    CellSpec("d3-ch4-3", kind="cosim", max_trials=3),  # D1 (noisy, 3), D3 (251 s): SonPI sessions, regions_cosim
+    CellSpec("d3-ch4-6", kind="cosim", max_trials=3),  # D1 (noisy, 6), D3 (615 s)
+    CellSpec("d1-ch4-3-noiseless", kind="cosim", max_trials=2),  # D1 (noiseless, 3)
+    CellSpec("d1-ch4-6-noiseless", kind="cosim", max_trials=2),  # D1 (noiseless, 6)
+    *(CellSpec(f"d4-ch6-{n}", kind="cosim", max_trials=3) for n in (4, 5, 6)),  # D4 (two lanes; N = 4, 5, 6)
+    CellSpec("d5-ch5-3", kind="cosim", max_trials=3),  # D5 (polygon regions)
 )
 
 
@@ -297,6 +304,7 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
 # the scenario kinds a cell can name, each a function running one trial of a cell ("cosim": still to be written)
 SCENARIO_KINDS: dict[str, Callable[[dict[str, Any], Trial], TrialResult]] = {
     "numerical": numerical_trial,
+    "cosim": cosim_trial,
 }
 
 
@@ -531,7 +539,6 @@ class RoyRegionsExperiment(Experiment):
         return run_kind(trial.cell, trial)
 
     def targets(self) -> list[Target]:
-        cosim = "needs co-simulated cells (kind 'cosim': SonPI sessions through the region controller), not built"
         return [
             Target(
                 "B3",
@@ -685,25 +692,30 @@ class RoyRegionsExperiment(Experiment):
                 "D1",
                 "hardware analog: area COV with noise",
                 "0.097 (3 robots), 0.02 (6); noiseless 0.022, 0.001",
-                "COV falling with N",
-                pending(cosim),
+                "COV within 50 %, above noiseless, falling with N",
+                judge_d1,
             ),
             Target(
                 "D3",
                 "geometric region on SonPIs: goal times, lines in corridors",
                 "3 robots 251 s; 6 robots 615 s",
-                "+-20 %",
-                pending(cosim),
+                "+-20 % after the speed calibration on 3 robots; a line at the narrowest region",
+                judge_d3,
             ),
             Target(
                 "D4",
                 "split/merge on SonPIs, 2-lane arena",
-                "pre-split 3120 cm^2; overlap 220 s; goal 385 s; final 2400 cm^2",
-                "+-20 %",
-                pending(cosim),
+                "pre-split 3120 cm^2; overlap 220 s; goal 385 s; final 2400 cm^2; N = 4, 5, 6: 309.7 / 349.56 / "
+                "386.77 s",
+                "+-20 % after the speed calibration on N = 6",
+                judge_d4,
             ),
             Target(
-                "D5", "polygon region on SonPIs", "'all in circles' 42, 100 s; goal 367 s", "+-20 %", pending(cosim)
+                "D5",
+                "polygon region on SonPIs",
+                "'all in circles' 42, 100 s; new boundary 112 s; goal 367 s",
+                "+-20 % after the speed calibration on the goal",
+                judge_d5,
             ),
         ]
 
