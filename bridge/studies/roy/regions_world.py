@@ -12,9 +12,12 @@ scenario's schedule) stops for good but keeps reporting its pose and sonars. Hea
 one when stopped). Sonars (m beams at the scenario's angles from the heading) are cast only at the planner's period,
 from the poses of that tick: range to the nearest obstacle, NaN beyond the window's far end.
 
-Speed: obstacle edges are bucketed once into a grid of cells as wide as the sonar range; a beam or a move is tested
-only against its cell's edges (padded to the fullest cell), so one tick and one cast are a few dense numpy
-operations over (N, m, K) with K the edges near a cell, not over every edge of the map.
+Speed: obstacle edges are bucketed once into two grids: a beam is tested only against the edges within d_max / 2 of
+its midpoint's cell (every point of the beam is that close to its midpoint), a move only against the edges within
+one tick's travel of its start's cell, each padded to the fullest cell; so one tick and one cast are a few dense
+numpy operations over (N, K) and (N, m, K) with K the few edges near a cell, not over every edge of the map. The
+candidates are a superset of the edges a beam or move can meet, in edge order, so the result is the same as testing
+every edge.
 """
 
 from __future__ import annotations
@@ -64,13 +67,11 @@ class EdgeGrid:
         if len(edges):
             near = point_segment_distance(centres, edges[:, 0], edges[:, 1]) <= reach + cell * math.sqrt(0.5)
         else:
-            near = np.zeros((len(centres), 0), bool)
+            near = np.zeros((len(centres), 1), bool)
+        self.pad = len(self.a) - 1  # the far-away edge's index
         k = max(1, int(near.sum(axis=1).max(initial=0)))
-        table = np.full((len(centres), k), len(self.a) - 1)
-        for c in np.nonzero(near.any(axis=1))[0]:  # once, at construction
-            idx = np.nonzero(near[c])[0]
-            table[c, : len(idx)] = idx
-        self.table = table
+        first = np.argsort(~near, axis=1, kind="stable")[:, :k]  # each cell's near edges first, in edge order
+        self.table = np.where(np.take_along_axis(near, first, axis=1), first, self.pad)
 
     def candidates(self, p: np.ndarray) -> np.ndarray:
         """The candidate edges' indices (N, K) of each point p (N, 2) (points off the grid take the nearest cell)."""
@@ -102,7 +103,12 @@ class RegionsWorld:
         edges = sc.world.edges()
         size = np.asarray(sc.world.size, float)
         self.edges = edges
-        self.grid = EdgeGrid(edges, np.zeros(2), size, max(self.d_max, 1.0), self.d_max + 1.0)
+        # beams by their midpoint (the grid reaches d_max / 2 + 1 beyond the map: an agent up to 1 unit outside it is
+        # still covered), moves by their start (a tick's travel at most v_max dt)
+        half = self.d_max / 2
+        out = half + 1.0
+        self.beam_grid = EdgeGrid(edges, np.full(2, -out), size + out, max(half / 4, 0.5), half + 0.01)
+        self.move_grid = EdgeGrid(edges, np.full(2, -1.0), size + 1.0, 1.0, self.v_max * self.dt + 0.01)
         self.circles = np.asarray([c for c in sc.world.circles], float).reshape(-1, 3)
         self.movers = tuple(Mover(tuple(m.a), tuple(m.b), m.radius, m.speed) for m in sc.world.movers)
 
@@ -136,8 +142,17 @@ class RegionsWorld:
         a = self.heading[:, None] + self.angles[None]
         d = np.stack([np.cos(a), np.sin(a)], axis=-1)
         o = np.broadcast_to(self.pos[:, None, :], d.shape)
-        cand = self.grid.candidates(self.pos)
-        best = ray_segments(o, d, self.grid.a[cand][:, None], self.grid.b[cand][:, None]).min(axis=-1)
+        g = self.beam_grid
+        ob, db = o.reshape(-1, 2), d.reshape(-1, 2)
+        cand = g.candidates(ob + db * (self.d_max / 2))
+        ray, k = np.nonzero(cand != g.pad)  # only the real (beam, edge) pairs, by beam
+        e = cand[ray, k]
+        s = ray_segments(ob[ray], db[ray], g.a[e][:, None], g.b[e][:, None])[:, 0]
+        flat = np.full(len(ob), np.inf)
+        if len(ray):
+            first = np.concatenate([[True], ray[1:] != ray[:-1]])
+            flat[ray[first]] = np.minimum.reduceat(s, np.nonzero(first)[0])
+        best = flat.reshape(d.shape[:2])
         for cx, cy, r in self.discs():
             best = np.minimum(best, ray_circle(o, d, np.array([cx, cy]), r))
         return np.where(best <= self.d_max, best, np.nan)
@@ -152,8 +167,8 @@ class RegionsWorld:
         v[self.failed] = 0.0
         p = self.pos
         q = p + v * self.dt
-        cand = self.grid.candidates(p)
-        ga, gb = self.grid.a[cand], self.grid.b[cand]
+        cand = self.move_grid.candidates(p)
+        ga, gb = self.move_grid.a[cand], self.move_grid.b[cand]
         hit = crosses(p, q, ga, gb) if len(p) else np.zeros(0, bool)
         if hit.any():
             q = self._slide(p, q, hit, ga, gb)
