@@ -12,12 +12,12 @@ scenario's schedule) stops for good but keeps reporting its pose and sonars. Hea
 one when stopped). Sonars (m beams at the scenario's angles from the heading) are cast only at the planner's period,
 from the poses of that tick: range to the nearest obstacle, NaN beyond the window's far end.
 
-Speed: obstacle edges are bucketed once into two grids: a beam is tested only against the edges within d_max / 2 of
-its midpoint's cell (every point of the beam is that close to its midpoint), a move only against the edges within
-one tick's travel of its start's cell, each padded to the fullest cell; so one tick and one cast are a few dense
-numpy operations over (N, K) and (N, m, K) with K the few edges near a cell, not over every edge of the map. The
-candidates are a superset of the edges a beam or move can meet, in edge order, so the result is the same as testing
-every edge.
+Speed: obstacle edges are bucketed once into two grids: a beam is tested only against the edges near its pieces
+(each quarter of it: the edges within d_max / 8 of the quarter's midpoint's cell; every point of the quarter is that
+close to its midpoint), a move only against the edges within one tick's travel of its start's cell; so one cast is
+a few numpy operations over the (beam, edge) pairs that can meet, and one tick over (N, K) with K the few edges near
+a cell (padded to the fullest cell), not over every edge of the map. The candidates are a superset of the edges a
+beam or move can meet, in edge order, so the result is the same as testing every edge.
 """
 
 from __future__ import annotations
@@ -35,11 +35,13 @@ from bridge.studies.roy.metrics import region_statistics, structural_density, tr
 from bridge.studies.roy.numerical import Mover, crosses, ray_circle, ray_segments, scatter
 from bridge.studies.roy.regions_scenarios import RegionScenario
 from swarm_logic.families.roy.regions.formation import shape_name
+from swarm_logic.families.roy.regions.laws import unique_rows
 from swarm_logic.families.roy.regions.planner import Observation, Plan, RegionPlanner, velocities
 from swarm_logic.families.roy.regions.sensing import beam_points
 from swarm_logic.log import plain
 
 FAR = 1e9  # where the padding edge lies (degenerate, never hit)
+BEAM_PIECES = 4  # a beam's edges are looked up per quarter of its length
 
 
 def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -105,9 +107,9 @@ class RegionsWorld:
         self.edges = edges
         # beams by their midpoint (the grid reaches d_max / 2 + 1 beyond the map: an agent up to 1 unit outside it is
         # still covered), moves by their start (a tick's travel at most v_max dt)
-        half = self.d_max / 2
-        out = half + 1.0
-        self.beam_grid = EdgeGrid(edges, np.full(2, -out), size + out, max(half / 4, 0.5), half + 0.01)
+        piece = self.d_max / BEAM_PIECES
+        out = self.d_max + 1.0
+        self.beam_grid = EdgeGrid(edges, np.full(2, -out), size + out, max(piece / 4, 0.25), piece / 2 + 0.01)
         self.move_grid = EdgeGrid(edges, np.full(2, -1.0), size + 1.0, 1.0, self.v_max * self.dt + 0.01)
         self.circles = np.asarray([c for c in sc.world.circles], float).reshape(-1, 3)
         self.movers = tuple(Mover(tuple(m.a), tuple(m.b), m.radius, m.speed) for m in sc.world.movers)
@@ -138,15 +140,19 @@ class RegionsWorld:
         return np.concatenate([self.circles, np.asarray(mv, float).reshape(-1, 3)])
 
     def cast(self) -> np.ndarray:
-        """The sonar ranges (N, m) from the current poses: the nearest obstacle along each beam, NaN beyond d_max."""
-        a = self.heading[:, None] + self.angles[None]
+        """The sonar ranges (N, m) from the current poses: the nearest obstacle along each beam, NaN beyond d_max
+        (agents on one spot with one heading read the same: cast once, copied)."""
+        first, same = unique_rows(np.column_stack([self.pos, self.heading]))
+        a = self.heading[first, None] + self.angles[None]
         d = np.stack([np.cos(a), np.sin(a)], axis=-1)
-        o = np.broadcast_to(self.pos[:, None, :], d.shape)
+        o = np.broadcast_to(self.pos[first, None, :], d.shape)
         g = self.beam_grid
         ob, db = o.reshape(-1, 2), d.reshape(-1, 2)
-        cand = g.candidates(ob + db * (self.d_max / 2))
-        ray, k = np.nonzero(cand != g.pad)  # only the real (beam, edge) pairs, by beam
-        e = cand[ray, k]
+        at = (np.arange(BEAM_PIECES) + 0.5) * (self.d_max / BEAM_PIECES)  # the pieces' midpoints along a beam
+        cand = g.candidates((ob[:, None] + db[:, None] * at[None, :, None]).reshape(-1, 2))
+        piece, k = np.nonzero(cand != g.pad)  # only the real (piece, edge) pairs, by beam
+        e = cand[piece, k]
+        ray = piece // BEAM_PIECES
         s = ray_segments(ob[ray], db[ray], g.a[e][:, None], g.b[e][:, None])[:, 0]
         flat = np.full(len(ob), np.inf)
         if len(ray):
@@ -155,7 +161,7 @@ class RegionsWorld:
         best = flat.reshape(d.shape[:2])
         for cx, cy, r in self.discs():
             best = np.minimum(best, ray_circle(o, d, np.array([cx, cy]), r))
-        return np.where(best <= self.d_max, best, np.nan)
+        return np.where(best <= self.d_max, best, np.nan)[same]
 
     def step(self, u: np.ndarray) -> None:
         """One tick: the commanded velocities (N, 2), saturated at v_max, zero for failed agents, integrated with

@@ -8,9 +8,11 @@ import hashlib
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from bridge.studies.roy.regions_scenarios import load_scenario, make_planner
 from bridge.studies.roy.regions_world import EdgeGrid, RegionsWorld, run_mission
+from swarm_logic.families.roy.regions.laws import kernel_sum, saturate, split_merge_law, unique_rows
 
 SHIPPED = ("ch4-a", "ch4-maze-50", "ch4-mover", "ch5-a", "ch6-case1", "ch6-case2", "ch6-case3")
 
@@ -63,6 +65,34 @@ def test_the_grids_cast_and_move_as_testing_every_edge(name: str) -> None:
         assert ref.contacts > 0  # some moves do hit an edge
         assert np.array_equal(w.pos, ref.pos) and w.contacts == ref.contacts
         assert np.array_equal(w.heading, ref.heading)
+
+
+def _knn_law_per_agent(x: np.ndarray, centre: np.ndarray, obs: np.ndarray, r_s: float, k_f: float = 2.5) -> np.ndarray:
+    """Eq. 6.5 "knn" (8 nearest within 3 r_s) as it was written before the speed work: one query per agent."""
+    pts = np.concatenate([x, obs])
+    k = min(9, len(pts))
+    _, idx = cKDTree(pts).query(x, k=k, distance_upper_bound=3 * r_s)
+    idx = idx.reshape(len(x), k)
+    i = np.repeat(np.arange(len(x)), k).reshape(len(x), k)
+    keep = (idx < len(pts)) & (idx != i)
+    return saturate(-12.0 * (x - centre) + k_f * kernel_sum(x, i[keep], idx[keep], r_s, others=pts), 1.0)
+
+
+def test_the_knn_law_works_once_per_spot_and_gives_the_same_bits() -> None:
+    """Swarms stack agents on one spot: clumps bigger and smaller than the neighbour count, a wall of repeated sonar
+    points, per-agent centres; the law per distinct spot equals the law per agent bit for bit."""
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        spots = rng.uniform(0, 4, (int(rng.integers(1, 40)), 2))
+        x = spots[rng.integers(0, len(spots), int(rng.integers(2, 300)))]
+        x[: len(x) // 3] += rng.normal(0, 0.05, (len(x) // 3, 2))  # a third off the spots
+        obs = np.repeat(rng.uniform(0, 4, (int(rng.integers(0, 30)), 2)), int(rng.integers(1, 5)), axis=0)
+        centre = rng.uniform(0, 4, (len(x), 2)) if trial % 2 else np.array([2.0, 2.0])
+        r_s = float(rng.uniform(0.05, 0.5))
+        fast = split_merge_law(x, centre, obs, mode="knn", r_s=r_s, neighbours=8, v_max=1.0)
+        assert np.array_equal(fast, _knn_law_per_agent(x, centre, obs, r_s))
+    first, same = unique_rows(x)
+    assert len(first) < len(x) and np.array_equal(x[first][same], x)
 
 
 @pytest.mark.parametrize(("name", "n", "seed", "max_s", "digest"), PINNED)
