@@ -25,8 +25,8 @@ TARGET_SESSION_RTF = 2.0
 def ch6_figures(quick: bool = False, duration: float | None = None) -> list[str]:
     """Chapter 6's cases at ``CH6_AGENTS`` agents, seed ``CH6_SEED``, each a mission to its end (``duration``: that many
     simulated seconds; quick: ``ch6-case2`` alone, ``QUICK_CH6_S`` s); a line each: simulated and wall seconds, the
-    real-time factor (simulated per wall second), CPU seconds, and where the time went (planner, sonar cast, the law
-    and the moves)."""
+    real-time factor (simulated per wall second), CPU seconds and simulated seconds per CPU second (what a quiet core
+    would give), and where the wall time went (planner, sonar cast, the law and the moves)."""
     max_s = duration if duration is not None else (QUICK_CH6_S if quick else None)
     lines = []
     for k, name in enumerate(CH6_CASES[:1] if quick else CH6_CASES):
@@ -42,8 +42,8 @@ def ch6_figures(quick: bool = False, duration: float | None = None) -> list[str]
         lines.append(
             f"  chapter 6 numerical model, {name} with {CH6_AGENTS} agents (seed {CH6_SEED}, {end}): "
             f"{p['sim_s']:.2f} simulated s in {p['wall_s']:.2f} s wall, rtf {p['sim_s'] / wall:.1f}x ({goal}); "
-            f"{cpu:.2f} CPU-s; planner {p['plan_s']:.2f} s, sonar cast {p['cast_s']:.2f} s, law and moves "
-            f"{p['world_s']:.2f} s"
+            f"{cpu:.2f} CPU-s ({p['sim_s'] / max(cpu, 1e-9):.1f} simulated s per CPU-s); wall s in the planner "
+            f"{p['plan_s']:.2f}, the sonar cast {p['cast_s']:.2f}, the law and the moves {p['world_s']:.2f}"
         )
     return lines
 
