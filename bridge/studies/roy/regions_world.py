@@ -42,6 +42,7 @@ from swarm_logic.log import plain
 
 FAR = 1e9  # where the padding edge lies (degenerate, never hit)
 BEAM_PIECES = 4  # a beam's edges are looked up per quarter of its length
+MAX_CELLS = 1 << 16  # the most cells an edge grid has
 
 
 def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -67,7 +68,12 @@ class EdgeGrid:
         gi, gj = np.meshgrid(np.arange(self.shape[0]), np.arange(self.shape[1]), indexing="ij")
         centres = self.lo + (np.stack([gi.ravel(), gj.ravel()], axis=1) + 0.5) * cell
         if len(edges):
-            near = point_segment_distance(centres, edges[:, 0], edges[:, 1]) <= reach + cell * math.sqrt(0.5)
+            near = np.concatenate(
+                [  # in blocks of cells: the distances of a block to every edge at a time
+                    point_segment_distance(c, edges[:, 0], edges[:, 1]) <= reach + cell * math.sqrt(0.5)
+                    for c in np.array_split(centres, max(1, len(centres) // 4096))
+                ]
+            )
         else:
             near = np.zeros((len(centres), 1), bool)
         self.pad = len(self.a) - 1  # the far-away edge's index
@@ -105,12 +111,15 @@ class RegionsWorld:
         edges = sc.world.edges()
         size = np.asarray(sc.world.size, float)
         self.edges = edges
-        # beams by their midpoint (the grid reaches d_max / 2 + 1 beyond the map: an agent up to 1 unit outside it is
-        # still covered), moves by their start (a tick's travel at most v_max dt)
+        # beams by their pieces' midpoints (the grid reaches d_max + 1 beyond the map: the beams of an agent up to 1
+        # unit outside it are still covered), moves by their start (a tick's travel is at most v_max dt); on a large
+        # map the cells grow so that a grid has at most MAX_CELLS of them
         piece = self.d_max / BEAM_PIECES
         out = self.d_max + 1.0
-        self.beam_grid = EdgeGrid(edges, np.full(2, -out), size + out, max(piece / 4, 0.25), piece / 2 + 0.01)
-        self.move_grid = EdgeGrid(edges, np.full(2, -1.0), size + 1.0, 1.0, self.v_max * self.dt + 0.01)
+        cell = max(piece / 4, 0.25, math.sqrt(float(np.prod(size + 2 * out)) / MAX_CELLS))
+        self.beam_grid = EdgeGrid(edges, np.full(2, -out), size + out, cell, piece / 2 + 0.01)
+        cell = max(1.0, math.sqrt(float(np.prod(size + 2.0)) / MAX_CELLS))
+        self.move_grid = EdgeGrid(edges, np.full(2, -1.0), size + 1.0, cell, self.v_max * self.dt + 0.01)
         self.circles = np.asarray([c for c in sc.world.circles], float).reshape(-1, 3)
         self.movers = tuple(Mover(tuple(m.a), tuple(m.b), m.radius, m.speed) for m in sc.world.movers)
 
@@ -156,8 +165,8 @@ class RegionsWorld:
         s = ray_segments(ob[ray], db[ray], g.a[e][:, None], g.b[e][:, None])[:, 0]
         flat = np.full(len(ob), np.inf)
         if len(ray):
-            first = np.concatenate([[True], ray[1:] != ray[:-1]])
-            flat[ray[first]] = np.minimum.reduceat(s, np.nonzero(first)[0])
+            start = np.concatenate([[True], ray[1:] != ray[:-1]])  # each beam's first pair
+            flat[ray[start]] = np.minimum.reduceat(s, np.nonzero(start)[0])
         best = flat.reshape(d.shape[:2])
         for cx, cy, r in self.discs():
             best = np.minimum(best, ray_circle(o, d, np.array([cx, cy]), r))
