@@ -288,7 +288,8 @@ def _parser_bench(sub: Any) -> None:
     p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time and the 12-robot "
                                    "arena's real-time factor; zebro: 20 Zebros' real-time factor by packing and body "
                                    "model, and the numerical 360-run table's wall time; roy: 100 numerical runs of "
-                                   "chapter 3's scenario with BAT, wall time and runs/s)")
+                                   "chapter 3's scenario with BAT, wall time and runs/s, the SonPI camera sessions, "
+                                   "chapter 6 with 1000 agents and the SonPIs under chapter 6's region planner)")
     p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
     p.set_defaults(fn=cmd_bench)
 

@@ -4,7 +4,9 @@ machine's cores (target: under 5 minutes), and one run through the controllers f
 SonPIs running chapter 3's law (fixed gains: the optimisers' cost is the numerical figure's) under the overhead
 camera: six in tracking mode (``hil_configs/sonpi/camera_formation.toml``, target at least 2x real time) and thirty
 in noise mode (target at least 1x), each with its real-time factor and every process's CPU seconds per simulated
-second. Figures only, never pass/fail: the machine is shared and noisy."""
+second; then chapters 4-6's virtual regions (``regions_bench``): chapter 6's numerical cases with 1000 agents (target
+at least 10x real time) and six SonPIs with the global controller hosting chapter 6's region planner under the
+tracking camera (target at least 2x). Figures only, never pass/fail: the machine is shared and noisy."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from typing import Any
 
 from bridge.experiments.sessions import run_config
 from bridge.studies.roy.numerical import SCENARIOS, ch3_batch, ch3_trial
+from bridge.studies.roy.regions_bench import TARGET_SESSION_RTF, ch6_figures, region_session
 
 RUNS = 100
 QUICK_RUNS = 10
@@ -51,19 +54,26 @@ def _session(name: str, raw: dict[str, Any], out_dir: str) -> dict[str, Any]:
     return run_config(raw, work, name)[0]
 
 
+def session_line(what: str, raw: dict[str, Any], target: float, out_dir: str) -> str:
+    """Run a session; its line: ``what``, its duration, real-time factor against ``target``, and every process's CPU
+    seconds per simulated second."""
+    s = _session(raw["session"]["name"], raw, out_dir)
+    sim = max(float(s["sim_time_s"]), 1e-9)
+    cpu = ", ".join(f"{p} {v / sim:.2f}" for p, v in sorted((s.get("process_cpu_s") or {}).items()))
+    print(f"  ran {what}: rtf {s['rtf']}x", file=sys.stderr)
+    return (
+        f"  {what}, {raw['session']['duration_s']:g} s: rtf {s['rtf']}x (target >= {target:g}x), "
+        f"{s['processes']} processes; CPU-s per simulated s: {cpu}"
+    )
+
+
 def camera_figures(duration: float, out_dir: str) -> list[str]:
     """Run the camera sessions; a line each: robots, mode, real-time factor against its target, and every
     process's CPU seconds per simulated second."""
-    lines = []
-    for mode, raw in camera_sessions(duration):
-        n = raw["robots"][0]["count"]
-        s = _session(raw["session"]["name"], raw, out_dir)
-        sim = max(float(s["sim_time_s"]), 1e-9)
-        cpu = ", ".join(f"{p} {v / sim:.2f}" for p, v in sorted((s.get("process_cpu_s") or {}).items()))
-        lines.append(f"  {n} SonPIs, camera in {mode} mode, {duration:g} s: rtf {s['rtf']}x (target >= "
-                     f"{TARGET_RTF[mode]:g}x), {s['processes']} processes; CPU-s per simulated s: {cpu}")
-        print(f"  ran {n} SonPIs ({mode}): rtf {s['rtf']}x", file=sys.stderr)
-    return lines
+    return [
+        session_line(f"{raw['robots'][0]['count']} SonPIs, camera in {mode} mode", raw, TARGET_RTF[mode], out_dir)
+        for mode, raw in camera_sessions(duration)
+    ]
 
 
 def _batch(seeds: list[int], max_s: float | None) -> tuple[int, int, float]:
@@ -75,8 +85,19 @@ def _batch(seeds: list[int], max_s: float | None) -> tuple[int, int, float]:
 
 def bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
     """``RUNS`` (``QUICK_RUNS``) seeded runs to arrival or the 600 s timeout (``duration``: simulated seconds per
-    run instead), in one batch per core; then the camera sessions (``duration`` or 10 s quick, 30 s full)."""
+    run instead), in one batch per core; then the camera sessions (``duration`` or 10 s quick, 30 s full); then
+    the regions figures: the chapter 6 session (``duration`` or 10 s quick, 60 s full: through the split) and the
+    1000-agent numerical cases (each to its end, ``duration`` s, or quick one case for 10 s)."""
     camera = camera_figures(duration or (10.0 if quick else 30.0), out_dir)
+    regions = [
+        session_line(
+            "6 SonPIs, global controller hosting the ch6 region planner, camera in tracking mode",
+            region_session(duration or (10.0 if quick else 60.0)),
+            TARGET_SESSION_RTF,
+            out_dir,
+        )
+    ]
+    regions += ch6_figures(quick, duration)
     n = QUICK_RUNS if quick else RUNS
     jobs = max(1, min(os.cpu_count() or 1, n))
     seeds = list(range(1, n + 1))
@@ -98,5 +119,8 @@ def bench(quick: bool = False, duration: float | None = None, out_dir: str = "ru
     print(f"  ran {n} runs in {wall:.1f} s", file=sys.stderr)
     print(f"  one run through the controllers (RoyApf per agent, no batch): {alone:.3f} CPU-s per simulated s")
     for line in camera:
+        print(line)
+    print("  virtual regions (chapters 4-6):")
+    for line in regions:
         print(line)
     return 0

@@ -12,9 +12,12 @@ scenario's schedule) stops for good but keeps reporting its pose and sonars. Hea
 one when stopped). Sonars (m beams at the scenario's angles from the heading) are cast only at the planner's period,
 from the poses of that tick: range to the nearest obstacle, NaN beyond the window's far end.
 
-Speed: obstacle edges are bucketed once into a grid of cells as wide as the sonar range; a beam or a move is tested
-only against its cell's edges (padded to the fullest cell), so one tick and one cast are a few dense numpy
-operations over (N, m, K) with K the edges near a cell, not over every edge of the map.
+Speed: obstacle edges are bucketed once into two grids: a beam is tested only against the edges near its pieces
+(each quarter of it: the edges within d_max / 8 of the quarter's midpoint's cell; every point of the quarter is that
+close to its midpoint), a move only against the edges within one tick's travel of its start's cell; so one cast is
+a few numpy operations over the (beam, edge) pairs that can meet, and one tick over (N, K) with K the few edges near
+a cell (padded to the fullest cell), not over every edge of the map. The candidates are a superset of the edges a
+beam or move can meet, in edge order, so the result is the same as testing every edge.
 """
 
 from __future__ import annotations
@@ -32,11 +35,14 @@ from bridge.studies.roy.metrics import region_statistics, structural_density, tr
 from bridge.studies.roy.numerical import Mover, crosses, ray_circle, ray_segments, scatter
 from bridge.studies.roy.regions_scenarios import RegionScenario
 from swarm_logic.families.roy.regions.formation import shape_name
+from swarm_logic.families.roy.regions.laws import unique_rows
 from swarm_logic.families.roy.regions.planner import Observation, Plan, RegionPlanner, velocities
 from swarm_logic.families.roy.regions.sensing import beam_points
 from swarm_logic.log import plain
 
 FAR = 1e9  # where the padding edge lies (degenerate, never hit)
+BEAM_PIECES = 4  # a beam's edges are looked up per quarter of its length
+MAX_CELLS = 1 << 16  # the most cells an edge grid has
 
 
 def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -62,15 +68,18 @@ class EdgeGrid:
         gi, gj = np.meshgrid(np.arange(self.shape[0]), np.arange(self.shape[1]), indexing="ij")
         centres = self.lo + (np.stack([gi.ravel(), gj.ravel()], axis=1) + 0.5) * cell
         if len(edges):
-            near = point_segment_distance(centres, edges[:, 0], edges[:, 1]) <= reach + cell * math.sqrt(0.5)
+            near = np.concatenate(
+                [  # in blocks of cells: the distances of a block to every edge at a time
+                    point_segment_distance(c, edges[:, 0], edges[:, 1]) <= reach + cell * math.sqrt(0.5)
+                    for c in np.array_split(centres, max(1, len(centres) // 4096))
+                ]
+            )
         else:
-            near = np.zeros((len(centres), 0), bool)
+            near = np.zeros((len(centres), 1), bool)
+        self.pad = len(self.a) - 1  # the far-away edge's index
         k = max(1, int(near.sum(axis=1).max(initial=0)))
-        table = np.full((len(centres), k), len(self.a) - 1)
-        for c in np.nonzero(near.any(axis=1))[0]:  # once, at construction
-            idx = np.nonzero(near[c])[0]
-            table[c, : len(idx)] = idx
-        self.table = table
+        first = np.argsort(~near, axis=1, kind="stable")[:, :k]  # each cell's near edges first, in edge order
+        self.table = np.where(np.take_along_axis(near, first, axis=1), first, self.pad)
 
     def candidates(self, p: np.ndarray) -> np.ndarray:
         """The candidate edges' indices (N, K) of each point p (N, 2) (points off the grid take the nearest cell)."""
@@ -102,7 +111,15 @@ class RegionsWorld:
         edges = sc.world.edges()
         size = np.asarray(sc.world.size, float)
         self.edges = edges
-        self.grid = EdgeGrid(edges, np.zeros(2), size, max(self.d_max, 1.0), self.d_max + 1.0)
+        # beams by their pieces' midpoints (the grid reaches d_max + 1 beyond the map: the beams of an agent up to 1
+        # unit outside it are still covered), moves by their start (a tick's travel is at most v_max dt); on a large
+        # map the cells grow so that a grid has at most MAX_CELLS of them
+        piece = self.d_max / BEAM_PIECES
+        out = self.d_max + 1.0
+        cell = max(piece / 4, 0.25, math.sqrt(float(np.prod(size + 2 * out)) / MAX_CELLS))
+        self.beam_grid = EdgeGrid(edges, np.full(2, -out), size + out, cell, piece / 2 + 0.01)
+        cell = max(1.0, math.sqrt(float(np.prod(size + 2.0)) / MAX_CELLS))
+        self.move_grid = EdgeGrid(edges, np.full(2, -1.0), size + 1.0, cell, self.v_max * self.dt + 0.01)
         self.circles = np.asarray([c for c in sc.world.circles], float).reshape(-1, 3)
         self.movers = tuple(Mover(tuple(m.a), tuple(m.b), m.radius, m.speed) for m in sc.world.movers)
 
@@ -132,15 +149,28 @@ class RegionsWorld:
         return np.concatenate([self.circles, np.asarray(mv, float).reshape(-1, 3)])
 
     def cast(self) -> np.ndarray:
-        """The sonar ranges (N, m) from the current poses: the nearest obstacle along each beam, NaN beyond d_max."""
-        a = self.heading[:, None] + self.angles[None]
+        """The sonar ranges (N, m) from the current poses: the nearest obstacle along each beam, NaN beyond d_max
+        (agents on one spot with one heading read the same: cast once, copied)."""
+        first, same = unique_rows(np.column_stack([self.pos, self.heading]))
+        a = self.heading[first, None] + self.angles[None]
         d = np.stack([np.cos(a), np.sin(a)], axis=-1)
-        o = np.broadcast_to(self.pos[:, None, :], d.shape)
-        cand = self.grid.candidates(self.pos)
-        best = ray_segments(o, d, self.grid.a[cand][:, None], self.grid.b[cand][:, None]).min(axis=-1)
+        o = np.broadcast_to(self.pos[first, None, :], d.shape)
+        g = self.beam_grid
+        ob, db = o.reshape(-1, 2), d.reshape(-1, 2)
+        at = (np.arange(BEAM_PIECES) + 0.5) * (self.d_max / BEAM_PIECES)  # the pieces' midpoints along a beam
+        cand = g.candidates((ob[:, None] + db[:, None] * at[None, :, None]).reshape(-1, 2))
+        piece, k = np.nonzero(cand != g.pad)  # only the real (piece, edge) pairs, by beam
+        e = cand[piece, k]
+        ray = piece // BEAM_PIECES
+        s = ray_segments(ob[ray], db[ray], g.a[e][:, None], g.b[e][:, None])[:, 0]
+        flat = np.full(len(ob), np.inf)
+        if len(ray):
+            start = np.concatenate([[True], ray[1:] != ray[:-1]])  # each beam's first pair
+            flat[ray[start]] = np.minimum.reduceat(s, np.nonzero(start)[0])
+        best = flat.reshape(d.shape[:2])
         for cx, cy, r in self.discs():
             best = np.minimum(best, ray_circle(o, d, np.array([cx, cy]), r))
-        return np.where(best <= self.d_max, best, np.nan)
+        return np.where(best <= self.d_max, best, np.nan)[same]
 
     def step(self, u: np.ndarray) -> None:
         """One tick: the commanded velocities (N, 2), saturated at v_max, zero for failed agents, integrated with
@@ -152,8 +182,8 @@ class RegionsWorld:
         v[self.failed] = 0.0
         p = self.pos
         q = p + v * self.dt
-        cand = self.grid.candidates(p)
-        ga, gb = self.grid.a[cand], self.grid.b[cand]
+        cand = self.move_grid.candidates(p)
+        ga, gb = self.move_grid.a[cand], self.move_grid.b[cand]
         hit = crosses(p, q, ga, gb) if len(p) else np.zeros(0, bool)
         if hit.any():
             q = self._slide(p, q, hit, ga, gb)

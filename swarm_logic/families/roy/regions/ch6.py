@@ -253,6 +253,17 @@ class Ch6Planner(RegionPlanner):
     def _goal_radius(self, s: _Swarm) -> float:
         return self.p.goal_radius if self.p.goal_radius is not None else math.sqrt(s.area / math.pi)
 
+    def _groups(self, ids: np.ndarray) -> np.ndarray:
+        """Each of ``ids``' sub-swarm (-1: none) by ``group_of``, looked up in one sorted array."""
+        if not self.group_of:
+            return np.full(len(ids), -1, dtype=int)
+        keys = np.fromiter(self.group_of.keys(), dtype=int, count=len(self.group_of))
+        vals = np.fromiter(self.group_of.values(), dtype=int, count=len(self.group_of))
+        order = np.argsort(keys)
+        keys, vals = keys[order], vals[order]
+        at = np.minimum(np.searchsorted(keys, ids), len(keys) - 1)
+        return np.where(keys[at] == ids, vals[at], -1)
+
     def _record(self, events: list[dict[str, Any]], e: dict[str, Any]) -> None:
         events.append(e)
         if e["kind"] in ("split", "merge", "promotion"):
@@ -285,7 +296,7 @@ class Ch6Planner(RegionPlanner):
         elif self.mission is None and self.targets is None:
             events.append({"kind": "input", "reason": "target", "target": np.asarray(obs.target).tolist()})
         live_ids, live_x = ids[ok], x[ok]
-        row = {int(i): r for r, i in enumerate(ids.tolist()) if ok[r]}
+        row = dict(zip(ids[ok].tolist(), np.nonzero(ok)[0].tolist(), strict=True))
 
         if not self.swarms:
             if not len(live_ids):
@@ -300,7 +311,7 @@ class Ch6Planner(RegionPlanner):
                 self.dropped[k_] += v
             if pts.dropped["garbage"]:
                 events.append({"kind": "input", "reason": "readings", "dropped": dict(pts.dropped)})
-        group_row = np.array([self.group_of.get(int(i), -1) if ok[r] else -1 for r, i in enumerate(ids.tolist())])
+        group_row = np.where(ok, self._groups(ids), -1)
         free_pts, free_row = self._free_ends(x, hd, rng, ang, ok)
         for s in self.swarms:
             mine = group_row == s.sub.id
@@ -331,8 +342,9 @@ class Ch6Planner(RegionPlanner):
 
     def _join(self, ids: np.ndarray, x: np.ndarray, events: list) -> None:
         """Agents seen for the first time join the sub-swarm whose region centre is nearest."""
-        for i, p in zip(ids.tolist(), x, strict=True):
-            if i in self.group_of:
+        new = [r for r, i in enumerate(ids.tolist()) if i not in self.group_of]
+        for i, p in zip(ids[new].tolist(), x[new], strict=True):
+            if i in self.group_of:  # an id given twice
                 continue
             k = int(np.argmin([np.hypot(*(p - s.sub.region.centre)) for s in self.swarms]))
             s = self.swarms[k]
@@ -504,14 +516,15 @@ class Ch6Planner(RegionPlanner):
     def _plan(self, t: float, ids: np.ndarray, x: np.ndarray, events: list, row: dict[int, int] | None = None) -> Plan:
         n = len(ids)
         centre = {s.sub.id: s.sub.region.centre for s in self.swarms}
-        groups = np.array([self.group_of.get(int(i), -1) for i in ids.tolist()], dtype=int)
+        groups = self._groups(ids)
         fallback = self.mission if self.mission is not None else np.zeros(2)
-        goals = np.array([centre.get(g, fallback) for g in groups.tolist()]).reshape(n, 2)
+        kinds, which = np.unique(groups, return_inverse=True)  # one goal per sub-swarm, copied to its members
+        goals = np.array([centre.get(g, fallback) for g in kinds.tolist()]).reshape(-1, 2)[which].reshape(n, 2)
         row = row or {}
         all_in = bool(self.swarms) and bool(row)
         for s in self.swarms:
             tgt = self._final_target(s)
-            present = [row[m] for m in s.sub.members if m in row]
+            present = list(map(row.__getitem__, filter(row.__contains__, s.sub.members)))
             there = (
                 tgt is not None
                 and s.waypoint is None

@@ -29,6 +29,18 @@ def saturate(u: np.ndarray, v_max: float | None) -> np.ndarray:
     return u * s[:, None]
 
 
+def unique_rows(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``a`` (N, c) that differ bit for bit: ``first`` the index of each one's first occurrence and
+    ``same`` (N,) which of them each row is (``a[first][same]`` is ``a``). Work done once per distinct row and copied
+    gives the same bits as done per row: swarms stack agents on one spot (a pull that converges to its float centre)."""
+    a = np.ascontiguousarray(a)
+    if not len(a):
+        return np.zeros(0, int), np.zeros(0, int)
+    v = a.reshape(len(a), -1).view(np.dtype((np.void, a.dtype.itemsize * int(np.prod(a.shape[1:])))))
+    _, first, same = np.unique(v.ravel(), return_index=True, return_inverse=True)
+    return first, same.ravel()
+
+
 def kernel_sum(
     x: np.ndarray, i: np.ndarray, j: np.ndarray, scale: np.ndarray | float, others: np.ndarray | None = None
 ) -> np.ndarray:
@@ -205,11 +217,14 @@ def split_merge_law(
         if not (isinstance(neighbours, int) and neighbours >= 1):
             raise ValueError(f"neighbours: must be an integer >= 1, got {neighbours!r}")
         k = min(neighbours + 1, len(pts))
-        _, idx = tree.query(x, k=k, distance_upper_bound=radius_scales * r_s)
-        idx = idx.reshape(n, k)
-        i = np.repeat(np.arange(n), k).reshape(n, k)
-        keep = (idx < len(pts)) & (idx != i)
-        u = u + k_f * kernel_sum(x, i[keep], idx[keep], r_s, others=pts)
+        # agents on one spot (bit for bit) have the same neighbours and the same sum: each spot's is worked out once
+        # (dropping another agent of the spot instead of oneself drops the same zero term)
+        first, same = unique_rows(x)
+        _, idx = tree.query(x[first], k=k, distance_upper_bound=radius_scales * r_s)
+        idx = idx.reshape(len(first), k)
+        i = np.repeat(np.arange(len(first)), k).reshape(len(first), k)
+        keep = (idx < len(pts)) & (idx != first[:, None])
+        u = u + k_f * kernel_sum(x[first], i[keep], idx[keep], r_s, others=pts)[same]
     else:
         lists = tree.query_ball_point(x, radius_scales * r_s)
         i = np.repeat(np.arange(n), [len(v) for v in lists])

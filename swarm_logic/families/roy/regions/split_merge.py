@@ -524,7 +524,7 @@ def _rows(ids: np.ndarray | Sequence[int] | None, positions: np.ndarray) -> tupl
     if len(idv) != len(pos):
         raise ValueError(f"ids: {len(idv)} ids for {len(pos)} positions")
     ok = np.isfinite(pos).all(axis=1)
-    return pos, {int(i): r for r, i in enumerate(idv.tolist()) if ok[r]}
+    return pos, dict(zip(idv[ok].tolist(), np.nonzero(ok)[0].tolist(), strict=True))
 
 
 def ensure_leader(
@@ -534,7 +534,7 @@ def ensure_leader(
     live leader: if its leader is missing, the surviving member nearest its region's centre (eq. 6.14's rule) is
     promoted and the promotion returned for the caller to log."""
     pos, row = _rows(ids, positions)
-    alive = tuple(m for m in swarm.members if m in row)
+    alive = tuple(filter(row.__contains__, swarm.members))
     if swarm.leader in row and swarm.leader in alive:
         return (swarm if alive == swarm.members else replace(swarm, members=alive)), None
     if not alive:
