@@ -16,12 +16,12 @@ from swarm_logic.families.roy.regions.laws import kernel_sum, saturate, split_me
 
 SHIPPED = ("ch4-a", "ch4-maze-50", "ch4-mover", "ch5-a", "ch6-case1", "ch6-case2", "ch6-case3")
 
-# (scenario, agents (None: the file's), seed, simulated seconds (None: to the end)): short missions run twice
+# (scenario, agents (None: the file's), seed, simulated seconds): short missions, run twice
 SAME_BYTES = [
-    ("ch6-case2", 1000, 1, 5.0),
-    ("ch6-case3", 6, 2, 30.0),
-    ("ch4-mover", None, 1, 20.0),
-    ("ch5-a", None, 1, 20.0),
+    ("ch6-case2", 1000, 1, 2.0),
+    ("ch6-case3", 6, 2, 12.0),
+    ("ch4-mover", None, 1, 8.0),
+    ("ch5-a", None, 1, 8.0),
 ]
 
 
