@@ -29,6 +29,19 @@ from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialR
 from bridge.experiments.stats import mean, ok, values
 from bridge.studies.roy.metrics import linear_fit
 from bridge.studies.roy.numerical import Mover
+from bridge.studies.roy.regions_baselines import (
+    C10_NS,
+    C10_TRIALS,
+    C10_VARIANTS,
+    FILE_N,
+    TVI_BASELINE,
+    TVI_NS,
+    TVI_PROPOSED,
+    TVI_TRIALS,
+    baseline_metrics,
+    judge_c5_tvi,
+    judge_c10,
+)
 from bridge.studies.roy.regions_scenarios import SCENARIO_DIR, RegionScenario, load_scenario, make_planner
 from bridge.studies.roy.regions_world import MissionResult, run_mission
 
@@ -60,11 +73,14 @@ class CellSpec:
     kind: str = "numerical"
     failures: float | None = None
     max_trials: int | None = None
+    agents: int | None = None  # the same map with this many agents (``RegionScenario.with_agents``), None: the file's
 
     def cell(self) -> dict[str, Any]:
         c: dict[str, Any] = {"kind": self.kind, "scenario": self.scenario}
         if self.failures is not None:
             c["failures"] = self.failures
+        if self.agents is not None:
+            c["agents"] = self.agents
         return c
 
 
@@ -73,6 +89,13 @@ CELLS: tuple[CellSpec, ...] = (
     CellSpec("ch4-maze-50"),  # B3, C4 (150 s, area COV 0.019), C5
     *(CellSpec("ch4-failures-50", failures=f) for f in FAILURES),  # B3, B5, C4 (250 s)
     CellSpec("ch4-mover"),  # B6
+    *(CellSpec(TVI_PROPOSED, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS[:-1]),  # C5-TVI (N = 50: ch4-maze-50)
+    *(CellSpec(TVI_BASELINE, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS),  # C5-TVI: the aggregation baseline
+    *(
+        CellSpec(sc, agents=None if n == FILE_N else n, max_trials=C10_TRIALS[n])
+        for n in C10_NS
+        for sc in C10_VARIANTS.values()
+    ),  # C10
 )
 
 
@@ -81,6 +104,8 @@ def scenario_of(cell: dict[str, Any]) -> RegionScenario:
     sc = load_scenario(cell["scenario"])
     if cell.get("failures") is not None:
         sc = sc.with_failures(float(cell["failures"]))
+    if cell.get("agents") is not None:
+        sc = sc.with_agents(int(cell["agents"]))
     return sc
 
 
@@ -242,6 +267,7 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
         **formation_metrics(res, plan),
         **failure_metrics(res, sc),
         **mover_metrics(res, sc),
+        **baseline_metrics(res),
     }
     ser = res.series
     t = [float(x) for x in ser["t"]]
@@ -416,11 +442,6 @@ def judge_c5_density(outcomes: list[Outcome]) -> Verdict:
     if not parts:
         return no_runs(outcomes, "needs runs with both an ellipse and a circle after the first 10 s")
     return "; ".join(parts), good, "D(t) eq. 4.50, means over the periods after 10 s; the ellipse = among obstacles"
-
-
-def judge_c5_tvi(outcomes: list[Outcome]) -> Verdict:
-    ours = "; ".join(f"N={n:g}: TVI {_f(float(np.mean(v)), 3)}" for n, v in _by_n(outcomes, "tvi").items())
-    return ours or "no runs", None, "needs the no-communication aggregation baseline (Shah & Vachhani 2019), not built"
 
 
 def _by_n(outcomes: list[Outcome], metric: str, timing: bool = False) -> dict[float, np.ndarray]:
@@ -631,7 +652,7 @@ class RoyRegionsExperiment(Experiment):
                 "running time: centralised < vision L-F < proposed with L-F, at every N",
                 "N = 6: 615 < 944 < 1029 s; N = 50: 150 < 192 < 250 s",
                 "the ordering",
-                pending("needs the vision leader-follower baselines and chapter 7's environment, not built"),
+                judge_c10,
             ),
             Target(
                 "C11",
@@ -768,7 +789,8 @@ class RoyRegionsExperiment(Experiment):
 
 def cell_label(cell: dict[str, Any]) -> str:
     """A cell's name in tables and plots: its scenario, with its failure fraction when it sets one."""
-    return cell["scenario"] + (f" {100 * cell['failures']:g} %" if cell.get("failures") is not None else "")
+    label = cell["scenario"] + (f" {100 * cell['failures']:g} %" if cell.get("failures") is not None else "")
+    return label + (f" N={cell['agents']}" if cell.get("agents") is not None else "")
 
 
 def representatives(outcomes: list[Outcome]) -> dict[str, TrialResult]:

@@ -10,6 +10,7 @@ import pytest
 from bridge.experiments import runner as ex
 from bridge.experiments.runner import Outcome, Trial, TrialResult, get_experiment
 from bridge.studies.roy import regions_experiments as rx
+from bridge.studies.roy.regions_baselines import C10_VARIANTS, TVI_BASELINE, TVI_NS
 from bridge.studies.roy.regions_experiments import CELLS, SCENARIO_KINDS, CellSpec, RoyRegionsExperiment
 
 TARGETS = ["B3", "B4", "B5", "B6", "B7", "B8", "B9", "B10", "B11", "B12", "C4-6", "C4-50", "C4-fail", "C4-COV"]
@@ -21,11 +22,15 @@ def test_the_cells_are_the_scenario_files_with_their_kind_and_failure_fractions(
 ) -> None:
     exp = get_experiment("roy-regions")()
     cells = exp.cells(smoke=False)
-    assert {c["scenario"] for c in cells} == {"ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"}
+    ch4 = {"ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"}
+    assert {c["scenario"] for c in cells} == ch4 | {TVI_BASELINE, *C10_VARIANTS.values()}
     assert sorted(c["failures"] for c in cells if "failures" in c) == [0.05, 0.10, 0.20]
     assert all(c["kind"] in SCENARIO_KINDS for c in cells) and exp.cells(smoke=True) == cells
     for c in cells:
-        assert rx.scenario_of(c).name == c["scenario"] and exp.cell_trials(c, 7) == 7
+        sc = rx.scenario_of(c)
+        assert sc.name == c["scenario"] and ("agents" not in c or sc.agents.n == c["agents"])
+        cap = next(s.max_trials for s in CELLS if s.cell() == c)
+        assert exp.cell_trials(c, 7) == min(7, cap or 7)
     assert rx.scenario_of({"scenario": "ch4-failures-50", "failures": 0.2}).failures.fraction == 0.2
     # a new scenario is one line, with a cap on its trials when its runs are dear
     monkeypatch.setattr(rx, "CELLS", (*CELLS, CellSpec("ch4-a", failures=0.5, max_trials=3)))
@@ -127,7 +132,7 @@ def test_a_smoke_run_reports_every_target_and_draws_the_plots(tmp_path: Path) ->
     run = ex.execute_experiment(
         "roy-regions", smoke=True, jobs=1, out=tmp_path, progress=False, only={"scenario": ["ch4-a", "ch4-maze-50"]}
     )
-    assert run.failed == 0 and len(run.outcomes) == 2
+    assert run.failed == 0 and len(run.outcomes) == 2 + len(TVI_NS) - 1  # and the C5-TVI cells at other N
     report = (tmp_path / "report.md").read_text()
     for tid in TARGETS:
         assert f"| {tid} |" in report
