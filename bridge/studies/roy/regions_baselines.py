@@ -32,7 +32,7 @@ C10_VARIANTS = {"central": "ch7-arena-central", "vision": "ch7-arena-vision", "l
 C10_THESIS = {6: (615.0, 944.0, 1029.0), 50: (150.0, 192.0, 250.0), 400: (1253.0, 1722.0, 2057.0)}
 C10_NS = (6, 50, 400)
 C10_TRIALS = {6: None, 50: 10, 400: 3}  # trials per cell (None: the experiment's); the 400-agent missions are dear
-FILE_N = 6  # the ch7-arena files' own N (their cells at 6 name no agents)
+# (every C10 cell names its N, 6 too: ``--only agents=6,50`` picks rows of the table)
 
 Verdict = tuple[str, bool | None, str]
 

@@ -33,7 +33,6 @@ from bridge.studies.roy.regions_baselines import (
     C10_NS,
     C10_TRIALS,
     C10_VARIANTS,
-    FILE_N,
     TVI_BASELINE,
     TVI_NS,
     TVI_PROPOSED,
@@ -89,13 +88,9 @@ CELLS: tuple[CellSpec, ...] = (
     CellSpec("ch4-maze-50"),  # B3, C4 (150 s, area COV 0.019), C5
     *(CellSpec("ch4-failures-50", failures=f) for f in FAILURES),  # B3, B5, C4 (250 s)
     CellSpec("ch4-mover"),  # B6
-    *(CellSpec(TVI_PROPOSED, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS[:-1]),  # C5-TVI (N = 50: ch4-maze-50)
+    *(CellSpec(TVI_PROPOSED, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS),  # C5-TVI: the proposed method
     *(CellSpec(TVI_BASELINE, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS),  # C5-TVI: the aggregation baseline
-    *(
-        CellSpec(sc, agents=None if n == FILE_N else n, max_trials=C10_TRIALS[n])
-        for n in C10_NS
-        for sc in C10_VARIANTS.values()
-    ),  # C10
+    *(CellSpec(sc, agents=n, max_trials=C10_TRIALS[n]) for n in C10_NS for sc in C10_VARIANTS.values()),  # C10
 )
 
 

@@ -74,9 +74,9 @@ def test_the_cells_of_both_targets() -> None:
     cells = [c.cell() for c in CELLS]
     for n in rb.TVI_NS:
         assert {"kind": "numerical", "scenario": rb.TVI_BASELINE, "agents": n} in cells
-    assert {"kind": "numerical", "scenario": rb.TVI_PROPOSED} in cells  # N = 50: chapter 4's own cell
+        assert {"kind": "numerical", "scenario": rb.TVI_PROPOSED, "agents": n} in cells
     for sc in rb.C10_VARIANTS.values():
-        assert {"kind": "numerical", "scenario": sc} in cells  # N = 6: the files' own
+        assert {"kind": "numerical", "scenario": sc, "agents": 6} in cells  # the files' own N, named
         assert {"kind": "numerical", "scenario": sc, "agents": 400} in cells
 
 
