@@ -73,17 +73,34 @@ def local_centroids(x: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarra
     return c, count
 
 
-def _law_params(k_c: float, k_f: float, r_s: float, radius_scales: float, neighbours: int) -> dict[str, Any]:
-    """Eq. 6.5's law in "knn" mode: the pull toward each agent's goal and the repulsion from its nearest teammates and
-    sonar points (the baselines' collision avoidance: the same kernel as the proposed method's chapter 6 law)."""
-    return {
-        "mode": "knn",
-        "k_c": k_c,
-        "k_f": k_f,
-        "r_s": r_s,
-        "radius_scales": radius_scales,
-        "neighbours": neighbours,
-    }
+@dataclass(frozen=True)
+class KnnLawParams:
+    """The baselines' local law: eq. 6.5 in its "knn" mode, the pull ``k_c`` toward each agent's goal and the
+    repulsion ``k_f`` exp(-d / ``r_s``) from its ``neighbours`` nearest teammates and sonar points within
+    ``radius_scales`` r_s (the same kernel as the proposed method's chapter 6 law); ``period_s`` the planner's."""
+
+    k_c: float = 0.5
+    k_f: float = 1.0
+    r_s: float = 0.5
+    radius_scales: float = 3.0
+    neighbours: int = 8
+    period_s: float = 0.25
+
+    def __post_init__(self) -> None:
+        check_fields(self, ("k_c", "k_f", "r_s", "radius_scales", "period_s"))
+        k = self.neighbours
+        require(isinstance(k, int) and k >= 1, "neighbours", "must be an integer >= 1", k)
+
+    def law_params(self) -> dict[str, Any]:
+        """The plan's ``params`` for the law ``split_merge``."""
+        return {
+            "mode": "knn",
+            "k_c": self.k_c,
+            "k_f": self.k_f,
+            "r_s": self.r_s,
+            "radius_scales": self.radius_scales,
+            "neighbours": self.neighbours,
+        }
 
 
 def _sorted(obs: Observation) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -100,32 +117,24 @@ def _sorted(obs: Observation) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @dataclass(frozen=True)
-class AggregationParams:
+class AggregationParams(KnnLawParams):
     """The aggregation baseline's settings, in thesis units. Each agent's desired velocity is ``goal_speed`` x v_max
     along its bearing to the target plus ``cohesion`` x (c_i - x_i), c_i the centroid of the teammates within
     ``sense_range`` (the aggregating attraction: Gazi-Passino's linear term, averaged over the neighbours seen),
-    capped at v_max; the law's pull ``k_c`` realises it and its repulsion (gain ``k_f``, scale ``r_s``, the
-    ``neighbours`` nearest teammates and sonar points within ``radius_scales`` r_s) keeps agents off each other and
-    the walls. ``r_s`` is scaled with N like every scenario's (``with_agents``)."""
+    capped at v_max; the law (``KnnLawParams``) realises it and keeps agents off each other and the walls. ``r_s``
+    is scaled with N like every scenario's (``with_agents``)."""
 
+    r_s: float = 0.606
     v_max: float = 0.3
     goal_speed: float = 0.8
     cohesion: float = 0.2
     sense_range: float = 5.0
-    k_c: float = 0.5
-    k_f: float = 1.0
-    r_s: float = 0.606
-    radius_scales: float = 3.0
-    neighbours: int = 8
-    period_s: float = 0.25
 
     def __post_init__(self) -> None:
-        check_fields(self, ("v_max", "goal_speed", "sense_range", "k_c", "k_f", "r_s", "radius_scales", "period_s"))
+        super().__post_init__()
+        check_fields(self, ("v_max", "goal_speed", "sense_range"))
         check_fields(self, ("cohesion",), positive=False)
         require(self.goal_speed <= 1.0, "goal_speed", "must be at most 1 (a fraction of v_max)", self.goal_speed)
-        require(
-            isinstance(self.neighbours, int) and self.neighbours >= 1, "neighbours", "must be >= 1", self.neighbours
-        )
 
 
 class AggregationPlanner(RegionPlanner):
@@ -165,7 +174,7 @@ class AggregationPlanner(RegionPlanner):
         goals[near] = target
         goals[~good] = xg[~good]
         self.plans += 1
-        params = _law_params(p.k_c, p.k_f, p.r_s, p.radius_scales, p.neighbours)
+        params = p.law_params()
         return Plan(obs.t, ids, goals, "split_merge", params, groups=np.zeros(len(ids), int), events=events)
 
     def summary(self) -> dict[str, Any]:
@@ -176,13 +185,12 @@ class AggregationPlanner(RegionPlanner):
 
 
 @dataclass(frozen=True)
-class VisionLFParams:
+class VisionLFParams(KnnLawParams):
     """The vision leader-follower baseline's settings, in thesis units. ``route``: the leader's predefined trajectory
     (waypoints, the target appended), taken at ``leader_speed`` x v_max; a waypoint is passed within
     ``waypoint_tol``. Followers: ``follow_distance`` behind the predecessor along its heading (a camera's working
     distance: not scaled with N), seen within ``camera_range`` and ``camera_fov_deg`` (the Pi camera's 62 degrees);
-    ``home_radius`` the target's zone. The law: pull ``k_c``, repulsion ``k_f`` at scale ``r_s`` from the
-    ``neighbours`` nearest teammates and sonar points within ``radius_scales`` r_s."""
+    ``home_radius`` the target's zone. The law: ``KnnLawParams``."""
 
     route: tuple[tuple[float, float], ...] = ()
     v_max: float = 0.3
@@ -192,36 +200,13 @@ class VisionLFParams:
     camera_range: float = 3.0
     camera_fov_deg: float = 62.0
     home_radius: float = 2.0
-    k_c: float = 0.5
-    k_f: float = 1.0
-    r_s: float = 0.5
-    radius_scales: float = 3.0
-    neighbours: int = 8
-    period_s: float = 0.25
 
     def __post_init__(self) -> None:
-        check_fields(
-            self,
-            (
-                "v_max",
-                "leader_speed",
-                "waypoint_tol",
-                "follow_distance",
-                "camera_range",
-                "camera_fov_deg",
-                "home_radius",
-                "k_c",
-                "k_f",
-                "r_s",
-                "radius_scales",
-                "period_s",
-            ),
-        )
+        super().__post_init__()
+        names = ("v_max", "leader_speed", "waypoint_tol", "follow_distance", "camera_range", "camera_fov_deg")
+        check_fields(self, (*names, "home_radius"))
         require(self.leader_speed <= 1.0, "leader_speed", "must be at most 1 (a fraction of v_max)", self.leader_speed)
         require(self.camera_fov_deg <= 360.0, "camera_fov_deg", "must be at most 360", self.camera_fov_deg)
-        require(
-            isinstance(self.neighbours, int) and self.neighbours >= 1, "neighbours", "must be >= 1", self.neighbours
-        )
         for k, w in enumerate(self.route):
             require(
                 len(w) == 2 and all(math.isfinite(float(c)) for c in w),
@@ -332,7 +317,7 @@ class VisionLeaderFollowerPlanner(RegionPlanner):
             self.home_t = obs.t
             events.append({"kind": "home", "t": obs.t})
         self.plans += 1
-        params = _law_params(p.k_c, p.k_f, p.r_s, p.radius_scales, p.neighbours)
+        params = p.law_params()
         return Plan(
             obs.t,
             ids,
