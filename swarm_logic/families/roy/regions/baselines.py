@@ -402,18 +402,17 @@ class HostedCh4Planner(Ch4Planner):
                 self.current = self.pending
             self.period_s = self.step_s  # the region moves one step of its dynamics per update
             try:
-                self.pending = super().plan(obs)
+                new = super().plan(obs)
             finally:
                 self.period_s = self.host.poll_s
             self.updates += 1
             self.cycle = self.host.cycle_s(self.n)
             self.ready_at = obs.t + self.cycle
             if self.current is None:  # the first update: the agents wait for it (nothing to follow before)
-                self.current, self.pending = self.pending, None
-                return self.current
-            out = self.current
-        else:
-            out = self.current
+                self.current = new
+            else:
+                self.pending = new
+        out = self.current
         assert out is not None
         fresh = out is not self.last_out
         self.last_out = out

@@ -19,7 +19,8 @@ from swarm_logic.families.roy.regions.baselines import (
     local_centroids,
     toward,
 )
-from swarm_logic.families.roy.regions.planner import PLANNERS, Observation, velocities
+from swarm_logic.families.roy.regions.ch4 import Ch4Planner
+from swarm_logic.families.roy.regions.planner import PLANNERS, Observation, Plan, velocities
 
 
 def obs(t: float, x: list[list[float]], target: tuple[float, float], heads: list[float] | None = None) -> Observation:
@@ -139,3 +140,18 @@ def test_the_hosted_planner_updates_at_its_pace_and_publishes_a_cycle_late(host:
     assert changes == starts[2:]
     step = centres[-1] - centres[0]
     assert step == pytest.approx((len(starts) - 2) * 0.8 * 0.3 * 0.25, rel=1e-6)  # one 0.25-s region step each
+
+
+def test_each_published_plan_carries_its_events_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An update's events go out with its plan, when it is published (a cycle late), and once."""
+
+    def marked(self: Ch4Planner, o: Observation) -> Plan:
+        return Plan(o.t, np.arange(6), np.zeros((6, 2)), "split_merge", events=({"kind": "mark", "t": o.t},))
+
+    monkeypatch.setattr(Ch4Planner, "plan", marked)
+    p = HostedCh4Planner(host="pc", window_s=0.25, compute_s_per_agent=0.0)  # a 0.25-s cycle
+    seen = []
+    for k in range(20):
+        pl = p.plan(obs(round(k * 0.05, 2), [[0.0, 0.0]] * 6, (30.0, 0.0)))
+        seen += [(pl.t, e["t"]) for e in pl.events]
+    assert seen == [(0.0, 0.0), (0.5, 0.25), (0.75, 0.5)]  # the first at once; then each update's a cycle late
