@@ -63,7 +63,8 @@ def test_the_baseline_files_share_their_maps() -> None:
         keys = ("world", "agents", "sensing", "mission", "failures", "metrics")
         return {k: getattr(sc, k).model_dump() for k in keys}
 
-    assert tables(rb.TVI_BASELINE) == tables(rb.TVI_PROPOSED)
+    assert tables(rb.TVI_BASELINE) == tables(rb.TVI_PROPOSED) == tables("ch4-maze-50")
+    assert load_scenario(rb.TVI_PROPOSED).planner == load_scenario("ch4-maze-50").planner
     central, vision, lf = (tables(s) for s in rb.C10_VARIANTS.values())
     assert central == vision == lf
     assert {load_scenario(s).planner.name for s in rb.C10_VARIANTS.values()} == {"ch4_hosted", "vision_lf"}

@@ -10,7 +10,7 @@ import pytest
 from bridge.experiments import runner as ex
 from bridge.experiments.runner import Outcome, Trial, TrialResult, get_experiment
 from bridge.studies.roy import regions_experiments as rx
-from bridge.studies.roy.regions_baselines import C10_VARIANTS, TVI_BASELINE, TVI_NS
+from bridge.studies.roy.regions_baselines import C10_VARIANTS, TVI_BASELINE, TVI_PROPOSED
 from bridge.studies.roy.regions_experiments import CELLS, SCENARIO_KINDS, CellSpec, RoyRegionsExperiment
 
 TARGETS = ["B3", "B4", "B5", "B6", "B7", "B8", "B9", "B10", "B11", "B12", "C4-6", "C4-50", "C4-fail", "C4-COV"]
@@ -23,7 +23,7 @@ def test_the_cells_are_the_scenario_files_with_their_kind_and_failure_fractions(
     exp = get_experiment("roy-regions")()
     cells = exp.cells(smoke=False)
     ch4 = {"ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"}
-    assert {c["scenario"] for c in cells} == ch4 | {TVI_BASELINE, *C10_VARIANTS.values()}
+    assert {c["scenario"] for c in cells} == ch4 | {TVI_PROPOSED, TVI_BASELINE, *C10_VARIANTS.values()}
     assert sorted(c["failures"] for c in cells if "failures" in c) == [0.05, 0.10, 0.20]
     assert all(c["kind"] in SCENARIO_KINDS for c in cells) and exp.cells(smoke=True) == cells
     for c in cells:
@@ -132,7 +132,7 @@ def test_a_smoke_run_reports_every_target_and_draws_the_plots(tmp_path: Path) ->
     run = ex.execute_experiment(
         "roy-regions", smoke=True, jobs=1, out=tmp_path, progress=False, only={"scenario": ["ch4-a", "ch4-maze-50"]}
     )
-    assert run.failed == 0 and len(run.outcomes) == 2 + len(TVI_NS)  # and the C5-TVI cells
+    assert run.failed == 0 and len(run.outcomes) == 2
     report = (tmp_path / "report.md").read_text()
     for tid in TARGETS:
         assert f"| {tid} |" in report
