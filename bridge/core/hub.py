@@ -500,7 +500,8 @@ class Hub:
 
     def _service_log(self, e: str, r: int, t: int, item: list) -> None:
         """``["log", topic, {values}]`` from a service (``Service.log``): recorded under ``/svc/<name>/log/<topic>``;
-        a fourth field names the registered schema to record it with (``register_schema``; unknown: malformed)."""
+        a fourth field names the registered schema to record it with (``register_schema``; unknown: malformed); then
+        shown to the loop functions (``on_service_log``)."""
         _, topic, values, *schema = item
         name = schema[0] if schema else "swarm_sitl.Log"
         if not (isinstance(topic, str) and topic.isidentifier() and isinstance(values, dict)):
@@ -509,6 +510,9 @@ class Hub:
             raise ValueError
         json.dumps(values, allow_nan=False)
         self.rec.write(t, f"/{e}/log/{topic}", name, values)
+        service = e.removeprefix("svc/")
+        for lf in self.loop_functions:
+            lf.on_service_log(service, topic, values, t)
 
     def run(self) -> dict[str, Any]:
         q = self.q_ns

@@ -34,6 +34,10 @@ class LoopFunctions:
     def on_log(self, robot: int, topic: str, values: dict[str, Any], t: int) -> None:
         """A robot's logic logged ``values`` under ``topic`` (already recorded); raise ``ValueError`` if malformed."""
 
+    def on_service_log(self, service: str, topic: str, values: dict[str, Any], t: int) -> None:
+        """Service ``service`` logged ``values`` under ``topic`` at quantum ``t`` (already recorded): a study may end
+        the session on a service's decision (``hub.end_ns``); raise ``ValueError`` if malformed."""
+
     def on_radio_sample(self, t: int, live: list[int], adj: np.ndarray) -> None:
         """The radio medium sampled the live robots' radio graph (``live`` robots, adjacency ``adj``)."""
 

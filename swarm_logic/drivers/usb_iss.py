@@ -97,7 +97,9 @@ class UsbIssSMBus(PlainI2cSMBus):
         if self.port is not None:
             self.close()
         path = bus[len(SCHEME):]
-        self.port = serial.Serial(path, 115200, timeout=self.timeout_s)  # a CDC port: the rate is not used
+        # a CDC port: the rate is not used; a write that cannot go out (the adapter gone, its buffer full) fails
+        # like a read that gets no answer, so closing the bus (which stops the motors) never blocks for good
+        self.port = serial.Serial(path, 115200, timeout=self.timeout_s, write_timeout=self.timeout_s)
         try:
             ident = self._command(bytes([ISS_CMD, ISS_VERSION]), 3)
             if ident[0] != MODULE_ID:
@@ -128,7 +130,10 @@ class UsbIssSMBus(PlainI2cSMBus):
         if port is None:
             raise _error(errno_.EBADF)
         port.reset_input_buffer()  # what a command the adapter ignored left behind
-        port.write(frame)
+        try:
+            port.write(frame)
+        except serial.SerialTimeoutException:
+            raise _error(errno_.ETIMEDOUT, f"the USB-ISS took none of a {len(frame)}-byte command") from None
         return self._read(n)
 
     def _read(self, n: int) -> bytes:

@@ -244,7 +244,7 @@ def test_a_session_sonpi_under_the_camera_is_driven_from_outside_through_both_po
                 bad.sendto(data, (host, int(port)))
         (tmp_path / "hal.toml").write_text(ports_hal(out, 2, int(port)))
         prog = subprocess.Popen(
-            [sys.executable, "-m", "swarm_logic", "--hal", str(tmp_path / "hal.toml")],
+            [sys.executable, "-X", "faulthandler", "-m", "swarm_logic", "--hal", str(tmp_path / "hal.toml")],
             cwd=ROOT,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
@@ -268,7 +268,12 @@ def test_a_session_sonpi_under_the_camera_is_driven_from_outside_through_both_po
         assert math.dist(start_xy, (first["x"], first["y"])) < 0.1  # the camera put it where the session did
         assert last["fresh"] and last["others"] == 2 and last["malformed"] == 0
         prog.send_signal(signal.SIGINT)
-        assert prog.wait(timeout=120) == 0, prog.stderr.read() if prog.stderr else ""
+        try:
+            prog.wait(timeout=120)  # a guard against a hang, not a wait: it exits at once
+        except subprocess.TimeoutExpired:  # a hang: its threads' stacks (faulthandler on SIGABRT) in the failure
+            prog.send_signal(signal.SIGABRT)
+            prog.wait()
+        assert prog.returncode == 0, prog.stderr.read() if prog.stderr else ""
     finally:
         if prog is not None and prog.poll() is None:
             prog.kill()

@@ -5,6 +5,7 @@ modules (the lock-step bench, no processes)."""
 from __future__ import annotations
 
 import errno
+import os
 import random
 import threading
 from collections.abc import Iterator
@@ -219,3 +220,39 @@ def test_the_client_drives_leg_modules_through_the_terminal(bench: tuple[I2cBenc
     assert {t["scl_hz"] for t in txns} == {400_000}  # the mode the client set
     assert [t["status"] for t in txns].count("nack") == 1
     assert b.adapter.counters["nacks"] == 1 and b.adapter.counters["transactions"] == len(txns)
+
+
+def test_a_write_the_adapter_does_not_take_fails_instead_of_blocking(tmp_path: Path) -> None:
+    """An adapter that stops reading (gone, or its program stuck) while its port's buffer is full: the command fails
+    with ETIMEDOUT after the bus's timeout, and closing the bus returns, so a program stopping on Ctrl-C exits."""
+    link = tmp_path / "i2c"
+    b = I2cBench(adapter=UsbIssEntity(0, str(link)))
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            b.step()
+            stop.wait(0.0005)
+
+    th = threading.Thread(target=spin, daemon=True)
+    th.start()
+    try:
+        bus: Any = open_smbus(f"usb-iss://{link}", scl_hz=400_000, timeout_s=0.05)
+    finally:
+        stop.set()
+        th.join()
+    try:
+        fd = bus.port.fd  # pyserial keeps it non-blocking: fill the terminal until it takes no more
+        for size in (4096, 1):
+            with pytest.raises(BlockingIOError):
+                for _ in range(1_000_000):
+                    os.write(fd, bytes(size))
+        with pytest.raises(OSError) as e:
+            bus.write_byte_data(0x10, 0x20, 1)
+        # the write times out ("took none"), or, when the kernel moved some of the terminal's buffer on after all,
+        # the answer does: either way the command fails instead of blocking
+        assert e.value.errno == errno.ETIMEDOUT
+    finally:
+        bus.close()
+        b.adapter.close()
+    assert bus.port is None

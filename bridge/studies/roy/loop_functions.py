@@ -5,7 +5,8 @@ model's arrival test: the centroid within ``goal_tol_m`` of T and every robot wi
 it), the mean path length, and the closest two robots came. Opt-in: a session with a ``[formation]`` section.
 
 Every ``sample_s`` the live robots' poses are sampled (recorded on ``/world/formation``: t, FE, centroid, nearest
-pair); the session ends ``end_after_arrival_s`` after the swarm arrives.
+pair); the session ends ``end_after_arrival_s`` after the swarm arrives, or, with ``end_on_event``
+(``SERVICE/KIND``), ``end_after_event_s`` after a service logs that decision (a region controller's ``done``).
 """
 
 from __future__ import annotations
@@ -43,6 +44,11 @@ class FormationCfg(Section):
     sample_s: float = Field(1.0, gt=0, le=60, description="the sampling step of FE and the arrival test")
     end_after_arrival_s: float | None = Field(0.0, ge=0, description="end the session this long after the swarm "
                                                                      "arrives (none: run to duration_s)")
+    end_on_event: str | None = Field(None, pattern=r"^[A-Za-z_][A-Za-z0-9_-]*/[A-Za-z_][A-Za-z0-9_]*$",
+                                     description="SERVICE/KIND: end the session when service SERVICE logs an event "
+                                                 "of this kind (a region controller's 'controller/done'); the "
+                                                 "swarm's arrival then ends nothing")
+    end_after_event_s: float = Field(1.0, ge=0, description="... this long after that event")
 
 
 def arrived(xy: np.ndarray, target: np.ndarray, r_s: float, tol: float) -> bool:
@@ -71,6 +77,8 @@ class RoyLoopFunctions(LoopFunctions):
         self.nn_min = math.inf
         self.arrived_s: float | None = None
         self.path_m: float | None = None  # the mean odometer at arrival
+        self.end_event = tuple(self.cfg.end_on_event.split("/")) if self.cfg.end_on_event else None
+        self.event_s: float | None = None  # when that event came
 
     def pre_step(self, t: int) -> None:
         if t < self.next_tick:
@@ -98,10 +106,21 @@ class RoyLoopFunctions(LoopFunctions):
         if at:
             self.arrived_s = t / 1e9
             self.path_m = float(w.odometer[w.alive].mean())
-            if self.cfg.end_after_arrival_s is not None:
-                q = self.hub.q_ns
-                end = t + round(self.cfg.end_after_arrival_s * 1e9)
-                self.hub.end_ns = min(self.hub.end_ns, max(t + q, -(-end // q) * q))
+            if self.cfg.end_after_arrival_s is not None and self.end_event is None:
+                self._end(t, self.cfg.end_after_arrival_s)
+
+    def _end(self, t: int, after_s: float) -> None:
+        """End the session ``after_s`` after quantum ``t`` (at the next quantum at the earliest)."""
+        q = self.hub.q_ns
+        end = t + round(after_s * 1e9)
+        self.hub.end_ns = min(self.hub.end_ns, max(t + q, -(-end // q) * q))
+
+    def on_service_log(self, service: str, topic: str, values: dict[str, Any], t: int) -> None:
+        if self.end_event is None or self.event_s is not None or topic != "event":
+            return
+        if (service, values.get("kind")) == self.end_event:
+            self.event_s = t / 1e9
+            self._end(t, self.cfg.end_after_event_s)
 
     def summary(self) -> dict[str, Any]:
         """``formation``: FE's mean and sd over the mission's samples (and its parts: the pairs too close, too far),
@@ -118,4 +137,5 @@ class RoyLoopFunctions(LoopFunctions):
             "fe_far": round(float(np.mean(self.far)), 4) if self.far else None,
             "arrived": self.arrived_s is not None, "mission_s": self.arrived_s,
             "path_m": round(path, 4), "nn_min_m": round(self.nn_min, 4) if math.isfinite(self.nn_min) else None,
+            **({"end_event": self.cfg.end_on_event, "end_event_s": self.event_s} if self.end_event else {}),
         }}

@@ -18,6 +18,7 @@ baseline or kind does not exist yet is "not judged" with the reason; none passes
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +42,25 @@ from bridge.studies.roy.regions_baselines import (
     judge_c5_tvi,
     judge_c10,
 )
+from bridge.studies.roy.regions_ch56 import (
+    SCALING_N,
+    SCALING_TRIALS,
+    ch6_figures,
+    ch56_curves,
+    ch56_metrics,
+    judge_b7,
+    judge_b8,
+    judge_b9,
+    judge_b10,
+    judge_b11,
+    judge_b12,
+    judge_c6,
+    judge_c7,
+    judge_c8,
+    judge_c9,
+    recorder_for,
+)
+from bridge.studies.roy.regions_cosim import cosim_trial, judge_d1, judge_d3, judge_d4, judge_d5
 from bridge.studies.roy.regions_scenarios import SCENARIO_DIR, RegionScenario, load_scenario, make_planner
 from bridge.studies.roy.regions_world import MissionResult, run_mission
 
@@ -65,14 +85,15 @@ SHAPES = ("line", "column", "row", "triangle", "quadrilateral", "pentagon", "hex
 
 @dataclass(frozen=True)
 class CellSpec:
-    """One cell: a scenario file's name, its kind, a failure fraction overriding the file's (or None) and a cap on
-    its trials (None: as many as the experiment runs per cell)."""
+    """One cell: a scenario file's name, its kind, a failure fraction overriding the file's (or None), an agent
+    count overriding the file's (``RegionScenario.with_agents``: the same map, r_s scaled; None: the file's) and a
+    cap on its trials (None: as many as the experiment runs per cell)."""
 
     scenario: str
     kind: str = "numerical"
     failures: float | None = None
     max_trials: int | None = None
-    agents: int | None = None  # the same map with this many agents (``RegionScenario.with_agents``), None: the file's
+    agents: int | None = None
 
     def cell(self) -> dict[str, Any]:
         c: dict[str, Any] = {"kind": self.kind, "scenario": self.scenario}
@@ -88,6 +109,19 @@ CELLS: tuple[CellSpec, ...] = (
     CellSpec("ch4-maze-50"),  # B3, C4 (150 s, area COV 0.019), C5
     *(CellSpec("ch4-failures-50", failures=f) for f in FAILURES),  # B3, B5, C4 (250 s)
     CellSpec("ch4-mover"),  # B6
+    CellSpec("ch5-a"),  # B7, B8, C6 (14 agents, Table 5.1)
+    CellSpec("ch6-case1"),  # B9, B10, B12, C9 (50 agents, r_s 3.2, three lanes)
+    CellSpec("ch6-case2"),  # B9, B10, B12, C9; C7, C8: scenario 1 at N = 100
+    CellSpec("ch6-case3"),  # B9-B12, C9; C7, C8: scenario 2 at N = 50
+    # C7, C8: scenario 1 (ch6-case2's map) and scenario 2 (ch6-case3's) at the other N of Tables 6.2 and 6.3
+    *(CellSpec("ch6-case2", agents=n, max_trials=SCALING_TRIALS.get(n)) for n in SCALING_N if n != 100),
+    *(CellSpec("ch6-case3", agents=n, max_trials=SCALING_TRIALS.get(n)) for n in SCALING_N if n != 50),
+    CellSpec("d3-ch4-3", kind="cosim", max_trials=3),  # D1 (noisy, 3), D3 (251 s): SonPI sessions, regions_cosim
+    CellSpec("d3-ch4-6", kind="cosim", max_trials=3),  # D1 (noisy, 6), D3 (615 s)
+    CellSpec("d1-ch4-3-noiseless", kind="cosim", max_trials=2),  # D1 (noiseless, 3)
+    CellSpec("d1-ch4-6-noiseless", kind="cosim", max_trials=2),  # D1 (noiseless, 6)
+    *(CellSpec(f"d4-ch6-{n}", kind="cosim", max_trials=3) for n in (4, 5, 6)),  # D4 (two lanes; N = 4, 5, 6)
+    CellSpec("d5-ch5-3", kind="cosim", max_trials=3),  # D5 (polygon regions)
     *(CellSpec(TVI_PROPOSED, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS),  # C5-TVI: the proposed method
     *(CellSpec(TVI_BASELINE, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS),  # C5-TVI: the aggregation baseline
     *(CellSpec(sc, agents=n, max_trials=C10_TRIALS[n]) for n in C10_NS for sc in C10_VARIANTS.values()),  # C10
@@ -95,7 +129,7 @@ CELLS: tuple[CellSpec, ...] = (
 
 
 def scenario_of(cell: dict[str, Any]) -> RegionScenario:
-    """The cell's scenario file, with its failure fraction when the cell sets one."""
+    """The cell's scenario file, with its failure fraction and its agent count when the cell sets them."""
     sc = load_scenario(cell["scenario"])
     if cell.get("failures") is not None:
         sc = sc.with_failures(float(cell["failures"]))
@@ -244,9 +278,12 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     run): its metrics, and per planner period the region's area, a, b, D(t) and (N <= 10) the formation's code."""
     sc = scenario_of(cell)
     planner = make_planner(sc)
+    rec = recorder_for(sc, planner)  # chapters 5 and 6: the plans recorded for their targets
+    cpu0 = time.process_time()
     res = run_mission(
-        sc, planner, trial.seed, max_time_s=SMOKE_S if trial.smoke else None, keep_plans=sc.name in GAP_MOVERS
+        sc, rec or planner, trial.seed, max_time_s=SMOKE_S if trial.smoke else None, keep_plans=sc.name in GAP_MOVERS
     )
+    cpu_s = time.process_time() - cpu0
     s, perf = res.summary, res.perf
     plan = formation_plan(res, str(getattr(planner, "shape", "") or ""))
     metrics: dict[str, Any] = {
@@ -262,6 +299,7 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
         **formation_metrics(res, plan),
         **failure_metrics(res, sc),
         **mover_metrics(res, sc),
+        **(ch56_metrics(res, rec, sc) if rec is not None else {}),
         **baseline_metrics(res),
     }
     ser = res.series
@@ -270,13 +308,19 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     if plan:
         curves["formation"] = [float(_code(n)) for n in planned_formation(np.asarray(t), plan)]
         curves["shape"] = [float(_code(n)) for n in ser["shape"]]
-    timings = {"exec_s": perf["plan_s"] + perf["world_s"] + perf["cast_s"], "plan_s": perf["plan_s"]}
-    return TrialResult(metrics, curves, {k: t for k in curves}, timings)
+    xs = {k: t for k in curves}
+    if rec is not None:
+        sub, sub_x = ch56_curves(rec)
+        curves.update(sub)
+        xs.update(sub_x)
+    timings = {"exec_s": perf["plan_s"] + perf["world_s"] + perf["cast_s"], "plan_s": perf["plan_s"], "cpu_s": cpu_s}
+    return TrialResult(metrics, curves, xs, timings)
 
 
 # the scenario kinds a cell can name, each a function running one trial of a cell ("cosim": still to be written)
 SCENARIO_KINDS: dict[str, Callable[[dict[str, Any], Trial], TrialResult]] = {
     "numerical": numerical_trial,
+    "cosim": cosim_trial,
 }
 
 
@@ -467,15 +511,6 @@ def exec_fit(outcomes: list[Outcome]) -> tuple[dict[float, np.ndarray], Any]:
     return by_n, linear_fit(list(by_n), [float(np.mean(v)) for v in by_n.values()])
 
 
-def judge_c8(outcomes: list[Outcome]) -> Verdict:
-    by_n, fit = exec_fit(outcomes)
-    ours = "; ".join(f"N={n:g}: {_f(float(np.mean(v)), 3)} s" for n, v in by_n.items())
-    if fit is not None:
-        ours += f"; fit {_f(fit.intercept, 3)} + {fit.slope:.4f} N s, R^2 {_f(fit.r2, 4)}"
-    why = "needs chapter 6's scenarios 1 and 2 at N = 50, 100, 250, 500, 1000 (the figures here: chapter 4's cells)"
-    return ours or "no runs", None, why
-
-
 @register
 class RoyRegionsExperiment(Experiment):
     name = "roy-regions"
@@ -486,10 +521,12 @@ class RoyRegionsExperiment(Experiment):
         "scenario a versioned look-alike of a lost map (hil_configs/roy/), its planner and parameters the file's "
         "(docs/roy-ch4.md: our resolutions, v_max 0.3 units/s frozen for chapter 4). Cells: ch4-a (6 agents, "
         "Table 4.1), ch4-maze-50 (50 agents, the scalable law), ch4-failures-50 at 5, 10 and 20 % actuator "
-        "failures, ch4-mover (a circle sweeping across the first gap). Each trial is one mission from its own seed "
-        "(deployment, failing agents). timings.csv's exec_s is the wall-clock time of the planner, the world and the "
-        "sonar casts (the thesis' execution time, erratum 29), plan_s the planner's part. Targets of chapters 5 and 6 "
-        "and of the hardware analogs (D) are not judged until their scenarios, baselines or co-simulated cells exist."
+        "failures, ch4-mover (a circle sweeping across the first gap), ch5-a (14 agents, Table 5.1), ch6-case1..3 "
+        "(Table 6.1) and chapter 6's scaling scenarios 1 (ch6-case2's map) and 2 (ch6-case3's) at N = 50-1000 "
+        "(r_s scaled to keep N pi r_s^2). Each trial is one mission from its own seed (deployment, failing agents). "
+        "timings.csv's exec_s is the wall-clock time of the planner, the world and the sonar casts (the thesis' "
+        "execution time, erratum 29), plan_s the planner's part, cpu_s the mission's CPU seconds (C8's measure). "
+        "Targets whose baselines or co-simulated cells do not exist yet are not judged."
     )
     trials = 20
     smoke_trials = 1
@@ -513,9 +550,6 @@ class RoyRegionsExperiment(Experiment):
         return run_kind(trial.cell, trial)
 
     def targets(self) -> list[Target]:
-        ch5 = "needs chapter 5's scenario (14 agents, 50 x 50, Table 5.1) and its cells"
-        ch6 = "needs chapter 6's scenarios (cases 1-3, Table 6.1) and the ch6 planner's cells"
-        cosim = "needs co-simulated cells (kind 'cosim': SonPI sessions through the region controller), not built"
         return [
             Target(
                 "B3",
@@ -551,42 +585,42 @@ class RoyRegionsExperiment(Experiment):
                 "at least N non-overlapping r_s circles in every polygon region; fallback packing",
                 "lattice 6, trim-and-pack 8 (Fig. 5.7); UA minimal at minimal b_fs",
                 "every update",
-                pending(ch5),
+                judge_b7,
             ),
             Target(
                 "B8",
                 "iteration barrier: the region waits until every agent is in its circle",
                 "holds",
                 "every update",
-                pending(ch5),
+                judge_b8,
             ),
             Target(
                 "B9",
                 "split iff >= 2 openings; sub-areas sum to the parent's; widest opening most agents",
                 "Fig. 6.7",
                 "every split",
-                pending(ch6),
+                judge_b9,
             ),
             Target(
                 "B10",
                 "merge iff the next ellipses intersect; area = sum of the sub-areas; one leader",
                 "Fig. 6.9",
                 "every merge",
-                pending(ch6),
+                judge_b10,
             ),
             Target(
                 "B11",
                 "movers in a lane: the sub-swarm's axes change, its area does not",
                 "55-70 s, case 3",
                 "area constant to 1e-9",
-                pending(ch6),
+                judge_b11,
             ),
             Target(
                 "B12",
                 "D(t) low while converging, up after a split, down after a merge",
                 "Figs. 6.8, 6.10",
                 "the order of the changes",
-                pending(ch6),
+                judge_b12,
             ),
             Target("C4-6", "6 agents reach T (ch4-a)", "171 s", "+-20 %", _time_target("ch4-a")),
             Target("C4-50", "50 agents through the maze (ch4-maze-50)", "150 s", "+-20 %", _time_target("ch4-maze-50")),
@@ -619,14 +653,14 @@ class RoyRegionsExperiment(Experiment):
                 "14 agents reach T in the 50 x 50 map; 'all in circles' events",
                 "250 s; 12, 29, 60.2, 94, 153.2 s",
                 "+-20 %; the events' count and order",
-                pending(ch5),
+                judge_c6,
             ),
             Target(
                 "C7",
                 "average structural density (eq. 6.25), falling with N",
                 "0.55 (100), 0.60 (50); 0.43 / 0.40 (500 / 1000, sc. 1); 0.325 / 0.31 (sc. 2)",
                 "+-0.1",
-                pending(ch6),
+                judge_c7,
             ),
             Target(
                 "C8",
@@ -640,7 +674,7 @@ class RoyRegionsExperiment(Experiment):
                 "chapter 6 missions: split, merge, arrival times",
                 "case 2: 10 / 45 / 60 s; case 1: 16 / 82 s; case 3: 35 / 85 s",
                 "+-20 %",
-                pending(ch6),
+                judge_c9,
             ),
             Target(
                 "C10",
@@ -669,25 +703,30 @@ class RoyRegionsExperiment(Experiment):
                 "D1",
                 "hardware analog: area COV with noise",
                 "0.097 (3 robots), 0.02 (6); noiseless 0.022, 0.001",
-                "COV falling with N",
-                pending(cosim),
+                "COV within 50 %, above noiseless, falling with N",
+                judge_d1,
             ),
             Target(
                 "D3",
                 "geometric region on SonPIs: goal times, lines in corridors",
                 "3 robots 251 s; 6 robots 615 s",
-                "+-20 %",
-                pending(cosim),
+                "+-20 % after the speed calibration on 3 robots; a line at the narrowest region",
+                judge_d3,
             ),
             Target(
                 "D4",
                 "split/merge on SonPIs, 2-lane arena",
-                "pre-split 3120 cm^2; overlap 220 s; goal 385 s; final 2400 cm^2",
-                "+-20 %",
-                pending(cosim),
+                "pre-split 3120 cm^2; overlap 220 s; goal 385 s; final 2400 cm^2; N = 4, 5, 6: 309.7 / 349.56 / "
+                "386.77 s",
+                "+-20 % after the speed calibration on N = 6",
+                judge_d4,
             ),
             Target(
-                "D5", "polygon region on SonPIs", "'all in circles' 42, 100 s; goal 367 s", "+-20 %", pending(cosim)
+                "D5",
+                "polygon region on SonPIs",
+                "'all in circles' 42, 100 s; new boundary 112 s; goal 367 s",
+                "+-20 % after the speed calibration on the goal",
+                judge_d5,
             ),
         ]
 
@@ -779,6 +818,7 @@ class RoyRegionsExperiment(Experiment):
         by_n, fit = exec_fit(outcomes)
         if by_n:
             lines += exec_plot(by_n, fit, plots / "exec-time-vs-n.png")
+        lines += ch6_figures(outcomes, plots)
         return lines
 
 
@@ -857,8 +897,15 @@ def density_plot(runs: dict[str, TrialResult], path: Path) -> list[str]:
     return _finish(fig, [ax], "D(t), one trial per cell", path, "D(t)")
 
 
-def exec_plot(by_n: dict[float, np.ndarray], fit: Any, path: Path) -> list[str]:
-    """Execution time per mission against N: each run, the means and the line through them."""
+def exec_plot(
+    by_n: dict[float, np.ndarray],
+    fit: Any,
+    path: Path,
+    label: str = "",
+    ylabel: str = "execution time (s, planner + world, wall clock)",
+) -> list[str]:
+    """Execution time per mission against N: each run, the means and the line through them; ``label`` names the
+    runs in the title (e.g. one scenario's), ``ylabel`` the time measured."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
@@ -867,8 +914,9 @@ def exec_plot(by_n: dict[float, np.ndarray], fit: Any, path: Path) -> list[str]:
     ax.plot(list(by_n), [float(np.mean(v)) for v in by_n.values()], "s", color="C1", label="mean")
     if fit is not None:
         xs = np.linspace(0, max(by_n) * 1.05, 50)
-        label = f"{fit.intercept:.3f} + {fit.slope:.4f} N (R^2 {fit.r2:.3f})"
-        ax.plot(xs, fit.intercept + fit.slope * xs, "--", color="C2", label=label)
+        line = f"{fit.intercept:.3f} + {fit.slope:.4f} N (R^2 {fit.r2:.3f})"
+        ax.plot(xs, fit.intercept + fit.slope * xs, "--", color="C2", label=line)
     ax.set_xlabel("agents N")
-    ax.set_ylabel("execution time (s, planner + world, wall clock)")
-    return _finish(fig, [ax], "execution time against N", path, "execution time against N")
+    ax.set_ylabel(ylabel)
+    what = f"execution time against N{', ' + label if label else ''}"
+    return _finish(fig, [ax], what, path, what)

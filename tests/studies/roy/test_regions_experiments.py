@@ -11,6 +11,7 @@ from bridge.experiments import runner as ex
 from bridge.experiments.runner import Outcome, Trial, TrialResult, get_experiment
 from bridge.studies.roy import regions_experiments as rx
 from bridge.studies.roy.regions_baselines import C10_VARIANTS, TVI_BASELINE, TVI_PROPOSED
+from bridge.studies.roy.regions_cosim import COSIM
 from bridge.studies.roy.regions_experiments import CELLS, SCENARIO_KINDS, CellSpec, RoyRegionsExperiment
 
 TARGETS = ["B3", "B4", "B5", "B6", "B7", "B8", "B9", "B10", "B11", "B12", "C4-6", "C4-50", "C4-fail", "C4-COV"]
@@ -21,14 +22,21 @@ def test_the_cells_are_the_scenario_files_with_their_kind_and_failure_fractions(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     exp = get_experiment("roy-regions")()
-    cells = exp.cells(smoke=False)
-    ch4 = {"ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"}
-    assert {c["scenario"] for c in cells} == ch4 | {TVI_PROPOSED, TVI_BASELINE, *C10_VARIANTS.values()}
+    every = exp.cells(smoke=False)
+    cells = [c for c in every if c["kind"] == "numerical"]
+    assert {c["scenario"] for c in cells} == {"ch4-a", "ch4-maze-50", "ch4-failures-50", "ch4-mover"} | {
+        "ch5-a",
+        "ch6-case1",
+        "ch6-case2",
+        "ch6-case3",
+    } | {TVI_PROPOSED, TVI_BASELINE, *C10_VARIANTS.values()}
+    assert {c["scenario"] for c in every if c["kind"] == "cosim"} == set(COSIM)  # SonPI sessions, few trials each
+    assert all(exp.cell_trials(c, 20) <= 3 for c in every if c["kind"] == "cosim")
     assert sorted(c["failures"] for c in cells if "failures" in c) == [0.05, 0.10, 0.20]
-    assert all(c["kind"] in SCENARIO_KINDS for c in cells) and exp.cells(smoke=True) == cells
+    assert all(c["kind"] in SCENARIO_KINDS for c in every) and exp.cells(smoke=True) == every
     for c in cells:
-        sc = rx.scenario_of(c)
-        assert sc.name == c["scenario"] and ("agents" not in c or sc.agents.n == c["agents"])
+        assert rx.scenario_of(c).name == c["scenario"]
+        assert rx.scenario_of(c).agents.n == c.get("agents", rx.scenario_of(c).agents.n)
         cap = next(s.max_trials for s in CELLS if s.cell() == c)
         assert exp.cell_trials(c, 7) == min(7, cap or 7)
     assert rx.scenario_of({"scenario": "ch4-failures-50", "failures": 0.2}).failures.fraction == 0.2
@@ -57,8 +65,8 @@ def test_smoke_trials_record_the_region_formation_failures_and_the_mover() -> No
     assert f["area_formula"] == pytest.approx(3.14159265 * 4.284**2 * 45 / 50)
     mv = exp.run_batch([Trial("roy-regions", {"kind": "numerical", "scenario": "ch4-mover"}, 0, 5, True, "")])[0]
     assert mv.metrics["mover_in_periods"] + mv.metrics["mover_out_periods"] == 81
-    with pytest.raises(ValueError, match="kind: no scenario kind 'cosim'; known: numerical"):
-        exp.run_batch([Trial("roy-regions", {"kind": "cosim", "scenario": "ch4-a"}, 0, 5, True, "")])
+    with pytest.raises(ValueError, match="kind: no scenario kind 'bench'; known: numerical, cosim"):
+        exp.run_batch([Trial("roy-regions", {"kind": "bench", "scenario": "ch4-a"}, 0, 5, True, "")])
 
 
 def outcome(i: int, smoke: bool = False, **cell_and_metrics: object) -> Outcome:

@@ -304,8 +304,14 @@ class Ch4Planner(RegionPlanner):
         p = self.p
         events: list[dict[str, Any]] = []
         if self.ids is None:
-            if len(obs.ids) == 0:
-                raise ValueError("the first observation has no agent: the planner sizes its swarm from it")
+            if len(obs.ids) == 0:  # nobody seen yet (before the camera's first frame): size the swarm later
+                return Plan(
+                    obs.t,
+                    np.zeros(0, int),
+                    np.zeros((0, 2)),
+                    "formation",
+                    events=({"kind": "held", "reason": "no agent"},),
+                )
             self._setup(obs.ids)
         unknown = self._rows(obs)
         if unknown:

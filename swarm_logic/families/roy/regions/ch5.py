@@ -56,6 +56,7 @@ from swarm_logic.families.roy.regions.records import check_fields
 from swarm_logic.families.roy.regions.sensing import SensingParams, beam_points, sense
 
 DONE_RULES = ("region", "agents")
+STEP_RULES = ("fixed", "horizon")
 FALLBACKS = ("circle", "keep")
 RELEASES = ("all in circles", "timeout")
 
@@ -69,8 +70,11 @@ class Ch5Params:
       closer than 0.5 x 2 r_s repel, None: every pair, as printed (agents then settle off their circles).
     - Sensing: the window ``d_min`` 0.5, ``d_max`` 5 (T, erratum 18: below the thesis' own d_thre- > 2 r_s, used as
       printed); ``r_robot`` and ``eclipse_eps``, a reading this close to a teammate is the teammate.
-    - Region (erratum 19): ``step`` 1 toward T per update, ``packing_density`` 0.7, ``grow`` True (False: the disc is
-      exactly ``d_max``), ``min_points`` 3, ``advance`` "shift_clip" ("efa": the reconstruction as is),
+    - Region (erratum 19): ``step`` 1 toward T per update, ``step_rule`` "fixed" (Φ's centre moves ``step``) or
+      "horizon" (thesis §5.4.1-5.4.2: Φ is fitted "inside the sensed space", eq. 5.5's points within d_thre+ of the
+      agents: its centre moves toward T until its far edge, N π r_s² / η's radius ahead of it, reaches the front
+      agent's sensing horizon d_thre+, never less than ``step``), ``packing_density`` 0.7, ``grow`` True (False: the
+      disc is exactly ``d_max``), ``min_points`` 3, ``advance`` "shift_clip" ("efa": the reconstruction as is),
       ``sort_about`` "points" ("swarm"), ``ordering`` "polar" ("given": literal), ``clearance`` 1 r_s,
       ``harmonics`` 14 and ``samples`` 100 (T).
     - Packing (erratum 20): ``select`` "central" ("all"), ``relax`` True (False: the lattice and shrinking only).
@@ -92,6 +96,7 @@ class Ch5Params:
     r_robot: float = 0.5
     eclipse_eps: float = 0.1
     step: float = 1.0
+    step_rule: str = "fixed"
     packing_density: float = 0.7
     grow: bool = True
     min_points: int = 3
@@ -134,6 +139,7 @@ class Ch5Params:
             self.assignment in ASSIGNMENTS, "assignment", f"expected one of {', '.join(ASSIGNMENTS)}", self.assignment
         )
         require(self.fallback in FALLBACKS, "fallback", f"expected one of {', '.join(FALLBACKS)}", self.fallback)
+        require(self.step_rule in STEP_RULES, "step_rule", f"expected one of {', '.join(STEP_RULES)}", self.step_rule)
         require(self.done_rule in DONE_RULES, "done_rule", f"expected one of {', '.join(DONE_RULES)}", self.done_rule)
         require(
             isinstance(self.frontier_bins, int) and self.frontier_bins >= 8,
@@ -388,7 +394,24 @@ class Ch5Planner(RegionPlanner):
             params = replace(params, sort_about="swarm")  # the outline is a star about the swarm's centroid
         if circle:
             params = replace(params, min_points=max(params.min_points, len(points) + 1))
+        if self.p.step_rule == "horizon" and not circle:  # the fallback's circle keeps ``step``
+            params = replace(params, step=self.horizon_step(pos, target))
         return polygon_region(points, pos, target, self.p.r_s, params)
+
+    def horizon_step(self, pos: np.ndarray, target: np.ndarray) -> float:
+        """``step_rule`` "horizon": how far Φ's centre moves toward T so that its far edge (the radius of the area
+        N π r_s² / η ahead of the centre) lies on the front agent's sensing horizon, d_thre+ beyond the agent
+        farthest along the direction to T; at least ``step``."""
+        if not len(pos) or not np.isfinite(target).all():
+            return self.p.step
+        centre = pos.mean(axis=0)
+        toward = target - centre
+        dist = float(np.hypot(*toward))
+        if dist <= 0.0:
+            return self.p.step
+        front = float(((pos - centre) @ (toward / dist)).max())
+        reach = math.sqrt(len(pos) * self.p.r_s**2 / self.p.packing_density)
+        return max(self.p.step, front + self.p.d_max - reach)
 
     def pack(self, region: PolygonRegion, pos: np.ndarray) -> tuple[CirclePlan | None, str]:
         """The circles and their assignment, and why they cannot hold the swarm ("" when they can): a region with

@@ -42,6 +42,9 @@ def test_absent_and_garbage_readings_do_not_crash() -> None:
     x = fm.tri_coordinates(1.0) + 5.0
     rng = np.array([[np.inf, -1.0, np.nan, 2.0, 2.0, 2.0, 2.0, 2.0]] * 6)
     target = np.array([35.0, 35.0])
+    # nobody seen yet (a session before the camera's first frame): it holds, and sizes the swarm later
+    empty = pl.plan(Observation(-0.25, np.zeros(0, int), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 8)), ang, target))
+    assert empty.goals.shape == (0, 2) and empty.events == ({"kind": "held", "reason": "no agent"},)
     plan = pl.plan(Observation(0.0, ids, x, np.zeros(6), rng, ang, target))
     assert plan.goals.shape == (6, 2) and np.isfinite(plan.goals).all() and list(plan.ids) == list(ids)
     assert {"kind": "input", "dropped": 12, "reason": "garbage"} in plan.events

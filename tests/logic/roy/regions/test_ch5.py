@@ -15,7 +15,7 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from bridge.studies.roy.numerical import crosses, ray_circle, ray_segments
-from swarm_logic.families.roy.regions.ch5 import Ch5Params, Ch5Planner
+from swarm_logic.families.roy.regions.ch5 import STEP_RULES, Ch5Params, Ch5Planner
 from swarm_logic.families.roy.regions.planner import PLANNERS, Observation, Plan, velocities
 from swarm_logic.families.roy.regions.sensing import ring_angles
 
@@ -129,6 +129,7 @@ def test_registered_and_parameters_checked() -> None:
         ({"tolerance": 0.0}, "tolerance"),
         ({"d_min": 6.0}, "d_max"),
         ({"harmonics": 0}, "harmonics"),
+        ({"step_rule": "far"}, "step_rule"),
     ):
         with pytest.raises(ValueError, match=field_name):
             Ch5Params(**bad)
@@ -213,6 +214,32 @@ def test_fourteen_agents_pass_the_corridor_and_reach_the_target(corridor: tuple[
     assert not crosses(track[:-1], track[1:], *CORRIDOR).any()  # no agent went through a wall
     assert s["updates"] >= 25 and len(s["arrivals"]) >= 25
     assert all(u["area"] > 0 for u in s["regions"])
+
+
+def test_the_horizon_step_puts_the_region_edge_on_the_sensing_horizon() -> None:
+    """``step_rule`` "horizon": the centre moves front + d_thre+ - sqrt(N r_s^2 / eta) toward T, at least ``step``."""
+    x = block(14, (0.0, 0.0))
+    front = float((x - x.mean(axis=0))[:, 0].max())  # T lies along +x
+    planner = Ch5Planner(step_rule="horizon")
+    assert planner.horizon_step(x, np.array([30.0, 0.0])) == pytest.approx(front + 5.0 - math.sqrt(14 / 0.7))
+    assert planner.horizon_step(x, np.array([30.0, 0.0])) == pytest.approx(4.4707, abs=1e-4)
+    assert planner.horizon_step(np.zeros((14, 2)), np.array([30.0, 0.0])) == 1.0  # never less than ``step``
+    assert Ch5Planner(step_rule="horizon", step=2.0).horizon_step(np.zeros((14, 2)), np.array([9.0, 0.0])) == 2.0
+    assert planner.horizon_step(x, x.mean(axis=0)) == 1.0  # at T: no direction
+
+
+def test_the_horizon_rule_crosses_open_space_in_fewer_regions() -> None:
+    """14 agents across open space to T = (30, 0): one region per step of 1 (43 updates) against one per sensing
+    horizon (10); every release by arrival in both."""
+    counts = {}
+    for rule in STEP_RULES:
+        planner = Ch5Planner(step_rule=rule)
+        r = run(planner, block(14, (0.0, 0.0)), (30.0, 0.0), OPEN, 60.0)
+        s = planner.summary()
+        assert r.plans[-1].done and not s["timeouts"], rule
+        assert np.hypot(*(r.x - r.plans[-1].goals).T).max() <= 0.1
+        counts[rule] = s["updates"]
+    assert counts["fixed"] >= 40 and counts["horizon"] <= 12
 
 
 def test_same_seed_same_plans() -> None:

@@ -1,27 +1,24 @@
 """Chapter 6's planner (``Ch6Planner``, region planner ``ch6``) on synthetic sonar: point agents with eight beams
 (ranges ray-cast against a corridor with a wall across it) follow the plan's law in an Euler loop; the swarm splits
 at two lanes into sub-swarms sized by the lanes' widths, goes through and merges behind the wall; one lane causes
-no split; a missing leader is replaced; bad input never crashes. And once as the SonPI swarm's global controller
-(a session: six SonPIs at a wall with two lanes).
+no split; a missing leader is replaced; bad input never crashes. The session of six SonPIs at a wall with two lanes
+is tests/services/test_region_ch6_session.py.
 
 The agents are points: under eq. 6.5 with the nearest-only repulsion (the default) they collapse onto their goal
 (the kernel vanishes between coincident points), so most tests use the "sum" mode, which keeps them apart."""
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge.core.recorder import iter_messages
 from bridge.studies.roy.numerical import ray_segments
 from swarm_logic.families.roy.regions.ch6 import Ch6Params, Ch6Planner
 from swarm_logic.families.roy.regions.planner import PLANNERS, Observation, velocities
 from swarm_logic.families.roy.regions.sensing import SensingParams, ring_angles, sense
-from tests.core.test_session import run as session_run
 
 ROOT = Path(__file__).resolve().parents[4]
 ANGLES = ring_angles(8)
@@ -227,30 +224,3 @@ def test_registered_and_parameters_validated() -> None:
     ):
         with pytest.raises(ValueError, match=field):
             Ch6Planner(**bad)
-
-
-@pytest.mark.session
-def test_six_sonpis_split_at_the_two_lanes_merge_behind_the_wall_and_arrive(tmp_path: Path) -> None:
-    """hil_configs/sonpi/regions_ch6.toml as the SonPI swarm's global controller (about 50 s of wall time)."""
-    out = tmp_path / "ch6"
-    code, summary = session_run(ROOT / "hil_configs" / "sonpi" / "regions_ch6.toml", out)
-    assert code == 0, summary.get("error")
-    ctl = summary["services"]["controller"]
-    assert ctl["planner"] == "ch6" and ctl["planner_errors"] == 0 and ctl["malformed"] == 0
-    events = [json.loads(d) for topic, _, d in iter_messages(out / "session.mcap") if topic.endswith("log/event")]
-    (split,) = [e for e in events if e["kind"] == "split"]
-    (merge,) = [e for e in events if e["kind"] == "merge"]
-    assert split["sizes"] == [3, 3] and split["b_fs"] == pytest.approx([3.5, 3.5], abs=0.5)  # two 0.35 m lanes
-    assert [e["kind"] for e in events].count("passed") == 2 and merge["t"] > split["t"]
-    assert merge["area"] == pytest.approx(6 * math.pi * 1.13**2) and merge["theorem1"]  # 2407 cm^2 (target A9)
-    assert ctl["done_s"] is not None and merge["t"] < ctl["done_s"] <= 120
-    # the recording draws two regions between the split and the merge, one before and after
-    scenes = [
-        (t / 1e9, json.loads(d)) for topic, t, d in iter_messages(out / "session.mcap") if topic.endswith("log/regions")
-    ]
-    counts = {len(s["entities"]) for t, s in scenes if split["t"] + 0.5 < t < merge["t"]}
-    assert counts == {2} and len(scenes[-1][1]["entities"]) == 1
-    # the robots: all six beyond the wall (x > 2.0 m) near the target at the end
-    last = [json.loads(d) for topic, _, d in iter_messages(out / "session.mcap") if topic == "/world/poses"][-1]
-    xy = np.array([last["x"], last["y"]]).T
-    assert np.all(xy[:, 0] > 2.0) and np.hypot(*(xy - [3.3, 0.85]).T).max() < 0.5
