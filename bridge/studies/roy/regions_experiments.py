@@ -30,6 +30,18 @@ from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialR
 from bridge.experiments.stats import mean, ok, values
 from bridge.studies.roy.metrics import linear_fit
 from bridge.studies.roy.numerical import Mover
+from bridge.studies.roy.regions_baselines import (
+    C10_NS,
+    C10_TRIALS,
+    C10_VARIANTS,
+    TVI_BASELINE,
+    TVI_NS,
+    TVI_PROPOSED,
+    TVI_TRIALS,
+    baseline_metrics,
+    judge_c5_tvi,
+    judge_c10,
+)
 from bridge.studies.roy.regions_ch56 import (
     SCALING_N,
     SCALING_TRIALS,
@@ -110,6 +122,9 @@ CELLS: tuple[CellSpec, ...] = (
     CellSpec("d1-ch4-6-noiseless", kind="cosim", max_trials=2),  # D1 (noiseless, 6)
     *(CellSpec(f"d4-ch6-{n}", kind="cosim", max_trials=3) for n in (4, 5, 6)),  # D4 (two lanes; N = 4, 5, 6)
     CellSpec("d5-ch5-3", kind="cosim", max_trials=3),  # D5 (polygon regions)
+    *(CellSpec(TVI_PROPOSED, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS),  # C5-TVI: the proposed method
+    *(CellSpec(TVI_BASELINE, agents=n, max_trials=TVI_TRIALS) for n in TVI_NS),  # C5-TVI: the aggregation baseline
+    *(CellSpec(sc, agents=n, max_trials=C10_TRIALS[n]) for n in C10_NS for sc in C10_VARIANTS.values()),  # C10
 )
 
 
@@ -285,6 +300,7 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
         **failure_metrics(res, sc),
         **mover_metrics(res, sc),
         **(ch56_metrics(res, rec, sc) if rec is not None else {}),
+        **baseline_metrics(res),
     }
     ser = res.series
     t = [float(x) for x in ser["t"]]
@@ -465,11 +481,6 @@ def judge_c5_density(outcomes: list[Outcome]) -> Verdict:
     if not parts:
         return no_runs(outcomes, "needs runs with both an ellipse and a circle after the first 10 s")
     return "; ".join(parts), good, "D(t) eq. 4.50, means over the periods after 10 s; the ellipse = among obstacles"
-
-
-def judge_c5_tvi(outcomes: list[Outcome]) -> Verdict:
-    ours = "; ".join(f"N={n:g}: TVI {_f(float(np.mean(v)), 3)}" for n, v in _by_n(outcomes, "tvi").items())
-    return ours or "no runs", None, "needs the no-communication aggregation baseline (Shah & Vachhani 2019), not built"
 
 
 def _by_n(outcomes: list[Outcome], metric: str, timing: bool = False) -> dict[float, np.ndarray]:
@@ -670,7 +681,7 @@ class RoyRegionsExperiment(Experiment):
                 "running time: centralised < vision L-F < proposed with L-F, at every N",
                 "N = 6: 615 < 944 < 1029 s; N = 50: 150 < 192 < 250 s",
                 "the ordering",
-                pending("needs the vision leader-follower baselines and chapter 7's environment, not built"),
+                judge_c10,
             ),
             Target(
                 "C11",
@@ -813,7 +824,8 @@ class RoyRegionsExperiment(Experiment):
 
 def cell_label(cell: dict[str, Any]) -> str:
     """A cell's name in tables and plots: its scenario, with its failure fraction when it sets one."""
-    return cell["scenario"] + (f" {100 * cell['failures']:g} %" if cell.get("failures") is not None else "")
+    label = cell["scenario"] + (f" {100 * cell['failures']:g} %" if cell.get("failures") is not None else "")
+    return label + (f" N={cell['agents']}" if cell.get("agents") is not None else "")
 
 
 def representatives(outcomes: list[Outcome]) -> dict[str, TrialResult]:
