@@ -180,14 +180,24 @@ def split_merge_law(
     radius_scales: float = 3.0,
     v_max: float | None = None,
     neighbours: int = 8,
+    min_sep: float = 0.0,
 ) -> np.ndarray:
     """Eq. 6.5: u_i = -k_c (x_i - O_e) + k_f exp(-|x_i - r| / r_s) (x_i - r), Table 6.1's gains; ``centre`` (2,) or
     each agent's sub-region centre (N, 2). The printed sum over j does not depend on j (erratum 22): ``mode``
     "nearest", r the closest agent or obstacle point; "sum", every agent and obstacle point within ``radius_scales``
     r_s; "knn", the ``neighbours`` nearest of those (nearest first): the sum's spacing at a cost linear in N, where
-    a dense swarm's full sum has hundreds of pairs per agent."""
+    a dense swarm's full sum has hundreds of pairs per agent.
+
+    ``min_sep`` (erratum 22, r_s as a kept distance): §6.2.3 defines r_s as "the minimum distance ... required to be
+    maintained" from r(t), which the printed kernel cannot hold (it vanishes at contact, at most k_f r_s / e per
+    neighbour against the pull's k_c per unit). With ``min_sep`` > 0 an agent closer than
+    ``min_sep`` r_s does not move toward it (that component of u_i is dropped) and moves away from it at k_c
+    (min_sep r_s - |x_ij|) (avoidance first, then convergence; agents only, the obstacles keep the printed kernel);
+    0, the law as printed."""
     if mode not in CH6_MODES:
         raise ValueError(f"mode: expected one of {', '.join(CH6_MODES)}, got {mode!r}")
+    if not (isinstance(min_sep, (int, float)) and math.isfinite(min_sep) and min_sep >= 0):
+        raise ValueError(f"min_sep: must be a finite number >= 0, got {min_sep!r}")
     x = np.asarray(x, dtype=float)
     n = len(x)
     obs = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=float).reshape(-1, 2)
@@ -216,7 +226,26 @@ def split_merge_law(
         j = np.concatenate([np.asarray(v, int) for v in lists]) if len(i) else np.zeros(0, int)
         keep = j != i
         u = u + k_f * kernel_sum(x, i[keep], j[keep], r_s, others=pts)
+    if min_sep > 0 and n > 1:
+        u = _keep_apart(x, u, min_sep * r_s, k_c)
     return saturate(u, v_max)
+
+
+def _keep_apart(x: np.ndarray, u: np.ndarray, sep: float, k: float) -> np.ndarray:
+    """``u`` with, for every pair of agents closer than ``sep``, each one's velocity component toward the other
+    dropped and a push away from it at k (sep - d) added (coincident agents part along a fixed direction per index:
+    the golden angle times i)."""
+    i, j = _both(cKDTree(x).query_pairs(sep, output_type="ndarray"))
+    if not len(i):
+        return u
+    away = x[i] - x[j]
+    r = np.hypot(away[:, 0], away[:, 1])
+    ang = i * 2.399963229728653
+    unit = np.where((r > 0)[:, None], away / np.maximum(r, 1e-300)[:, None], np.stack([np.cos(ang), np.sin(ang)], 1))
+    toward = np.minimum(np.einsum("ij,ij->i", u[i], unit), 0.0)
+    w = k * (sep - r) - toward
+    n = len(x)
+    return u + np.stack([np.bincount(i, w * unit[:, 0], n), np.bincount(i, w * unit[:, 1], n)], axis=1)
 
 
 # --- Theorem 1 (eqs. 4.7-4.21, erratum 13) ----------------------------------------------------------------------------
