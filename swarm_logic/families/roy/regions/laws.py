@@ -191,9 +191,9 @@ def split_merge_law(
     ``min_sep`` (erratum 22, r_s as a kept distance): §6.2.3 defines r_s as "the minimum distance ... required to be
     maintained" from r(t), which the printed kernel cannot hold (it vanishes at contact, at most k_f r_s / e per
     neighbour against the pull's k_c per unit). With ``min_sep`` > 0 an agent closer than
-    ``min_sep`` r_s does not move toward it (that component of u_i is dropped) and moves away from it at k_c
-    (min_sep r_s - |x_ij|) (avoidance first, then convergence; agents only, the obstacles keep the printed kernel);
-    0, the law as printed."""
+    ``min_sep`` r_s is pushed away from it at k (min_sep r_s - |x_ij|), k = k_c or enough to reach ``v_max`` 10 %
+    inside, and the push has the first share of ``v_max`` (avoidance first, then convergence; agents only, the
+    obstacles keep the printed kernel); 0, the law as printed."""
     if mode not in CH6_MODES:
         raise ValueError(f"mode: expected one of {', '.join(CH6_MODES)}, got {mode!r}")
     if not (isinstance(min_sep, (int, float)) and math.isfinite(min_sep) and min_sep >= 0):
@@ -227,14 +227,14 @@ def split_merge_law(
         keep = j != i
         u = u + k_f * kernel_sum(x, i[keep], j[keep], r_s, others=pts)
     if min_sep > 0 and n > 1:
-        u = _keep_apart(x, u, min_sep * r_s, k_c)
+        u = _keep_apart(x, u, min_sep * r_s, k_c, v_max)
     return saturate(u, v_max)
 
 
-def _keep_apart(x: np.ndarray, u: np.ndarray, sep: float, k: float) -> np.ndarray:
-    """``u`` with, for every pair of agents closer than ``sep``, each one's velocity component toward the other
-    dropped and a push away from it at k (sep - d) added (coincident agents part along a fixed direction per index:
-    the golden angle times i)."""
+def _keep_apart(x: np.ndarray, u: np.ndarray, sep: float, k: float, v_max: float | None) -> np.ndarray:
+    """``u`` plus, for every pair of agents closer than ``sep``, a push away from the other at k (sep - d), k at least
+    10 ``v_max`` / ``sep`` (a pair 10 % inside ``sep`` pushes at ``v_max``); the push takes its share of ``v_max``
+    first, and u the rest (coincident agents part along a fixed direction per index: the golden angle times i)."""
     i, j = _both(cKDTree(x).query_pairs(sep, output_type="ndarray"))
     if not len(i):
         return u
@@ -242,10 +242,14 @@ def _keep_apart(x: np.ndarray, u: np.ndarray, sep: float, k: float) -> np.ndarra
     r = np.hypot(away[:, 0], away[:, 1])
     ang = i * 2.399963229728653
     unit = np.where((r > 0)[:, None], away / np.maximum(r, 1e-300)[:, None], np.stack([np.cos(ang), np.sin(ang)], 1))
-    toward = np.minimum(np.einsum("ij,ij->i", u[i], unit), 0.0)
-    w = k * (sep - r) - toward
     n = len(x)
-    return u + np.stack([np.bincount(i, w * unit[:, 0], n), np.bincount(i, w * unit[:, 1], n)], axis=1)
+    w = (k if v_max is None else max(k, 10.0 * v_max / sep)) * (sep - r)
+    push = saturate(np.stack([np.bincount(i, w * unit[:, 0], n), np.bincount(i, w * unit[:, 1], n)], axis=1), v_max)
+    if v_max is None:
+        return u + push
+    left = np.maximum(v_max - np.hypot(push[:, 0], push[:, 1]), 0.0)  # the push first, the rest of v_max for u
+    scale = np.minimum(1.0, left / np.maximum(np.hypot(u[:, 0], u[:, 1]), 1e-300))
+    return push + u * scale[:, None]
 
 
 # --- Theorem 1 (eqs. 4.7-4.21, erratum 13) ----------------------------------------------------------------------------
