@@ -55,9 +55,24 @@ def _count_between(d: np.ndarray, lo: float, lo_in: bool, hi: float, hi_in: bool
     return int(np.count_nonzero(above & below))
 
 
-def structural_density(xy: np.ndarray, scale: float, rule: LinkRule = "ch6") -> float:
+def structural_density(xy: np.ndarray, scale: float, rule: LinkRule = "ch6", groups: np.ndarray | None = None) -> float:
     """D(t) = sum_i sum_j g_ij / (N (N - 1)): the share of ordered pairs i != j linked by ``rule`` (``LINK_RULES``)
-    with ``scale`` R_s (chapter 4, R_s = sqrt(ab / N)) or r_s (chapters 5, 6); 0 for fewer than two agents."""
+    with ``scale`` R_s (chapter 4, R_s = sqrt(ab / N)) or r_s (chapters 5, 6); 0 for fewer than two agents.
+
+    ``groups`` (N,) sub-swarm ids: only pairs within a sub-swarm count, D = sum_g links_g / sum_g Q_g (Q_g - 1) (the
+    reading of §6.5.1's "inside the virtual region" under which D rises after a split; agents with a negative id
+    belong to none); None: every pair of the N agents, eq. 6.25 as printed."""
+    if groups is not None:
+        g = np.asarray(groups).reshape(-1)
+        p = np.asarray(xy, dtype=float).reshape(-1, 2)
+        if len(g) != len(p):
+            raise ValueError(f"structural_density: groups must have one id per agent ({len(p)}), got {len(g)}")
+        links = pairs = 0.0
+        for k in np.unique(g[g >= 0]):
+            q = int(np.count_nonzero(g == k))
+            links += structural_density(p[g == k], scale, rule) * q * (q - 1)
+            pairs += q * (q - 1)
+        return links / pairs if pairs else 0.0
     if rule not in LINK_RULES:
         raise ValueError(f"structural_density: rule must be one of {tuple(LINK_RULES)}, got {rule!r}")
     if not (math.isfinite(scale) and scale > 0):

@@ -14,7 +14,8 @@ a ``version`` string that changes whenever the layout does. One schema covers th
 - ``[mission]``: ``targets`` (one or more [x, y]), ``lanes`` (optional: the target indices each lane visits in order,
   chapter 6), ``arrival_radius``, ``timeout_s``, ``dt`` (0.05 s, erratum 1).
 - ``[failures]``: actuator failures: a ``fraction`` of the agents stop at the scheduled ``times`` (s), in turn.
-- ``[metrics]``: the structural density's ``density_rule`` ("ch4", "ch5", "ch6") and its ``r_s`` (chapters 5, 6).
+- ``[metrics]``: the structural density's ``density_rule`` ("ch4", "ch5", "ch6") and its ``r_s`` (chapters 5, 6);
+  ``density_pairs`` "swarm" (every pair, as printed) or "sub_swarms" (pairs within a plan's sub-swarm only).
 - ``[planner]``: ``name`` (an entry point of ``swarm_sitl.region_planners``) and ``params``, its parameters.
 
 A wrong file is a ``ConfigError`` naming the file, the field and the reason.
@@ -172,6 +173,7 @@ class FailuresCfg(Section):
 class MetricsCfg(Section):
     density_rule: Literal["ch4", "ch5", "ch6"] = "ch4"
     r_s: float = Field(1.0, gt=0)
+    density_pairs: Literal["swarm", "sub_swarms"] = "swarm"
 
 
 class PlannerCfg(Section):

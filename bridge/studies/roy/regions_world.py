@@ -392,7 +392,13 @@ def _record(series: dict[str, list[Any]], world: RegionsWorld, plan: Plan, sc: R
         scale = math.sqrt(reg.area / math.pi / max(len(x), 1)) if reg is not None else math.nan
     else:
         scale = sc.metrics.r_s
-    series["density"].append(structural_density(x, scale, rule) if math.isfinite(scale) and scale > 0 else math.nan)
+    groups = None
+    if sc.metrics.density_pairs == "sub_swarms" and plan.groups is not None:
+        groups = np.full(world.n, -1)
+        groups[np.asarray(plan.ids, int)] = np.asarray(plan.groups, int)  # the observation's ids are the world's rows
+        groups = groups[working]
+    ok = math.isfinite(scale) and scale > 0
+    series["density"].append(structural_density(x, scale, rule, groups) if ok else math.nan)
     series["n_failed"].append(int((~working).sum()))
     series["law"].append(plan.law)
 

@@ -129,3 +129,20 @@ def test_unused_area_summaries_and_the_time_fit():
     assert (round(fit.intercept, 1), round(fit.slope, 2), round(fit.r2, 5)) == (61.2, 5.56, 0.99998)
     with pytest.raises(ValueError, match="distinct"):
         linear_fit([1, 1], [2, 3])
+
+
+def test_structural_density_within_sub_swarms():
+    # two sub-swarms of 5 packed agents, 50 apart (after a split): every pair inside a sub-swarm is within 2 r_s
+    a = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.5, 0.5], [0.25, 0.25]])
+    xy = np.concatenate([a, a + np.array([50.0, 0.0])])
+    groups = np.array([0] * 5 + [1] * 5)
+    assert structural_density(xy, 1.0, "ch6") == pytest.approx(40 / 90)  # eq. 6.25 over all 10: the split lowers D
+    assert structural_density(xy, 1.0, "ch6", groups) == 1.0  # within the sub-swarms: it does not
+    # one agent of no sub-swarm (-1) is left out; a far member lowers its sub-swarm's share (links 12 + 20 of 12 + 20)
+    far = xy.copy()
+    far[4] = (20.0, 0.0)
+    assert structural_density(far, 1.0, "ch6", np.array([0, 0, 0, 0, -1, 1, 1, 1, 1, 1])) == 1.0
+    assert structural_density(far, 1.0, "ch6", groups) == pytest.approx((12 + 20) / (20 + 20))
+    assert structural_density(xy, 1.0, "ch6", np.full(10, -1)) == 0.0
+    with pytest.raises(ValueError, match="groups"):
+        structural_density(xy, 1.0, "ch6", groups[:3])

@@ -62,7 +62,9 @@ class Ch6Params:
 
     - Law (eq. 6.5): ``k_c`` 12, ``k_f`` 2.5, ``r_s`` (3.2 and 0.5 in Table 6.1's cases; 1.13 on the SonPI),
       ``law_mode`` "nearest" (erratum 22; "sum": every agent and point within ``radius_scales`` r_s; "knn": the
-      ``law_neighbours`` nearest of those, the sum's spacing at a cost linear in N for large swarms).
+      ``law_neighbours`` nearest of those, the sum's spacing at a cost linear in N for large swarms),
+      ``law_min_sep`` (erratum 22: r_s as §6.2.3's kept minimum distance; an agent nearer than ``law_min_sep`` r_s
+      to another moves only away from it; 0 the printed law, which packs the swarm far tighter than r_s).
     - Sensing: the window [``d_min``, ``d_max``] = [2, 5] (eqs. 6.1-6.4); ``r_robot``, ``eclipse_eps`` the teammate
       filter; the points of the last ``memory`` periods are kept (the thesis' R~(t + tau); one period of eight beams
       per agent misses most of a wall); a beam clear beyond ``d_max`` gives a free end for the detector, at its echo's
@@ -98,6 +100,7 @@ class Ch6Params:
     law_mode: str = "nearest"
     radius_scales: float = 3.0
     law_neighbours: int = 8
+    law_min_sep: float = 0.0
     d_min: float = 2.0
     d_max: float = 5.0
     r_robot: float = 0.5
@@ -134,6 +137,7 @@ class Ch6Params:
     def __post_init__(self) -> None:
         check_fields(self, ("r_s", "k_c", "radius_scales", "d_max", "v_region", "k_vcir", "k_theta", "period_s"))
         check_fields(self, ("k_f", "d_min", "r_robot", "eclipse_eps", "clearance", "gap_ahead"), positive=False)
+        check_fields(self, ("law_min_sep",), positive=False)
         for name in ("bin_width", "free_reach", "opening_reach", "pass_depth", "area", "goal_radius"):
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -547,6 +551,8 @@ class Ch6Planner(RegionPlanner):
         }
         if self.p.law_mode == "knn":
             params["neighbours"] = self.p.law_neighbours
+        if self.p.law_min_sep > 0:
+            params["min_sep"] = self.p.law_min_sep
         return Plan(
             t,
             ids,

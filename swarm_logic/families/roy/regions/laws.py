@@ -192,14 +192,24 @@ def split_merge_law(
     radius_scales: float = 3.0,
     v_max: float | None = None,
     neighbours: int = 8,
+    min_sep: float = 0.0,
 ) -> np.ndarray:
     """Eq. 6.5: u_i = -k_c (x_i - O_e) + k_f exp(-|x_i - r| / r_s) (x_i - r), Table 6.1's gains; ``centre`` (2,) or
     each agent's sub-region centre (N, 2). The printed sum over j does not depend on j (erratum 22): ``mode``
     "nearest", r the closest agent or obstacle point; "sum", every agent and obstacle point within ``radius_scales``
     r_s; "knn", the ``neighbours`` nearest of those (nearest first): the sum's spacing at a cost linear in N, where
-    a dense swarm's full sum has hundreds of pairs per agent."""
+    a dense swarm's full sum has hundreds of pairs per agent.
+
+    ``min_sep`` (erratum 22, r_s as a kept distance): §6.2.3 defines r_s as "the minimum distance ... required to be
+    maintained" from r(t), which the printed kernel cannot hold (it vanishes at contact, at most k_f r_s / e per
+    neighbour against the pull's k_c per unit). With ``min_sep`` > 0 an agent closer than
+    ``min_sep`` r_s is pushed away from it at k (min_sep r_s - |x_ij|), k = k_c or enough to reach ``v_max`` 10 %
+    inside, and the push has the first share of ``v_max`` (avoidance first, then convergence; agents only, the
+    obstacles keep the printed kernel); 0, the law as printed."""
     if mode not in CH6_MODES:
         raise ValueError(f"mode: expected one of {', '.join(CH6_MODES)}, got {mode!r}")
+    if not (isinstance(min_sep, (int, float)) and math.isfinite(min_sep) and min_sep >= 0):
+        raise ValueError(f"min_sep: must be a finite number >= 0, got {min_sep!r}")
     x = np.asarray(x, dtype=float)
     n = len(x)
     obs = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=float).reshape(-1, 2)
@@ -231,7 +241,30 @@ def split_merge_law(
         j = np.concatenate([np.asarray(v, int) for v in lists]) if len(i) else np.zeros(0, int)
         keep = j != i
         u = u + k_f * kernel_sum(x, i[keep], j[keep], r_s, others=pts)
+    if min_sep > 0 and n > 1:
+        u = _keep_apart(x, u, min_sep * r_s, k_c, v_max)
     return saturate(u, v_max)
+
+
+def _keep_apart(x: np.ndarray, u: np.ndarray, sep: float, k: float, v_max: float | None) -> np.ndarray:
+    """``u`` plus, for every pair of agents closer than ``sep``, a push away from the other at k (sep - d), k at least
+    10 ``v_max`` / ``sep`` (a pair 10 % inside ``sep`` pushes at ``v_max``); the push takes its share of ``v_max``
+    first, and u the rest (coincident agents part along a fixed direction per index: the golden angle times i)."""
+    i, j = _both(cKDTree(x).query_pairs(sep, output_type="ndarray"))
+    if not len(i):
+        return u
+    away = x[i] - x[j]
+    r = np.hypot(away[:, 0], away[:, 1])
+    ang = i * 2.399963229728653
+    unit = np.where((r > 0)[:, None], away / np.maximum(r, 1e-300)[:, None], np.stack([np.cos(ang), np.sin(ang)], 1))
+    n = len(x)
+    w = (k if v_max is None else max(k, 10.0 * v_max / sep)) * (sep - r)
+    push = saturate(np.stack([np.bincount(i, w * unit[:, 0], n), np.bincount(i, w * unit[:, 1], n)], axis=1), v_max)
+    if v_max is None:
+        return u + push
+    left = np.maximum(v_max - np.hypot(push[:, 0], push[:, 1]), 0.0)  # the push first, the rest of v_max for u
+    scale = np.minimum(1.0, left / np.maximum(np.hypot(u[:, 0], u[:, 1]), 1e-300))
+    return push + u * scale[:, None]
 
 
 # --- Theorem 1 (eqs. 4.7-4.21, erratum 13) ----------------------------------------------------------------------------

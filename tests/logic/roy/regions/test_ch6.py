@@ -208,6 +208,18 @@ def test_bad_input_never_crashes_and_is_logged() -> None:
     assert s["dropped_readings"]["garbage"] > 0 and s["bad_poses"] > 0
 
 
+def test_law_min_sep_reaches_the_plan_and_keeps_the_sub_swarm_apart() -> None:
+    ids, x = start()
+    rr = ranges(x, np.zeros(len(ids)), walls(TWO_LANES))
+    for sep, want in ((0.0, None), (1.0, 1.0)):
+        plan = planner(law_min_sep=sep).plan(Observation(0.0, ids, x, np.zeros(len(ids)), rr, ANGLES, TARGET))
+        assert plan.params.get("min_sep") == want
+    p = planner(law_min_sep=1.0, v_region=0.01)
+    x, _, _ = run(p, TWO_LANES, 8.0)
+    d = np.hypot(x[:, None, 0] - x[None, :, 0], x[:, None, 1] - x[None, :, 1]) + np.eye(len(x)) * 1e9
+    assert np.median(d.min(axis=1)) > 0.85 * 0.5  # r_s = 0.5 kept (0.45 measured; the sum law alone: 0.14)
+
+
 def test_registered_and_parameters_validated() -> None:
     assert PLANNERS.get("ch6") is Ch6Planner
     assert Ch6Params().k_c == 12.0 and Ch6Params().k_f == 2.5 and (Ch6Params().d_min, Ch6Params().d_max) == (2, 5)
@@ -215,6 +227,7 @@ def test_registered_and_parameters_validated() -> None:
         ({"r_s": -1.0}, "r_s"),
         ({"memory": 0}, "memory"),
         ({"law_mode": "all"}, "law_mode"),
+        ({"law_min_sep": -1.0}, "law_min_sep"),
         ({"semi_minor": "quarter"}, "semi_minor"),
         ({"d_min": 6.0}, "d_max"),
         ({"lane_map": [0]}, "lane_map"),

@@ -167,3 +167,54 @@ def test_split_merge_law_knn_is_the_sum_over_the_k_nearest():
     assert np.allclose(one, split_merge_law(x, np.zeros(2), obs, mode="nearest", r_s=0.5), atol=1e-12)
     with pytest.raises(ValueError, match="neighbours"):
         split_merge_law(x, np.zeros(2), obs, mode="knn", neighbours=0)
+
+
+def _settle(x: np.ndarray, seconds: float, **kw: object) -> np.ndarray:
+    """Agents under eq. 6.5 toward the origin, Euler steps of 0.05 s at v_max 2 (the numerical model's)."""
+    for _ in range(round(seconds / 0.05)):
+        x = x + 0.05 * split_merge_law(x, np.zeros(2), v_max=2.0, **kw)
+    return x
+
+
+def _nearest(x: np.ndarray) -> np.ndarray:
+    d = np.hypot(x[:, None, 0] - x[None, :, 0], x[:, None, 1] - x[None, :, 1]) + np.diag(np.full(len(x), np.inf))
+    return d.min(axis=1)
+
+
+def test_split_merge_law_min_sep_keeps_r_s_between_agents_erratum_22():
+    from bridge.studies.roy.metrics import structural_density
+
+    x0 = np.random.default_rng(3).uniform(-8.0, 8.0, (30, 2))
+    r_s = 1.0
+    printed = _settle(x0, 10.0, r_s=r_s, mode="knn")
+    kept = _settle(x0, 10.0, r_s=r_s, mode="knn", min_sep=1.0)
+    # the printed kernel vanishes at contact: Table 6.1's gains pack 30 agents into a clump much tighter than r_s
+    assert np.median(_nearest(printed)) < 0.1 * r_s and np.hypot(*printed.T).max() < 0.5 * r_s
+    assert structural_density(printed, r_s) == 1.0
+    # with min_sep = 1 they keep about r_s from each other, near the centre (radius about 0.55 r_s sqrt(N) = 3)
+    nn = _nearest(kept)
+    assert 0.85 * r_s < np.median(nn) < r_s and nn.min() > 0.75 * r_s  # a push of v_max at 10 % inside r_s
+    assert np.hypot(*kept.T).max() < 4.0
+    # eq. 6.25's D (pairs within 2 r_s) of a patch of 30 at spacing about r_s: about 10 of 29 partners (0.35 measured)
+    assert 0.3 < structural_density(kept, r_s) < 0.45
+
+
+def test_split_merge_law_min_sep_hand_values_and_validation():
+    x = np.array([[-0.25, 0.0], [0.25, 0.0]])
+    printed = split_merge_law(x, np.zeros(2), r_s=1.0, mode="nearest")
+    assert printed[1] == pytest.approx([-12.0 * 0.25 + 2.5 * math.exp(-0.5) * 0.5, 0.0])
+    # unsaturated: the push k_c (r_s - 0.5) = 6 is added
+    kept = split_merge_law(x, np.zeros(2), r_s=1.0, mode="nearest", min_sep=1.0)
+    assert kept[1] == pytest.approx(printed[1] + [6.0, 0.0]) and kept[0] == pytest.approx(-kept[1])
+    # at v_max 2 the push (max(k_c, 10 v_max / r_s) x 0.5 = 10, saturated to 2) takes the whole budget
+    assert split_merge_law(x, np.zeros(2), r_s=1.0, min_sep=1.0, v_max=2.0)[1] == pytest.approx([2.0, 0.0])
+    # coincident agents part in different directions; agents farther than min_sep r_s see the printed law
+    u = split_merge_law(np.zeros((3, 2)), np.zeros(2), r_s=1.0, min_sep=1.0)
+    assert np.all(np.hypot(*u.T) > 1.0) and len({tuple(np.round(v, 6)) for v in u}) == 3
+    far = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 5.0]])
+    assert split_merge_law(far, np.zeros(2), mode="sum", min_sep=1.0) == pytest.approx(
+        split_merge_law(far, np.zeros(2), mode="sum")
+    )
+    for bad in (-1.0, math.nan, "1"):
+        with pytest.raises(ValueError, match="min_sep"):
+            split_merge_law(x, np.zeros(2), min_sep=bad)
