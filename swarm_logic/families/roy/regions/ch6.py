@@ -90,11 +90,11 @@ class Ch6Params:
       ("sides" of the line toward the target, the corridor reading; "kmeans" as printed), on the points ahead of the
       region's centre by at most its larger semi-axis plus ``gap_ahead`` along the heading (a wall across the way
       is not a gap: the region holds when it reaches it, and the detector decides; a wall just passed is behind).
-    - ``face`` (default False, the plan as before): while the swarm, before its first split, has obstacle points
-      within its reach ahead and across its way (``_wall_ahead``: the wall it holds before), the plan asks the
-      robots to face its heading (``planner.FACE``; the SonPI's ``roy_region`` turns in place toward it,
-      ``face_tol_deg``): robots drawn to one centre end up facing it, and five fixed front sonars then read their
-      teammates, not the wall and its lanes.
+    - ``face`` (default False, the plan as before): while the swarm, before its first split, advances (its region
+      not waiting for its robots) or has obstacle points within its reach ahead and across its way
+      (``_wall_ahead``: the wall it holds before), the plan asks the robots to face its heading (``planner.FACE``;
+      the SonPI's ``roy_region`` turns in place toward it, ``face_tol_deg``): robots drawn to one centre end up
+      facing it, and five fixed front sonars then read their teammates, not the wall and its lanes.
     - ``goal_radius`` (None: the equal-area radius of each sub-swarm's region): done when every agent is this close to
       its sub-swarm's target.
     """
@@ -417,12 +417,14 @@ class Ch6Planner(RegionPlanner):
         reach = max(e.a, e.b) + self.p.gap_ahead
         ahead = (hits - c) @ h if len(hits) else np.zeros(0)
         near = hits[(ahead >= 0) & (ahead <= reach)]
-        s.facing = heading if s.waypoint is None and self._wall_ahead(near, xs, c, h) else None
+        wall = self._wall_ahead(near, xs, c, h)
         gap = free_space(near, c, self.p.gap_mode, heading=heading, split=self.p.gap_split)
         step = step_region(s.state, gap, goal, self.period_s, self.p.region_params(s.area), xs if len(xs) else None)
         if step.held.startswith("infeasible") and not s.held.startswith("infeasible"):
             events.append({"kind": "held", "t": t, "swarm": s.sub.id, "reason": step.held})
         s.held = step.held
+        # the robots face the way while the region advances (not while it waits for them) or holds before a wall
+        s.facing = heading if s.waypoint is None and (wall or not step.held) else None
         s.state = step.state
         s.sub = replace(s.sub, region=step.state.region)
         return [s]

@@ -239,17 +239,16 @@ def test_registered_and_parameters_validated() -> None:
             Ch6Planner(**bad)
 
 
-def test_face_asks_the_robots_to_face_the_wall_while_the_swarm_holds_before_it() -> None:
+def test_face_asks_the_robots_to_face_the_way_until_the_split() -> None:
     x0, _, off = run(planner(), TWO_LANES, 16.0)
     x1, _, on = run(planner(face=True), TWO_LANES, 16.0)
     assert not any(FACE in plan.params for _, plan, _, _ in off)
     (split,) = events(on, "split")
-    assert events(off, "split")[0]["t"] == split["t"]  # point agents ignore it: the same mission
+    assert events(off, "split")[0]["t"] == split["t"] and np.array_equal(x0, x1)  # point agents ignore it
     faced = [t for t, plan, _, _ in on if FACE in plan.params]
-    assert faced and max(faced) < split["t"]  # before the split only
+    # from the first region step (the region advancing) through the hold at the wall, never after the split
+    assert faced[0] == 0.25 and max(faced) < split["t"] and len(faced) >= 0.8 * split["t"] / 0.25
     assert all(plan.params[FACE] == pytest.approx(0.0, abs=0.3) for _, plan, _, _ in on if FACE in plan.params)
-    # only once the wall is within the region's reach ahead (the swarm starts 13 units before it)
-    assert min(faced) > 0.25 and np.array_equal(x0, x1)
 
 
 def test_a_wall_ahead_is_across_the_way_ahead_of_every_robot_not_beside_or_among_them() -> None:
