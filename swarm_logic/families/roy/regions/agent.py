@@ -7,6 +7,11 @@ It holds still, logging why (topic ``hold``, once per change of reason), when it
 than ``stale_s`` (by its own clock since it arrived), when it has no pose, when the plan does not name it, or when
 the plan's length unit is not its own ``unit_m`` (no guess at a conversion).
 
+When the plan names a heading to face (``planner.FACE``: chapter 6's region held before a wall) and ``face_tol_deg``
+is above 0, a robot turned more than that from it turns in place toward it (its point ahead sent across its heading:
+the tracking layer then turns the body about its axle), until within a third of it, and only then follows the law
+again: its fixed front sonars look at the wall instead of at its teammates.
+
 The plan's rows of agents the camera does not see this step are left out of the law (``restrict``): the law acts on
 the agents this robot can place. ``to_packet`` and ``from_packet`` carry a ``Plan`` over the SonPI's wire.
 """
@@ -19,7 +24,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from swarm_logic.families.roy.controller import POS, SonpiAgent
-from swarm_logic.families.roy.regions.planner import Plan, velocities
+from swarm_logic.families.roy.regions.planner import FACE, Plan, velocities
 from swarm_logic.families.roy.regions.sensing import SensingParams, sense
 from swarm_logic.log import plain
 from swarm_logic.robot import Robot
@@ -102,6 +107,8 @@ class RegionAgent(SonpiAgent):
         "sonar_period_s": 0.25,  # the thesis' 250 ms windows
         "stale_s": 1.0,  # a plan this old (since it arrived) is not applied
         "d_max": 5.0,  # units: sonar points beyond this are not obstacles (chapter 4's cap, SensingParams)
+        "face_tol_deg": 0.0,  # turn toward the plan's FACE heading when more than this off it (0: never)
+        "turn_mps": 0.05,  # the point ahead's speed across the heading while turning (0.1 m ahead: 0.5 rad/s)
     }
     ranges: ClassVar[dict[str, str]] = {
         "period_s": "(0, 10]",
@@ -110,6 +117,8 @@ class RegionAgent(SonpiAgent):
         "sonar_period_s": "(0, 60]",
         "stale_s": POS,
         "d_max": POS,
+        "face_tol_deg": "[0, 180]",
+        "turn_mps": POS,
     }
 
     def init(self, robot: Robot) -> None:
@@ -128,6 +137,28 @@ class RegionAgent(SonpiAgent):
         self.missing_rows = 0  # plan agents left out of the law: the camera had no pose for them
         self.bad_readings = 0  # sonar readings sent as "no reading" (not finite, negative, beyond the wire's range)
         self.v = np.zeros(2)
+        self.turning = False
+        self.turns = 0  # turns toward the plan's FACE heading begun
+
+    def face(self, plan: Plan, yaw: float) -> bool:
+        """Whether to turn in place toward the plan's FACE heading this step (and, if so, the command sent)."""
+        tol = math.radians(float(self.p["face_tol_deg"]))
+        want = plan.params.get(FACE)
+        if tol <= 0 or not isinstance(want, (int, float)) or not math.isfinite(want):
+            self.turning = False
+            return False
+        err = math.atan2(math.sin(want - yaw), math.cos(want - yaw))
+        if not self.turning and abs(err) > tol:
+            self.turning = True
+            self.turns += 1
+        elif self.turning and abs(err) < tol / 3:
+            self.turning = False
+        if not self.turning:
+            return False
+        u = math.copysign(float(self.p["turn_mps"]), err)  # across the heading: a pure turn about the axle
+        self.v = np.zeros(2)
+        self.velocity.set_velocity(-u * math.sin(yaw), u * math.cos(yaw))
+        return True
 
     def send_window(self, now: float) -> None:
         """The latest sonar window to the controller, every ``sonar_period_s``."""
@@ -183,6 +214,8 @@ class RegionAgent(SonpiAgent):
             self.reason = None
         unit = float(self.p["unit_m"])
         plan = from_packet(order.plan, order.t_s)
+        if self.face(plan, me.yaw_rad):
+            return
         seen = {q.id: q for q in self.localisation.poses()}
         seen[self.robot.id] = me
         keep = np.array([int(i) in seen for i in plan.ids])
@@ -208,5 +241,6 @@ class RegionAgent(SonpiAgent):
             "vy": float(self.v[1]),
             "holding": HOLD_REASONS.index(self.reason) if self.reason in HOLD_REASONS else -1,
             "applied": self.applied,
+            "turns": self.turns,
             "pose_src": self.pose_code(),
         }

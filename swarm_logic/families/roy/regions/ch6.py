@@ -29,7 +29,7 @@ import numpy as np
 
 from swarm_logic.families.roy.regions.ellipse import RegionParams, RegionState, free_space, step_region
 from swarm_logic.families.roy.regions.laws import CH6_MODES
-from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
+from swarm_logic.families.roy.regions.planner import FACE, Observation, Plan, Region, RegionPlanner
 from swarm_logic.families.roy.regions.records import check_fields
 from swarm_logic.families.roy.regions.sensing import DROP_REASONS, SensingParams, beam_points, sense
 from swarm_logic.families.roy.regions.shapes import Ellipse
@@ -90,6 +90,11 @@ class Ch6Params:
       ("sides" of the line toward the target, the corridor reading; "kmeans" as printed), on the points ahead of the
       region's centre by at most its larger semi-axis plus ``gap_ahead`` along the heading (a wall across the way
       is not a gap: the region holds when it reaches it, and the detector decides; a wall just passed is behind).
+    - ``face`` (default False, the plan as before): while the swarm, before its first split, advances (its region
+      not waiting for its robots) or has obstacle points within its reach ahead and across its way
+      (``_wall_ahead``: the wall it holds before), the plan asks the robots to face its heading (``planner.FACE``;
+      the SonPI's ``roy_region`` turns in place toward it, ``face_tol_deg``): robots drawn to one centre end up
+      facing it, and five fixed front sonars then read their teammates, not the wall and its lanes.
     - ``goal_radius`` (None: the equal-area radius of each sub-swarm's region): done when every agent is this close to
       its sub-swarm's target.
     """
@@ -131,6 +136,7 @@ class Ch6Params:
     gap_mode: str = "closest"
     gap_split: str = "sides"
     gap_ahead: float = 0.0
+    face: bool = False
     goal_radius: float | None = None
     period_s: float = 0.25
 
@@ -206,6 +212,7 @@ class _Swarm:
     mouth: np.ndarray | None = None
     confirm: int = 0
     held: str = ""
+    facing: float | None = None
     scan: str = ""
     arrived: bool = False
 
@@ -410,14 +417,29 @@ class Ch6Planner(RegionPlanner):
         reach = max(e.a, e.b) + self.p.gap_ahead
         ahead = (hits - c) @ h if len(hits) else np.zeros(0)
         near = hits[(ahead >= 0) & (ahead <= reach)]
+        wall = self._wall_ahead(near, xs, c, h)
         gap = free_space(near, c, self.p.gap_mode, heading=heading, split=self.p.gap_split)
         step = step_region(s.state, gap, goal, self.period_s, self.p.region_params(s.area), xs if len(xs) else None)
         if step.held.startswith("infeasible") and not s.held.startswith("infeasible"):
             events.append({"kind": "held", "t": t, "swarm": s.sub.id, "reason": step.held})
         s.held = step.held
+        # the robots face the way while the region advances (not while it waits for them) or holds before a wall
+        s.facing = heading if s.waypoint is None and (wall or not step.held) else None
         s.state = step.state
         s.sub = replace(s.sub, region=step.state.region)
         return [s]
+
+    def _wall_ahead(self, near: np.ndarray, xs: np.ndarray, c: np.ndarray, h: np.ndarray) -> bool:
+        """Whether any of the points ``near`` (within the region's reach ahead) lies across the way: ahead of every
+        member by more than ``r_robot`` (not a point among the robots, as a teammate's back can be) and within the
+        members' lateral extent widened by r_s (not the arena's side walls beside them)."""
+        if not len(near) or not len(xs):
+            return False
+        side = np.array([-h[1], h[0]])
+        along, across = (xs - c) @ h, (xs - c) @ side
+        pa, pc = (near - c) @ h, (near - c) @ side
+        lo, hi = across.min() - self.p.r_s, across.max() + self.p.r_s
+        return bool(np.any((pa > along.max() + self.p.r_robot) & (pc >= lo) & (pc <= hi)))
 
     def _through(self, s: _Swarm, xs: np.ndarray) -> bool:
         """Whether a sub-swarm in transit is out of its lane: its region's centre at the waypoint, or every present
@@ -553,6 +575,9 @@ class Ch6Planner(RegionPlanner):
             params["neighbours"] = self.p.law_neighbours
         if self.p.law_min_sep > 0:
             params["min_sep"] = self.p.law_min_sep
+        before = not self.counts["splits"] and not self.counts["merges"]
+        if self.p.face and before and len(self.swarms) == 1 and self.swarms[0].facing is not None:
+            params[FACE] = self.swarms[0].facing
         return Plan(
             t,
             ids,

@@ -77,9 +77,10 @@ class Region:
 class Plan:
     """One period's decision. ``goals`` (N, 2): each of ``ids``' point of attraction (the region's centre, its place
     in the formation, its packed circle, its sub-region's centre); ``law`` a name in ``LAWS`` and ``params`` its
-    keyword arguments (JSON values: numbers, lists); ``groups`` (N,) each agent's sub-swarm, ``leaders`` the
-    sub-swarms' leaders; ``regions`` what to draw; ``events`` the decisions taken this period (each a JSON dict with
-    a ``kind``: "split", "merge", "formation", "failure", "held", "input", ...); ``done`` when the mission is over."""
+    keyword arguments (JSON values: numbers, lists), except ``FACE``, which no law takes; ``groups`` (N,) each
+    agent's sub-swarm, ``leaders`` the sub-swarms' leaders; ``regions`` what to draw; ``events`` the decisions taken
+    this period (each a JSON dict with a ``kind``: "split", "merge", "formation", "failure", "held", "input", ...);
+    ``done`` when the mission is over."""
 
     t: float
     ids: np.ndarray
@@ -174,6 +175,10 @@ def _split_merge(
     return laws.split_merge_law(x, goals, obstacles=obstacles, v_max=v_max, **kw)
 
 
+# a plan param no law takes: the world heading (rad) the robots should face while the region is held before an
+# obstacle ahead, so that sonars fixed to their fronts look at it (chapter 6's planner sets it, ``Ch6Params.face``)
+FACE = "face"
+
 # the local laws a plan may name (chapter 4: eqs. 4.6 and 4.41, chapter 5: eq. 5.2, chapter 6: eq. 6.5)
 LAWS: dict[str, Law] = {
     "formation": _formation,
@@ -192,4 +197,5 @@ def velocities(
     x = np.asarray(positions, dtype=float)
     if x.shape != np.shape(plan.goals):
         raise ValueError(f"positions: expected {np.shape(plan.goals)} (the plan's agents), got {x.shape}")
-    return LAWS[plan.law](x, np.asarray(plan.goals, dtype=float), obstacles, v_max, **plan.params)
+    params = {k: v for k, v in plan.params.items() if k != FACE}
+    return LAWS[plan.law](x, np.asarray(plan.goals, dtype=float), obstacles, v_max, **params)

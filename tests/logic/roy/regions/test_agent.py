@@ -96,3 +96,36 @@ def test_a_window_carries_what_the_wire_can_and_no_reading_for_the_rest() -> Non
     assert ranges == [0.5, math.inf, None, None, None, 4.0] and bad == 3
     data = pp.encode_sonar(0, 1.0, pp.SonarWindow(2, tuple(ranges)))
     assert pp.decode(data)[1].ranges_m == (0.5, math.inf, None, None, None, 4.0)
+
+
+def test_a_robot_turns_in_place_toward_the_plans_face_heading_and_then_follows_the_law() -> None:
+    sent: list[tuple[float, float]] = []
+    a = RegionAgent()
+    a.p = RegionAgent.with_defaults({"face_tol_deg": 45})
+    a.velocity = SimpleNamespace(set_velocity=lambda vx, vy: sent.append((vx, vy)))
+    a.reset()
+    plan = Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {"k_c": 3.0, "face": 0.0})
+    # facing back (pi): the point ahead goes across the heading, a pure turn (the forward component is 0)
+    assert a.face(plan, math.pi) and a.turning and a.turns == 1
+    (vx, vy) = sent[-1]
+    assert math.isclose(vx * math.cos(math.pi) + vy * math.sin(math.pi), 0.0, abs_tol=1e-12)
+    assert math.isclose(math.hypot(vx, vy), 0.05)
+    # it keeps turning until within a third of the tolerance (15 degrees), the same turn counted once
+    assert a.face(plan, math.radians(30)) and a.turns == 1
+    assert not a.face(plan, math.radians(10)) and not a.turning
+    # within the tolerance it follows the law; a turn of 50 degrees starts another turn, toward the heading (right)
+    assert not a.face(plan, math.radians(40))
+    assert a.face(plan, math.radians(50)) and a.turns == 2
+    vx, vy = sent[-1]
+    yaw = math.radians(50)
+    assert -vx * math.sin(yaw) + vy * math.cos(yaw) < 0  # clockwise: the across-heading component points right
+    # no FACE in the plan, or face_tol_deg 0 (the default): never
+    a.turning = False
+    assert not a.face(Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {"k_c": 3.0}), math.pi)
+    a.p = RegionAgent.with_defaults({})
+    assert not a.face(plan, math.pi) and a.turns == 2
+    # the laws never see FACE
+    assert np.array_equal(
+        velocities(plan, np.array([[1.0, 2.0]])),
+        velocities(Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {"k_c": 3.0}), np.array([[1.0, 2.0]])),
+    )
