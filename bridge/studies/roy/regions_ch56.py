@@ -38,6 +38,7 @@ from bridge.experiments.runner import Outcome, TrialResult
 from bridge.experiments.stats import ok
 from bridge.studies.roy.metrics import linear_fit, unused_area
 from bridge.studies.roy.numerical import Mover
+from bridge.studies.roy.regions_plots import exec_plot, finish
 from bridge.studies.roy.regions_scenarios import RegionScenario
 from bridge.studies.roy.regions_world import MissionResult
 from swarm_logic.families.roy.regions.planner import Observation, Plan, RegionPlanner
@@ -703,7 +704,6 @@ def subswarm_plot(case: str, res: TrialResult, path: Path) -> list[str]:
     marked (Figs. 6.8, 6.10)."""
     import matplotlib.pyplot as plt
 
-    from bridge.studies.roy.regions_experiments import _finish  # here: that module imports this one
 
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.0, 5.0), dpi=110, sharex=True)
     groups = sorted({k[3:].split("_")[0] for k in res.curves if k.startswith("sub")}, key=int)
@@ -717,14 +717,13 @@ def subswarm_plot(case: str, res: TrialResult, path: Path) -> list[str]:
     ax2.set_ylabel("semi-axes (unit)")
     ax2.set_yscale("log")
     ax2.set_xlabel("t (s)")
-    return _finish(fig, [ax1, ax2], f"sub-swarms of {case}", path, f"sub-swarms, {case}")
+    return finish(fig, [ax1, ax2], f"sub-swarms of {case}", path, f"sub-swarms, {case}")
 
 
 def density_events_plot(runs: dict[str, TrialResult], path: Path) -> list[str]:
     """D(t) (eq. 6.25) over a chapter 6 mission per case, splits and merges marked (Figs. 6.13, 6.14)."""
     import matplotlib.pyplot as plt
 
-    from bridge.studies.roy.regions_experiments import _finish  # here: that module imports this one
 
     fig, axes = plt.subplots(len(runs), 1, figsize=(7.0, 2.4 * len(runs)), dpi=110, squeeze=False)
     for ax, (case, res) in zip(axes[:, 0], runs.items(), strict=True):
@@ -732,13 +731,12 @@ def density_events_plot(runs: dict[str, TrialResult], path: Path) -> list[str]:
         _events(ax, res)
         ax.set_ylabel("D(t)")
     axes[-1, 0].set_xlabel("t (s)")
-    return _finish(fig, list(axes[:, 0]), "D(t) with splits and merges", path, "D(t), chapter 6")
+    return finish(fig, list(axes[:, 0]), "D(t) with splits and merges", path, "D(t), chapter 6")
 
 
 def ch6_figures(outcomes: list[Outcome], plots: Path) -> list[str]:
     """The report's chapter 6 figures: each case's sub-swarms, D(t) with the events, execution time against N per
     scaling scenario with its fit."""
-    from bridge.studies.roy.regions_experiments import exec_plot  # here: that module imports this one
 
     lines: list[str] = []
     reps = {c: r for c in CH6_CASES if (r := _first(outcomes, c)) is not None}
