@@ -292,7 +292,7 @@ def test_a_session_sonpi_under_the_camera_is_driven_from_outside_through_both_po
     r2 = s["per_robot"][2]
     assert math.dist(target, start_xy) - math.dist(target, r2["final_pose"][:2]) > 0.2  # it moved towards the target
     # it drove its board through the adapter (how many transactions depends on the machine's load: the program runs
-    # on its wall clock while the session keeps simulated time; 76 in 8 s of simulated time on a loaded machine)
+    # on its wall clock while the session keeps simulated time: 76 were seen on a loaded machine)
     assert s["per_robot"][2]["firmware"]["i2c_adapter"]["transactions"] >= 20
     # the recording: robot 2's odometry, as the network carried it from its port to every node
     odometry = []
