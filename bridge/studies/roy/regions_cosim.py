@@ -401,10 +401,12 @@ def judge_d5(outcomes: list[Outcome]) -> Verdict:
     goal = _goal(res)
     k = THESIS_D5["goal"] / goal
     got = {key: k * mean(res, f"{key}_s") for key in ("circles_1", "circles_2", "boundary")}
+    keys = ("circles_1_s", "circles_2_s", "boundary_s", "arrival_s")
     ordered = _every_run(
         res,
         lambda m: (
-            m.get("boundary_s") is not None and m["circles_1_s"] < m["circles_2_s"] <= m["boundary_s"] < m["arrival_s"]
+            all(m.get(key) is not None for key in keys)  # a run that never arrived (or never released) is out of order
+            and m["circles_1_s"] < m["circles_2_s"] <= m["boundary_s"] < m["arrival_s"]
         ),
     )
     near = {key: _within(v, THESIS_D5[key], TIME_TOL) for key, v in got.items()}
@@ -413,7 +415,9 @@ def judge_d5(outcomes: list[Outcome]) -> Verdict:
         + ", ".join(f"{key} {_f(v)} s" for key, v in got.items())
         + f"; releases {_f(mean(res, 'circle_releases'), 1)}, regions {_f(mean(res, 'region_updates'), 1)} per run"
     )
+    arrived = sum(r.metrics.get("arrival_s") is not None for r in res)
     failed = [key for key, v in near.items() if not v] + ([] if ordered else ["order"])
+    failed += [] if arrived == len(res) else [f"arrived {arrived}/{len(res)}"]
     why = "failed: " + ", ".join(failed) if failed else "times and order"
     return ours, not failed and not math.isnan(goal), why + " (thesis 42, 100, 112, 367 s)"
 

@@ -159,6 +159,10 @@ def test_the_d_targets_pass_and_fail_on_synthetic_outcomes() -> None:
     assert targets["D5"].evaluate(d5(11.5, 27.0, 30.5))[1] is True  # x 3.67: 42, 99, 112 s
     assert targets["D5"].evaluate(d5(5.0, 27.0, 30.5))[1] is False
     assert targets["D5"].evaluate(d5(11.5, 31.0, 30.5))[1] is False  # the boundary before the release
+    # a run that never arrived (the session ended first): judged, and failed, never an error
+    stuck = _out("d5-ch5-3", 1, arrival_s=None, circles_1_s=2.0, circles_2_s=8.0, boundary_s=8.0)
+    _, good, why = targets["D5"].evaluate([*d5(11.5, 27.0, 30.5), stuck])
+    assert good is False and "arrived 1/2" in why and "order" in why
 
 
 def test_a_bad_end_on_event_is_refused_naming_the_field(tmp_path: Path) -> None:
