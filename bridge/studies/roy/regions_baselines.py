@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from bridge.experiments.runner import Outcome, TrialResult
-from bridge.experiments.stats import ok
+from bridge.studies.roy.regions_judging import Verdict, whole
 from bridge.studies.roy.regions_world import MissionResult
 
 # C5-TVI: Fig. 4.15 gives no N; ours run up to the thesis' 50-agent maze (ch4-maze-tvi: ch4-maze-50 under its own
@@ -35,7 +35,6 @@ C10_NS = (6, 50, 400)
 C10_TRIALS = {6: None, 50: 10, 400: 3}  # trials per cell (None: the experiment's); the 400-agent missions are dear
 # (every C10 cell names its N, 6 too: ``--only agents=6,50`` picks rows of the table)
 
-Verdict = tuple[str, bool | None, str]
 
 
 def baseline_metrics(res: MissionResult) -> dict[str, Any]:
@@ -54,11 +53,6 @@ def baseline_metrics(res: MissionResult) -> dict[str, Any]:
         if key in p:
             out[name] = p[key]
     return out
-
-
-def whole(outcomes: list[Outcome], scenario: str) -> list[TrialResult]:
-    """The results of the scenario's whole missions (a smoke run's stop early: not judged)."""
-    return ok([o for o in outcomes if not o.trial.smoke], scenario=scenario)
 
 
 def by_n(results: list[TrialResult], metric: str) -> dict[int, list[float]]:

@@ -35,9 +35,11 @@ from scipy.stats import spearmanr
 from shapely.geometry import Polygon
 
 from bridge.experiments.runner import Outcome, TrialResult
-from bridge.experiments.stats import ok
 from bridge.studies.roy.metrics import linear_fit, unused_area
 from bridge.studies.roy.numerical import Mover
+from bridge.studies.roy.regions_judging import Verdict, whole
+from bridge.studies.roy.regions_judging import fmt as _f
+from bridge.studies.roy.regions_judging import no_runs as _none
 from bridge.studies.roy.regions_plots import exec_plot, finish
 from bridge.studies.roy.regions_scenarios import RegionScenario
 from bridge.studies.roy.regions_world import MissionResult
@@ -83,7 +85,6 @@ REL = 1e-9  # B9, B10, B11: areas equal to this relative tolerance
 # packing erodes the region with arcs drawn as chords (0.0012 r_s), so 1e-3 r is its own accuracy
 CLEAR_TOL = 1e-3
 
-Verdict = tuple[str, bool | None, str]
 
 
 # -- recording -------------------------------------------------------------------------------------------------------
@@ -365,22 +366,6 @@ def ch56_curves(rec: Recorder) -> tuple[dict[str, list[float]], dict[str, list[f
 
 
 # -- judging ---------------------------------------------------------------------------------------------------------
-
-
-def _f(x: Any, nd: int = 2) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
-
-
-def whole(outcomes: list[Outcome], scenario: str, **cell: Any) -> list[TrialResult]:
-    """The results of a scenario's whole missions (not a smoke run's, which stop early) in the cells matching
-    ``cell`` (``agents=None``: the file's own agent count)."""
-    return ok([o for o in outcomes if not o.trial.smoke], scenario=scenario, **cell)
-
-
-def _none(outcomes: list[Outcome], need: str) -> Verdict:
-    if any(o.trial.smoke for o in outcomes):
-        return "no runs", None, "smoke run: the missions stop early"
-    return "no runs", None, need
 
 
 def _sum(res: list[TrialResult], key: str) -> int:
@@ -704,7 +689,6 @@ def subswarm_plot(case: str, res: TrialResult, path: Path) -> list[str]:
     marked (Figs. 6.8, 6.10)."""
     import matplotlib.pyplot as plt
 
-
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.0, 5.0), dpi=110, sharex=True)
     groups = sorted({k[3:].split("_")[0] for k in res.curves if k.startswith("sub")}, key=int)
     for k, g in enumerate(groups):
@@ -723,7 +707,6 @@ def subswarm_plot(case: str, res: TrialResult, path: Path) -> list[str]:
 def density_events_plot(runs: dict[str, TrialResult], path: Path) -> list[str]:
     """D(t) (eq. 6.25) over a chapter 6 mission per case, splits and merges marked (Figs. 6.13, 6.14)."""
     import matplotlib.pyplot as plt
-
 
     fig, axes = plt.subplots(len(runs), 1, figsize=(7.0, 2.4 * len(runs)), dpi=110, squeeze=False)
     for ax, (case, res) in zip(axes[:, 0], runs.items(), strict=True):

@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import math
 import tomllib
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,7 +33,9 @@ from bridge.core.recorder import iter_messages
 from bridge.core.rng import stream
 from bridge.experiments.runner import Outcome, Trial, TrialResult
 from bridge.experiments.sessions import run_config
-from bridge.experiments.stats import mean, ok, values
+from bridge.experiments.stats import mean, values
+from bridge.studies.roy import regions_judging as judging
+from bridge.studies.roy.regions_judging import Verdict, every, fmt, no_runs
 
 SONPI_DIR = Path(__file__).resolve().parents[3] / "hil_configs" / "sonpi"
 NOISE_FILE = SONPI_DIR / "noise_profiles.toml"
@@ -280,21 +281,19 @@ def cosim_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
 
 
 # -- judging ---------------------------------------------------------------------------------------------------------
-Verdict = tuple[str, bool | None, str]
 
 
 def _f(x: Any, nd: int = 1) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
+    return fmt(x, nd)
 
 
 def whole(outcomes: list[Outcome], scenario: str) -> list[TrialResult]:
     """The results of a co-simulated scenario's whole sessions (a smoke run's stop early)."""
-    return ok([o for o in outcomes if not o.trial.smoke], kind="cosim", scenario=scenario)
+    return judging.whole(outcomes, scenario, kind="cosim")
 
 
 def _none(outcomes: list[Outcome], cells: str) -> Verdict:
-    smoke = any(o.trial.smoke for o in outcomes)
-    return "no runs", None, f"smoke run: the sessions stop at {SMOKE_S:g} s" if smoke else f"needs {cells}"
+    return no_runs(outcomes, f"needs {cells}", f"smoke run: the sessions stop at {SMOKE_S:g} s")
 
 
 def _within(x: float, ref: float, tol: float) -> bool:
@@ -402,7 +401,7 @@ def judge_d5(outcomes: list[Outcome]) -> Verdict:
     k = THESIS_D5["goal"] / goal
     got = {key: k * mean(res, f"{key}_s") for key in ("circles_1", "circles_2", "boundary")}
     keys = ("circles_1_s", "circles_2_s", "boundary_s", "arrival_s")
-    ordered = _every_run(
+    ordered = every(
         res,
         lambda m: (
             all(m.get(key) is not None for key in keys)  # a run that never arrived (or never released) is out of order
@@ -420,7 +419,3 @@ def judge_d5(outcomes: list[Outcome]) -> Verdict:
     failed += [] if arrived == len(res) else [f"arrived {arrived}/{len(res)}"]
     why = "failed: " + ", ".join(failed) if failed else "times and order"
     return ours, not failed and not math.isnan(goal), why + " (thesis 42, 100, 112, 367 s)"
-
-
-def _every_run(res: list[TrialResult], test: Callable[[dict[str, Any]], bool]) -> bool:
-    return bool(res) and all(test(r.metrics) for r in res)

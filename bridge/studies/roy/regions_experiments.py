@@ -28,6 +28,7 @@ import numpy as np
 
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
 from bridge.experiments.stats import mean, ok, values
+from bridge.studies.roy import regions_judging as judging
 from bridge.studies.roy.metrics import linear_fit
 from bridge.studies.roy.numerical import Mover
 from bridge.studies.roy.regions_baselines import (
@@ -61,6 +62,10 @@ from bridge.studies.roy.regions_ch56 import (
     recorder_for,
 )
 from bridge.studies.roy.regions_cosim import cosim_trial, judge_d1, judge_d3, judge_d4, judge_d5
+from bridge.studies.roy.regions_judging import Verdict
+from bridge.studies.roy.regions_judging import every as _every
+from bridge.studies.roy.regions_judging import fmt as _f
+from bridge.studies.roy.regions_judging import whole as runs
 from bridge.studies.roy.regions_plots import SHAPES, density_plot, exec_plot, file_name, formation_plot, region_plot
 from bridge.studies.roy.regions_scenarios import SCENARIO_DIR, RegionScenario, load_scenario, make_planner
 from bridge.studies.roy.regions_world import MissionResult, run_mission
@@ -324,23 +329,11 @@ SCENARIO_KINDS: dict[str, Callable[[dict[str, Any], Trial], TrialResult]] = {
 
 
 # -- judging ---------------------------------------------------------------------------------------------------------
-Verdict = tuple[str, bool | None, str]
-
-
-def _f(x: Any, nd: int = 2) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
-
-
-def runs(outcomes: list[Outcome], scenario: str, **cell: Any) -> list[TrialResult]:
-    """The results of a scenario's whole missions that ran (any kind unless given): a smoke run's missions stop
-    early, so its targets are not judged."""
-    return ok([o for o in outcomes if not o.trial.smoke], scenario=scenario, **cell)
 
 
 def no_runs(outcomes: list[Outcome], need: str) -> Verdict:
     """Not judged for want of whole missions: a smoke run's stop early, else ``need`` says what is missing."""
-    smoke = any(o.trial.smoke for o in outcomes)
-    return "no runs", None, f"smoke run: the missions stop at {SMOKE_S:g} s" if smoke else need
+    return judging.no_runs(outcomes, need, f"smoke run: the missions stop at {SMOKE_S:g} s")
 
 
 def missing(scenario: str) -> str | None:
@@ -351,10 +344,6 @@ def missing(scenario: str) -> str | None:
 def pending(why: str) -> Callable[[list[Outcome]], Verdict]:
     """A target that needs something not built yet (a scenario, a baseline, a kind of cell): not judged, saying what."""
     return lambda outcomes: ("not run", None, why)
-
-
-def _every(res: list[TrialResult], test: Callable[[dict[str, Any]], bool]) -> bool:
-    return bool(res) and all(test(r.metrics) for r in res)
 
 
 def judge_b3(outcomes: list[Outcome]) -> Verdict:
