@@ -36,7 +36,6 @@ C10_TRIALS = {6: None, 50: 10, 400: 3}  # trials per cell (None: the experiment'
 # (every C10 cell names its N, 6 too: ``--only agents=6,50`` picks rows of the table)
 
 
-
 def baseline_metrics(res: MissionResult) -> dict[str, Any]:
     """The per-trial figures of the baselines' planners, when the mission's planner has them: the hosted planner's
     update cycle and count, the vision leader-follower's follower-periods out of view and when all were home, the
