@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import importlib
+import json
 import math
 import multiprocessing
 import os
@@ -296,6 +297,44 @@ def _run_trials(ref: _Ref, trials: list[Trial]) -> list[_Done]:
     return [(r, e, share) for r, e in done]
 
 
+RESULTS_DIR = "results"  # in the output directory: each finished trial's result, what --resume picks up
+
+
+def _result_path(out_dir: Path, trial: Trial) -> Path:
+    return out_dir / RESULTS_DIR / _slug(trial.cell) / f"{trial.index}.json"
+
+
+def _result_key(trial: Trial) -> dict[str, Any]:
+    """What a stored result must match to stand for a planned trial: the experiment, cell, index, seed, smoke."""
+    return json.loads(json.dumps({"experiment": trial.experiment, "cell": trial.cell, "index": trial.index,
+                                  "seed": str(trial.seed), "smoke": trial.smoke}))
+
+
+def _store(path: Path, trial: Trial, done: _Done) -> None:
+    """Keep a successful trial's result at ``path`` (written whole, then renamed: never half a file)."""
+    res, err, wall = done
+    if res is None or err is not None:
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    body = {"key": _result_key(trial), "wall_s": wall, "metrics": res.metrics, "curves": res.curves,
+            "curve_x": res.curve_x, "timings": res.timings}
+    tmp = path.with_suffix(".part")
+    tmp.write_text(json.dumps(body))
+    tmp.replace(path)
+
+
+def _stored(path: Path, trial: Trial) -> _Done | None:
+    """The result an earlier run of this very trial stored at ``path``, or None (none, another trial's, unreadable)."""
+    try:
+        body = json.loads(path.read_text())
+        if body["key"] != _result_key(trial):
+            return None
+        res = TrialResult(body["metrics"], body["curves"], body["curve_x"], body["timings"])
+        return res, None, float(body["wall_s"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def _run_trial(ref: _Ref, trial: Trial) -> _Done:
     t0 = time.perf_counter()
     wd = Path(trial.workdir)
@@ -409,9 +448,10 @@ def _chunks(trials: list[Trial], size: int | Callable[[dict[str, Any]], int]) ->
 
 
 def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress,
-             batch: int | Callable[[dict[str, Any]], int] = 1) -> tuple[dict[int, _Done], bool]:
+             batch: int | Callable[[dict[str, Any]], int] = 1,
+             on_done: Callable[[int, _Done], None] = lambda k, d: None) -> tuple[dict[int, _Done], bool]:
     """Run the trials (``batch`` of one cell per task); returns what finished by position in `trials`, and whether
-    Ctrl-C cut the run short."""
+    Ctrl-C cut the run short. ``on_done`` sees each finished trial as it comes."""
     done: dict[int, _Done] = {}
     groups = _chunks(trials, batch if callable(batch) else max(1, batch))
     if jobs == 1:
@@ -424,6 +464,7 @@ def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress,
                     return done, True
                 for k, r in zip(g, res, strict=True):
                     done[k] = r
+                    on_done(k, r)
                     bar.advance(r[1] is not None)
         except KeyboardInterrupt:
             return done, True
@@ -442,6 +483,7 @@ def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress,
                 res = [(None, f"worker: {_error_text(e, frames=0)}", 0.0)] * len(g)
             for k, r in zip(g, res, strict=True):
                 done[k] = r
+                on_done(k, r)
                 bar.advance(r[1] is not None)
     except BaseException as e:
         _abort(pool)
@@ -452,6 +494,7 @@ def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress,
                 for k, r in zip(g, f.result(), strict=True):
                     if r[1] is None:
                         done[k] = r
+                        on_done(k, r)
         return done, True
     pool.shutdown(wait=True)
     return done, False
@@ -741,9 +784,11 @@ def select_cells(cells: list[dict[str, Any]], only: dict[str, list[str]] | None)
 
 def execute_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
                        smoke: bool = False, seed: int = 0, progress: bool = True,
-                       only: dict[str, list[str]] | None = None) -> ExperimentRun:
+                       only: dict[str, list[str]] | None = None, resume: bool = False) -> ExperimentRun:
     """Run experiment `name` and write its outputs; see run_experiment. Ctrl-C keeps what finished. `only` runs
-    the cells whose values match (key to accepted values); a trial's seed does not depend on which cells run."""
+    the cells whose values match (key to accepted values); a trial's seed does not depend on which cells run.
+    `resume` takes each trial an earlier run into the same `out` finished (its results/ file: the same cell, index
+    and seed) instead of running it again."""
     t_start = time.monotonic()
     cls = get_experiment(name)
     exp = cls()
@@ -758,6 +803,8 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     out_dir = Path(out) if out is not None else default_out
     _clear_outputs(out_dir)
     work = (out_dir / "work").absolute()
+    if not resume:  # a fresh run: no earlier trial's result stays to be taken for this run's
+        shutil.rmtree(out_dir / RESULTS_DIR, ignore_errors=True)
     counts = [exp.cell_trials(c, n) for c in cells]
     plan = [Trial(name, dict(c), i, trial_seed(seed, name, {k: v for k, v in c.items() if k not in cls.seed_ignores},
                                                i), smoke, str(work / _slug(c) / str(i)))
@@ -765,8 +812,16 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     cell_of = [j for j, m in enumerate(counts) for _ in range(m)]
     ref = _ref(cls)
     _INSTANCES.setdefault(ref, exp)
-    done, interrupted = _execute_interruptible(ref, plan, jobs, _Progress(name, len(plan), progress),
-                                               lambda c: int(exp.cell_batch(c)))
+    kept = {k: d for k, t in enumerate(plan) if resume and (d := _stored(_result_path(out_dir, t), t)) is not None}
+    todo = [k for k in range(len(plan)) if k not in kept]
+    bar = _Progress(name, len(todo), progress)
+
+    def store(j: int, d: _Done) -> None:
+        _store(_result_path(out_dir, plan[todo[j]]), plan[todo[j]], d)
+
+    ran, interrupted = (_execute_interruptible(ref, [plan[k] for k in todo], jobs, bar,
+                                               lambda c: int(exp.cell_batch(c)), store) if todo else ({}, False))
+    done = {**kept, **{todo[j]: d for j, d in ran.items()}}
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
             d.rmdir()
@@ -793,7 +848,8 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
              f"- experiment `{name}`{' (smoke run)' if smoke else ''}: {_count(len(cells), 'cell')} x "
              f"{_count(n, 'trial')}{'' if len(set(counts)) <= 1 else ' (fewer in some: see each cell)'}, seed "
              f"{seed}{chosen}",
-             f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"]
+             f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"
+             + (f" ({len(kept)} taken from an earlier run into this directory: --resume)" if kept else "")]
     if interrupted:
         lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
                       "cover only the trials that finished."]
@@ -825,7 +881,8 @@ def _clear_outputs(out_dir: Path) -> None:
 
 
 def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: int, bar: _Progress,
-                           batch: int | Callable[[dict[str, Any]], int] = 1) -> tuple[dict[int, tuple], bool]:
+                           batch: int | Callable[[dict[str, Any]], int] = 1,
+                           on_done: Callable[[int, _Done], None] = lambda k, d: None) -> tuple[dict[int, tuple], bool]:
     """``_execute`` with SIGTERM ending the run as Ctrl-C does (no orphans), the handlers restored after."""
     old_term = old_int = None
     _STOP.clear()
@@ -833,7 +890,7 @@ def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: i
         old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
         old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
     try:
-        return _execute(ref, plan, jobs, bar, batch)
+        return _execute(ref, plan, jobs, bar, batch, on_done)
     finally:
         bar.close()
         if old_term is not None:
@@ -923,8 +980,8 @@ def _failure_lines(outcomes: list[Outcome], failed: int) -> list[str]:
 
 def run_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
                    smoke: bool = False, seed: int = 0, progress: bool = True,
-                   only: dict[str, list[str]] | None = None) -> Path:
+                   only: dict[str, list[str]] | None = None, resume: bool = False) -> Path:
     """Run experiment `name`: `trials` per cell (default its own), on `jobs` processes (default: one per CPU;
     1 runs in this process), into `out` (default runs/experiments/NAME[-smoke]), the cells `only` selects (default
     all). Returns the output directory; execute_experiment() also returns the outcomes, failures and verdicts."""
-    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only).out
+    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only, resume).out

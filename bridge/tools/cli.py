@@ -188,7 +188,7 @@ def cmd_experiment(a: argparse.Namespace) -> int:
         chosen += [v for v in values if v not in chosen]
     try:
         run = execute_experiment(a.name, trials=a.trials, jobs=a.jobs, out=a.out, smoke=a.smoke, seed=a.seed,
-                                 progress=not a.quiet, only=only or None)
+                                 progress=not a.quiet, only=only or None, resume=a.resume)
     except (UnknownExperimentError, ValueError) as e:
         print(f"swarm-sitl experiment: {e}", file=sys.stderr)
         return 2
@@ -332,6 +332,9 @@ def _parser_experiment(sub: Any) -> None:
     p.add_argument("--only", type=_cell_choice, action="append", default=[], metavar="KEY=V1[,V2...]",
                    help="run only the cells whose KEY is one of the values (repeat for more keys; e.g. "
                         "--only n=15,30); trial seeds stay those of the full run")
+    p.add_argument("--resume", action="store_true",
+                   help="take the trials an earlier run into the same --out finished (same cell, index and seed) "
+                        "instead of running them again: an interrupted run goes on, added cells run alone")
     p.set_defaults(fn=cmd_experiment)
 
 

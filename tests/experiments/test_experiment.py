@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import re
@@ -228,6 +229,35 @@ def test_only_runs_the_chosen_cells_with_the_full_runs_seeds(tmp_path: Path,
     with pytest.raises(SystemExit) as e:
         main(["experiment", "test-pi", "--only", "n"])
     assert e.value.code == 2 and "write KEY=V1[,V2...]" in capsys.readouterr().err
+
+
+def test_resume_takes_the_finished_trials_and_runs_the_rest(tmp_path: Path) -> None:
+    fresh = ex.run_experiment("test-pi", trials=3, jobs=1, out=tmp_path / "fresh", progress=False)
+    out = tmp_path / "pi"
+    ex.run_experiment("test-pi", trials=3, jobs=1, out=out, progress=False, only={"n": ["100"]})
+    stored = sorted(p.relative_to(out / "results").as_posix() for p in (out / "results").rglob("*.json"))
+    assert stored == ["n-100/0.json", "n-100/1.json", "n-100/2.json"]
+    # a stored result is taken as it is: mark one to see it come back, and spoil another's key to see it rerun
+    one = out / "results" / "n-100" / "1.json"
+    body = json.loads(one.read_text())
+    body["metrics"]["size"] = "taken"
+    one.write_text(json.dumps(body))
+    two = out / "results" / "n-100" / "2.json"
+    body = json.loads(two.read_text())
+    body["key"]["seed"] = "1"
+    two.write_text(json.dumps(body))
+    run = ex.execute_experiment("test-pi", trials=3, jobs=2, out=out, progress=False, resume=True)
+    assert len(run.outcomes) == 6 and run.failed == 0
+    rows, want = _rows(out / "trials.csv"), _rows(fresh / "trials.csv")
+    assert rows[1]["size"] == "taken" and [r for i, r in enumerate(rows) if i != 1] == [
+        r for i, r in enumerate(want) if i != 1]
+    for f in (fresh / "curves").iterdir():
+        assert f.read_bytes() == (out / "curves" / f.name).read_bytes()
+    assert "(2 taken from an earlier run into this directory: --resume)" in (out / "report.md").read_text()
+    # without --resume nothing earlier is taken
+    run = ex.execute_experiment("test-pi", trials=3, jobs=1, out=out, progress=False)
+    assert (out / "trials.csv").read_bytes() == (fresh / "trials.csv").read_bytes()
+    assert "--resume" not in (out / "report.md").read_text()
 
 
 def test_unknown_names_and_listing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
