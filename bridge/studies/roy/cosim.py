@@ -70,6 +70,17 @@ class Case:
     title: str
     obstacles: list[dict[str, Any]] = field(default_factory=list)
     timeout_s: float = 240.0
+    phases: list[dict[str, Any]] = field(default_factory=list)  # [formation] phases (Table 7.5): name, until_dist_m
+
+
+APPROACH_M = 0.30  # a phase of avoiding a car starts when the centroid is this far before its lane ...
+CLEAR_M = 0.15  # ... and ends this far past it (a car 6 cm in radius, a SonPI 9 cm)
+
+
+def _phase(name: str, until_x: float | None = None) -> dict[str, Any]:
+    """A route phase ending where the centroid, moving east, reaches x = ``until_x`` (its distance to T; None: the
+    last phase, ending at arrival)."""
+    return {"name": name} if until_x is None else {"name": name, "until_dist_m": round(TARGET_M[0] - until_x, 3)}
 
 
 CASES = {
@@ -77,11 +88,18 @@ CASES = {
     "ch7-static": Case("ch7-static", "case 2: a pillar and a wall with a 45 cm passage",
                    [{"type": "cylinder", "x": 1.2, "y": 0.7, "radius": 0.08, "height": 0.3}, *_wall(2.1, 1.05)]),
     "ch7-moving-low": Case("ch7-moving-low", "case 3: one toy car across the route (low complexity)",
-                       [_car(2.0, 0.25, 1.50, 0.08)]),
+                       [_car(2.0, 0.25, 1.50, 0.08)],
+                       phases=[_phase("before changing initial formation", 2.0 - APPROACH_M),
+                               _phase("after changing initial formation", 2.0 + CLEAR_M),
+                               _phase("achieving final formation")]),
     "ch7-moving-high": Case("ch7-moving-high", "case 4: two walls with passages at opposite sides and three toy cars "
                         "(high complexity)",
                         [*_wall(1.5, 0.45), *_wall(2.4, 1.30), _car(1.0, 1.55, 0.20, 0.06),
-                         _car(1.95, 0.20, 1.55, 0.08), _car(2.8, 1.55, 0.20, 0.07)], timeout_s=360.0),
+                         _car(1.95, 0.20, 1.55, 0.08), _car(2.8, 1.55, 0.20, 0.07)], timeout_s=360.0,
+                        phases=[_phase("before changing initial formation", 1.0 - APPROACH_M),
+                                _phase("avoiding 1st moving obstacle", 1.0 + CLEAR_M),
+                                _phase("avoiding 2nd and 3rd moving obstacles", 2.8 + CLEAR_M),
+                                _phase("achieving final formation")]),
 }
 PROFILES = ("simulation", "hardware")
 ZERO_NOISE = {"model": {"x_mean_m": 0.0, "x_std_m": 0.0, "y_mean_m": 0.0, "y_std_m": 0.0, "yaw_mean_rad": 0.0,
@@ -101,20 +119,27 @@ def deploy(n: int, seed: int) -> list[list[float]]:
     return out
 
 
+GATHERING = "gathering"  # the method that is not RoyApf's optimiser: behaviour roy_gathering (circle gathering)
+
+
 def session_config(case: str, n: int, profile: str, seed: int, workdir: Path, max_s: float | None = None,
                    optimiser: str = "bat") -> dict[str, Any]:
     """One session of ``case`` with ``n`` SonPIs in ``profile``, deployed from ``seed`` (the same deployment in both
-    profiles); ``max_s`` cuts the session short (smoke runs)."""
+    profiles); ``max_s`` cuts the session short (smoke runs). ``optimiser``: RoyApf's, or ``GATHERING`` for the
+    circle-gathering baseline in its place."""
     if case not in CASES:
         raise ValueError(f"case: no case {case!r}; known: {', '.join(CASES)}")
     if profile not in PROFILES:
         raise ValueError(f"profile: no profile {profile!r}; known: {', '.join(PROFILES)}")
     c = CASES[case]
     ideal = profile == "simulation"
-    params = {"optimiser": optimiser, "v_max": V_MAX, "r_s": R_S_UNITS, "unit_m": UNIT_M,
+    params = {"v_max": V_MAX, "r_s": R_S_UNITS, "unit_m": UNIT_M,
               "target_x": TARGET_M[0] / UNIT_M, "target_y": TARGET_M[1] / UNIT_M}
+    behaviour = "roy_gathering" if optimiser == GATHERING else "roy_apf"
+    if behaviour == "roy_apf":
+        params["optimiser"] = optimiser
     group: dict[str, Any] = {
-        "count": n, "profile": "sonpi", "behaviour": "roy_apf", "params": params,
+        "count": n, "profile": "sonpi", "behaviour": behaviour, "params": params,
         "placement": {"kind": "explicit", "poses": deploy(n, seed)},
         **({"sonar_firing": "ideal", "sonar_noise_m": 0.0} if ideal else {"sonar_firing": "sequential"}),
         "devices": {"sonpi_wifi": {"url": "sitl://wifi", "localisation": "camera"}},
@@ -135,7 +160,8 @@ def session_config(case: str, n: int, profile: str, seed: int, workdir: Path, ma
         "robots": [group],
         "services": [{"kind": "overhead_camera", "name": "camera", "options": camera}],
         "wifi": wifi,
-        "formation": {"target": list(TARGET_M), "r_s_m": R_S_UNITS * UNIT_M, "goal_tol_m": UNIT_M},
+        "formation": {"target": list(TARGET_M), "r_s_m": R_S_UNITS * UNIT_M, "goal_tol_m": UNIT_M,
+                      **({"phases": c.phases} if c.phases else {})},
     }
 
 
@@ -175,7 +201,17 @@ def session_metrics(s: dict[str, Any]) -> dict[str, Any]:
         "wifi_lost": wifi.get("lost", 0), "wifi_sent": wifi.get("sent", 0),
         "alive": sum(1 for r in s["per_robot"] if r.get("alive")), "rtf": s.get("rtf"),
         "cpu_s": round(float(s.get("cpu_s_total") or 0.0), 2),
+        **phase_metrics(f.get("phases") or []),
     }
+
+
+def phase_metrics(phases: list[dict[str, Any]]) -> dict[str, Any]:
+    """Each route phase's FE and duration as trials.csv columns ``ph<k>_fe``, ``ph<k>_s`` (k from 1)."""
+    out: dict[str, Any] = {}
+    for k, p in enumerate(phases, 1):
+        out[f"ph{k}_fe"] = p["fe_mean"]
+        out[f"ph{k}_s"] = p["duration_s"]
+    return out
 
 
 def _mm(v: float | None) -> float | None:

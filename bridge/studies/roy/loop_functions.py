@@ -5,17 +5,20 @@ model's arrival test: the centroid within ``goal_tol_m`` of T and every robot wi
 it), the mean path length, and the closest two robots came. Opt-in: a session with a ``[formation]`` section.
 
 Every ``sample_s`` the live robots' poses are sampled (recorded on ``/world/formation``: t, FE, centroid, nearest
-pair); the session ends ``end_after_arrival_s`` after the swarm arrives, or, with ``end_on_event``
+pair). ``phases`` splits the mission into named stretches of the route, each ending when the centroid first comes
+within its ``until_dist_m`` of T (the last one at arrival), and scores each apart (Table 7.5's phase-wise FE and
+durations). The session ends ``end_after_arrival_s`` after the swarm arrives, or, with ``end_on_event``
 (``SERVICE/KIND``), ``end_after_event_s`` after a service logs that decision (a region controller's ``done``).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from bridge.core.config import Section
 from bridge.core.loop_functions import LoopFunctions
@@ -35,6 +38,14 @@ register_schema("swarm_sitl.RoyFormation", {
 })
 
 
+class PhaseCfg(Section):
+    """One stretch of the route: its name, and where it ends (none: at arrival, the last phase)."""
+
+    name: str = Field(min_length=1)
+    until_dist_m: float | None = Field(None, gt=0, description="the phase ends when the centroid first comes this "
+                                                               "near T (m); none: at arrival")
+
+
 class FormationCfg(Section):
     """``[formation]``: how a chapter 3 session is scored and when it ends."""
 
@@ -49,6 +60,19 @@ class FormationCfg(Section):
                                                  "of this kind (a region controller's 'controller/done'); the "
                                                  "swarm's arrival then ends nothing")
     end_after_event_s: float = Field(1.0, ge=0, description="... this long after that event")
+    phases: list[PhaseCfg] = Field(default_factory=list, description="the route's phases in order, each scored "
+                                                                      "apart; only the last may end at arrival")
+
+    @field_validator("phases")
+    @classmethod
+    def _phases_in_order(cls, v: list[PhaseCfg]) -> list[PhaseCfg]:
+        ends = [p.until_dist_m for p in v]
+        if any(e is None for e in ends[:-1]):
+            raise ValueError("only the last phase may leave out until_dist_m (it ends at arrival)")
+        dist = [e for e in ends if e is not None]
+        if any(b >= a for a, b in itertools.pairwise(dist)):
+            raise ValueError(f"until_dist_m must fall from phase to phase (nearer T each time), got {dist}")
+        return v
 
 
 def arrived(xy: np.ndarray, target: np.ndarray, r_s: float, tol: float) -> bool:
@@ -79,6 +103,10 @@ class RoyLoopFunctions(LoopFunctions):
         self.path_m: float | None = None  # the mean odometer at arrival
         self.end_event = tuple(self.cfg.end_on_event.split("/")) if self.cfg.end_on_event else None
         self.event_s: float | None = None  # when that event came
+        self.phase = 0  # the phase the swarm is in (== len(phases): past the last one's end)
+        self.phase_fe: list[list[float]] = [[] for _ in self.cfg.phases]
+        self.phase_start: list[float | None] = [0.0 if k == 0 else None for k in range(len(self.cfg.phases))]
+        self.phase_end: list[float | None] = [None] * len(self.cfg.phases)
 
     def pre_step(self, t: int) -> None:
         if t < self.next_tick:
@@ -99,6 +127,7 @@ class RoyLoopFunctions(LoopFunctions):
                             "arrived": at})
         if self.arrived_s is not None:
             return
+        self._phase(t / 1e9, float(np.hypot(*(c - self.target))) if len(xy) else math.inf, fe)
         self.fe.append(fe)
         self.close.append(close)
         self.far.append(far)
@@ -108,6 +137,32 @@ class RoyLoopFunctions(LoopFunctions):
             self.path_m = float(w.odometer[w.alive].mean())
             if self.cfg.end_after_arrival_s is not None and self.end_event is None:
                 self._end(t, self.cfg.end_after_arrival_s)
+
+    def _phase(self, t_s: float, dist: float, fe: float) -> None:
+        """Move on past every phase whose end the centroid has reached (``dist`` from T), then count this sample's
+        FE in the phase it is in."""
+        ph = self.cfg.phases
+        while self.phase < len(ph) and ph[self.phase].until_dist_m is not None and dist <= ph[self.phase].until_dist_m:
+            self.phase_end[self.phase] = t_s
+            self.phase += 1
+            if self.phase < len(ph):
+                self.phase_start[self.phase] = t_s
+        if self.phase < len(ph):
+            self.phase_fe[self.phase].append(fe)
+
+    def _phases(self) -> list[dict[str, Any]]:
+        """Each phase's start and end (s; None: not reached), duration and FE mean and sd over its samples."""
+        out = []
+        for k, p in enumerate(self.cfg.phases):
+            start, end = self.phase_start[k], self.phase_end[k]
+            if end is None and k == self.phase and p.until_dist_m is None:
+                end = self.arrived_s  # the last phase ends at arrival
+            fe = np.array(self.phase_fe[k])
+            out.append({"name": p.name, "start_s": start, "end_s": end,
+                        "duration_s": None if start is None or end is None else round(end - start, 3),
+                        "samples": len(fe), "fe_mean": round(float(fe.mean()), 4) if len(fe) else None,
+                        "fe_sd": round(float(fe.std(ddof=1)), 4) if len(fe) > 1 else None})
+        return out
 
     def _end(self, t: int, after_s: float) -> None:
         """End the session ``after_s`` after quantum ``t`` (at the next quantum at the earliest)."""
@@ -138,4 +193,5 @@ class RoyLoopFunctions(LoopFunctions):
             "arrived": self.arrived_s is not None, "mission_s": self.arrived_s,
             "path_m": round(path, 4), "nn_min_m": round(self.nn_min, 4) if math.isfinite(self.nn_min) else None,
             **({"end_event": self.cfg.end_on_event, "end_event_s": self.event_s} if self.end_event else {}),
+            **({"phases": self._phases()} if self.cfg.phases else {}),
         }}

@@ -140,3 +140,42 @@ def test_the_bench_s_camera_sessions_are_valid_configs(tmp_path: Path) -> None:
         path.write_text(to_toml(raw))
         cfg = load_config(path)
         assert cfg.session.duration_s == 5.0 and not RoyLoopFunctions.wanted(cfg)
+
+
+def test_route_phases_split_the_mission_where_the_centroid_nears_the_target(tmp_path: Path) -> None:
+    """Table 7.5's phases: each ends where the centroid first comes within its distance of T, the next starts there,
+    every sample before arrival counts in exactly one, and a phase not reached has no times."""
+    cfg = cosim.session_config("ch7-open", 3, "simulation", 3, tmp_path, max_s=30.0)
+    start = float(np.hypot(*(np.mean([p[:2] for p in cfg["robots"][0]["placement"]["poses"]], 0) - cosim.TARGET_M)))
+    cfg["formation"]["phases"] = [{"name": "first", "until_dist_m": round(start - 0.05, 3)},
+                                  {"name": "second", "until_dist_m": round(start - 0.25, 3)},
+                                  {"name": "far", "until_dist_m": 0.2}, {"name": "last"}]
+    s = cosim.run_session(cfg, tmp_path)
+    f = s["formation"]
+    first, second, far, last = f["phases"]
+    assert first["start_s"] == 0.0 and 0 < first["end_s"] == second["start_s"] < second["end_s"] == far["start_s"]
+    assert far["end_s"] is None and far["duration_s"] is None and last["start_s"] is None and last["samples"] == 0
+    assert first["duration_s"] == first["end_s"] and second["duration_s"] == pytest.approx(
+        second["end_s"] - second["start_s"])
+    assert sum(p["samples"] for p in f["phases"]) == f["samples"] and not f["arrived"]
+    overall = sum(p["fe_mean"] * p["samples"] for p in f["phases"] if p["samples"]) / f["samples"]
+    assert overall == pytest.approx(f["fe_mean"], abs=1e-3)
+    m = cosim.session_metrics(s)
+    assert m["ph1_s"] == first["duration_s"] and m["ph4_fe"] is None and m["ph3_s"] is None
+
+
+@pytest.mark.parametrize(("phases", "says"), [
+    ([{"name": "a"}, {"name": "b", "until_dist_m": 1.0}], "only the last phase may leave out until_dist_m"),
+    ([{"name": "a", "until_dist_m": 1.0}, {"name": "b", "until_dist_m": 1.5}], "must fall from phase to phase"),
+    ([{"name": "a", "until_dist_m": -1.0}], "until_dist_m"),
+])
+def test_route_phases_out_of_order_are_refused_naming_the_field(tmp_path: Path, phases: list, says: str) -> None:
+    from bridge.core.config import ConfigError
+
+    cfg = cosim.session_config("ch7-open", 3, "simulation", 3, tmp_path)
+    cfg["formation"]["phases"] = phases
+    path = tmp_path / "p.toml"
+    path.write_text(to_toml(cfg))
+    with pytest.raises(ConfigError) as e:
+        load_config(path)
+    assert "formation" in str(e.value) and "phases" in str(e.value) and says in str(e.value)
