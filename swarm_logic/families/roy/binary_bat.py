@@ -128,30 +128,12 @@ def binary_bat(
     bats: int = 25,
     iters: int = 50,
     bits: int = 8,
-    f_min: float = 0.0,
-    f_max: float = 1.0,
-    a0: float = 1.0,
-    alpha: float = 0.9,
-    gamma: float = 0.9,
-    transfer: str = "sigmoid",
     x0: np.ndarray | None = None,
+    **settings: float | str,
 ) -> tuple[np.ndarray, float]:
-    """One problem: the best point found and its value, the uniforms drawn from ``rng`` in one call."""
+    """One problem: the best point found and its value, the uniforms drawn from ``rng`` in one call; ``settings``
+    are ``binary_bat_batch``'s f_min, f_max, a0, alpha, gamma and transfer."""
     u = rng.random((1, binary_bat_draws(bats, iters, len(lo), bits)))
-    best, val = binary_bat_batch(
-        single(f),
-        lo,
-        hi,
-        u,
-        bats,
-        iters,
-        bits,
-        f_min,
-        f_max,
-        a0,
-        alpha,
-        gamma,
-        transfer,
-        None if x0 is None else np.asarray(x0, float)[None, :],
-    )
+    x0 = None if x0 is None else np.asarray(x0, float)[None, :]
+    best, val = binary_bat_batch(single(f), lo, hi, u, bats, iters, bits, x0=x0, **settings)
     return best[0], float(val[0])
