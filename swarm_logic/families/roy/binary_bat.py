@@ -1,5 +1,5 @@
-"""The binary cooperative bat algorithm chapter 7 (Table 7.5) compares BAT with (Zhang, ISA Trans. 96, 2020), as a
-gain optimiser: each gain is ``bits`` bits over [lo, hi], each bit has a velocity, and a bit is set from its velocity
+"""The binary cooperative bat algorithm (Zhang, ISA Trans. 96, 2020), which chapter 7 (Table 7.5) compares with BAT, as
+a gain optimiser: each gain is ``bits`` bits over [lo, hi], each bit has a velocity, and a bit is set from its velocity
 mapped into [0, 1].
 
 The thesis' only description: the velocity is mapped into a probability and the bit set to one or zero by comparing
@@ -7,7 +7,8 @@ it with a random number (the S-shaped, sigmoid, ``transfer``). Zhang's paper is 
 that of the binary bat algorithm (BBA; Mirjalili, Mirjalili & Yang, Neural Comput. Appl. 2014), which also gives the
 V-shaped ``transfer`` (a bit flips with probability |2/pi arctan(pi/2 v)|), with Yang's loudness and pulse rate:
 f_i = f_min + beta (f_max - f_min), v_i <- v_i + f_i (x_i - x_*) per bit; if rand > r_i a local walk around the best;
-the candidate is accepted if it is no worse and rand < A_i, and then A_i <- alpha A_i, r_i <- r_i(0) (1 - e^(-gamma t)).
+the candidate is accepted if it is no worse and rand < A_i, and then A_i <- alpha A_i, r_i <- r_i(0) (1 - e^(-gamma t))
+(r_i = 0, Yang's value at t = 0, until a bat's first acceptance).
 Zhang's cooperative term (the bats sharing information over a communication topology) is not described, so absent.
 Our readings [R]:
 - sigmoid: bit = 1 when rand < S(-v), S(z) = 1 / (1 + e^-z): with v accumulating f (x - x_*), bits move towards the
