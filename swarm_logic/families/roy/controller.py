@@ -15,6 +15,7 @@ import numpy as np
 
 from swarm_logic.controller import Controller
 from swarm_logic.families.roy.bat import BAT_MODES
+from swarm_logic.families.roy.binary_bat import BINARY_TRANSFERS
 from swarm_logic.families.roy.objective import MODES, AgentState, observe
 from swarm_logic.families.roy.potential import OA_LAWS
 from swarm_logic.families.roy.tuning import command, deadlocked, draw, kind, tune
@@ -34,7 +35,7 @@ from swarm_logic.robots.sonpi.interfaces import (
     own_pose,
 )
 
-OPTIMISERS = ("bat", "pso", "bfo", "bgpso", "psoabg", "fixed")
+OPTIMISERS = ("bat", "pso", "bfo", "bgpso", "psoabg", "binary_bat", "fixed")
 POS = "(0, inf)"
 GAIN = "[0.1, 10]"
 COUNT = "[1, 10000]"
@@ -147,6 +148,11 @@ class RoyApf(SonpiAgent):
         "bat_a0": 1.0,
         "bat_alpha": 0.05,
         "bat_gamma": 0.95,
+        # the binary (cooperative) bat of ch.7 (Table 7.5) [R]: bat_pop x bat_iters, bat_f_min/f_max/a0 as BAT
+        "bbat_bits": 8,  # [R] bits a gain: a grid of 2^8 points over [gain_min, gain_max]
+        "bbat_transfer": "sigmoid",  # the thesis' S-shaped map; "v_shaped": BBA's (Mirjalili et al. 2014)
+        "bbat_alpha": 0.9,  # the thesis gives none for Zhang's: Yang's standard BA
+        "bbat_gamma": 0.9,
         "deadlock_window_s": 2.0,  # erratum #7: PSOABG switches to PSO when the centroid moves
         "deadlock_move": 0.05,  # < deadlock_move x r_s in deadlock_window_s
         "goal_tol": 1.0,  # units (digest §5.5): no deadlock within this of T
@@ -161,13 +167,14 @@ class RoyApf(SonpiAgent):
         "bfo_ns": "[0, 1000]", "bfo_nre": COUNT, "bfo_ned": COUNT, "bfo_ped": UNIT, "bfo_step": "(0, 1]",
         "bfo_d_att": "[0, inf)", "bfo_w_att": "[0, inf)", "bfo_h_rep": "[0, inf)", "bfo_w_rep": "[0, inf)",
         "bat_pop": COUNT, "bat_iters": "[0, 10000]", "bat_f_min": "[0, inf)", "bat_f_max": "[0, inf)",
-        "bat_a0": "[0, 1]", "bat_alpha": "(0, 1]", "bat_gamma": "(0, inf)", "deadlock_window_s": POS,
+        "bat_a0": "[0, 1]", "bat_alpha": "(0, 1]", "bat_gamma": "(0, inf)", "bbat_bits": "[1, 30]",
+        "bbat_alpha": "(0, 1]", "bbat_gamma": "(0, inf)", "deadlock_window_s": POS,
         "deadlock_move": "[0, inf)", "goal_tol": "[0, inf)",
     }
     choices: ClassVar[dict[str, tuple[str, ...]]] = {
         "optimiser": OPTIMISERS, "objective": MODES, "oa_mode": ("per_sensor", "nearest"), "oa_law": OA_LAWS,
         "progress": ("swarm", "centroid"),
-        "target_term": ("saturated", "none"), "bat_mode": BAT_MODES,
+        "target_term": ("saturated", "none"), "bat_mode": BAT_MODES, "bbat_transfer": BINARY_TRANSFERS,
     }
     static_params = frozenset({"period_s", "deadlock_window_s"})  # both size state built by ``init``
 

@@ -15,6 +15,7 @@ import numpy as np
 from swarm_logic.families.roy import potential
 from swarm_logic.families.roy.bat import bat_batch, bat_draws
 from swarm_logic.families.roy.bfo import bfo_batch, bfo_draws
+from swarm_logic.families.roy.binary_bat import binary_bat_batch, binary_bat_draws
 from swarm_logic.families.roy.objective import AgentState, theta
 from swarm_logic.families.roy.pso import pso_batch, pso_draws
 
@@ -33,7 +34,8 @@ def draw_sizes(p: dict[str, Any], k: str) -> dict[str, int]:
     """The uniforms optimiser ``k`` takes per step, by component (BGPSO: BFO's, then PSO's)."""
     sizes = {"bat": bat_draws(int(p["bat_pop"]), int(p["bat_iters"]), DIM),
              "pso": pso_draws(int(p["pso_particles"]), int(p["pso_iters"]), DIM),
-             "bfo": bfo_draws(int(p["bfo_bacteria"]), int(p["bfo_nc"]), int(p["bfo_nre"]), int(p["bfo_ned"]), DIM)}
+             "bfo": bfo_draws(int(p["bfo_bacteria"]), int(p["bfo_nc"]), int(p["bfo_nre"]), int(p["bfo_ned"]), DIM),
+             "binary_bat": binary_bat_draws(int(p["bat_pop"]), int(p["bat_iters"]), DIM, int(p["bbat_bits"]))}
     if k == "fixed":
         return {}
     if k == "bgpso":
@@ -79,6 +81,10 @@ def tune(p: dict[str, Any], k: str, s: AgentState, gains: np.ndarray, u: dict[st
     if k == "bat":
         return bat_batch(f, lo, hi, u["bat"], int(p["bat_pop"]), int(p["bat_iters"]), p["bat_f_min"],
                          p["bat_f_max"], p["bat_a0"], p["bat_alpha"], p["bat_gamma"], p["bat_mode"], x0=gains)[0]
+    if k == "binary_bat":  # BAT's population and iterations: the comparison at equal evaluations
+        return binary_bat_batch(f, lo, hi, u["binary_bat"], int(p["bat_pop"]), int(p["bat_iters"]), int(p["bbat_bits"]),
+                                p["bat_f_min"], p["bat_f_max"], p["bat_a0"], p["bbat_alpha"], p["bbat_gamma"],
+                                p["bbat_transfer"], x0=gains)[0]
     if k == "pso":
         return run_pso()
     if k == "bfo":
