@@ -1,18 +1,18 @@
 """``roy-regions``: chapters 4-6's virtual regions (digest 001 §4.2-4.6) judged against the thesis (targets B3-B12,
 C4-C12, D1, D3-D5 of §6).
 
-A cell is one scenario file of ``hil_configs/roy/`` (``regions_scenarios``) run by its ``kind``: "numerical" (the
-point model, ``regions_world.run_mission``: one mission per trial, its planner the file's) now; "cosim" (SonPI
-sessions through the region controller service, ``bridge.experiments.sessions.run_config``, hardware-scale arenas for
-D1, D3-D5) is a kind still to be written: ``SCENARIO_KINDS`` names the kinds there are and a cell of another kind
-raises. ``CELLS`` lists them, one ``CellSpec`` a line: adding a scenario (chapter 5's, chapter 6's cases, their
-500/1000-agent variants) is one more line, with a cap on its trials when its runs are dear.
+A cell is a scenario run by its ``kind``: "numerical" (a scenario file of ``hil_configs/roy/``,
+``regions_scenarios``, in the point model, ``regions_world.run_mission``: one mission per trial, its planner the
+file's), "cosim" (SonPI sessions through the region controller service, ``regions_cosim``: hardware-scale arenas for
+D1, D3-D5) or "ch7" (chapter 7's comparisons of the BAT approach on SonPIs, ``regions_ch7``: C11, C12).
+``SCENARIO_KINDS`` names the kinds; ``CELLS`` lists the region cells, one ``CellSpec`` a line, with a cap on a cell's
+trials when its runs are dear.
 
 Each trial records the mission's figures (arrival, region area and axes, D(t), TVI, formations, failures, the AD
 test's holds around a mover) and its execution time: the wall-clock seconds of the planner, the world and the sonar
 casts (``exec_s``, erratum 29: the thesis' "execution time" is compute time, not the simulated ``sim_s``; ``plan_s``
 the planner's part): the two columns that differ between two runs of the same command. A target whose scenario,
-baseline or kind does not exist yet is "not judged" with the reason; none passes without runs.
+baseline or kind has no runs is "not judged" with the reason; none passes without runs.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ import numpy as np
 
 from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialResult, register
 from bridge.experiments.stats import mean, ok, values
+from bridge.studies.roy import regions_ch7
 from bridge.studies.roy import regions_judging as judging
 from bridge.studies.roy.metrics import linear_fit
 from bridge.studies.roy.numerical import Mover
@@ -321,10 +322,11 @@ def numerical_trial(cell: dict[str, Any], trial: Trial) -> TrialResult:
     return TrialResult(metrics, curves, xs, timings)
 
 
-# the scenario kinds a cell can name, each a function running one trial of a cell ("cosim": still to be written)
+# the scenario kinds a cell can name, each a function running one trial of a cell
 SCENARIO_KINDS: dict[str, Callable[[dict[str, Any], Trial], TrialResult]] = {
     "numerical": numerical_trial,
     "cosim": cosim_trial,
+    regions_ch7.KIND: regions_ch7.trial,
 }
 
 
@@ -339,11 +341,6 @@ def no_runs(outcomes: list[Outcome], need: str) -> Verdict:
 def missing(scenario: str) -> str | None:
     """Why a scenario cannot be judged yet: no file, or None when it has one."""
     return None if (SCENARIO_DIR / f"{scenario}.toml").exists() else f"no scenario file {scenario} yet"
-
-
-def pending(why: str) -> Callable[[list[Outcome]], Verdict]:
-    """A target that needs something not built yet (a scenario, a baseline, a kind of cell): not judged, saying what."""
-    return lambda outcomes: ("not run", None, why)
 
 
 def judge_b3(outcomes: list[Outcome]) -> Verdict:
@@ -514,9 +511,12 @@ class RoyRegionsExperiment(Experiment):
         "(r_s scaled to keep N pi r_s^2). Each trial is one mission from its own seed (deployment, failing agents). "
         "timings.csv's exec_s is the wall-clock time of the planner, the world and the sonar casts (the thesis' "
         "execution time, erratum 29), plan_s the planner's part, cpu_s the mission's CPU seconds (C8's measure). "
-        "Targets whose baselines or co-simulated cells do not exist yet are not judged."
+        "Co-simulated cells (SonPI sessions): D1, D3-D5's region sessions (regions_cosim) and chapter 7's "
+        "comparisons of the BAT approach with circle gathering and binary bat in cases 3 and 4 (regions_ch7, C11, "
+        "C12; the methods share their deployments)."
     )
     trials = 20
+    seed_ignores = ("method",)  # chapter 7's methods share their deployments: the comparisons are paired
     smoke_trials = 1
     boxes = (
         ("arrival_s", "arrival time (s)"),
@@ -525,9 +525,11 @@ class RoyRegionsExperiment(Experiment):
     )
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
-        return [c.cell() for c in CELLS]
+        return [c.cell() for c in CELLS] + regions_ch7.cells()
 
     def cell_trials(self, cell: dict[str, Any], n: int) -> int:
+        if cell.get("kind") == regions_ch7.KIND:
+            return min(n, regions_ch7.TRIALS)
         spec = next((c for c in CELLS if c.cell() == cell), None)
         return min(n, spec.max_trials) if spec is not None and spec.max_trials else n
 
@@ -676,16 +678,14 @@ class RoyRegionsExperiment(Experiment):
                 "against circle gathering in cases 3/4: faster everywhere, CG fails 4 robots high",
                 "260 vs 451, 304 vs 612, 466 vs 1169 s",
                 "every cell",
-                pending("needs chapter 7's cases 3/4 for the regions planner (co-simulated) and its CG cells"),
+                regions_ch7.judge_c11,
             ),
             Target(
                 "C12",
                 "phase-wise FE at or below binary bat's; shorter missions",
                 "304 vs 345 s, 575 vs 725 s",
                 "every phase",
-                pending(
-                    "needs the regions planner in chapter 7's dynamic cases beside roy-apf's binary bat (co-simulated)"
-                ),
+                regions_ch7.judge_c12,
             ),
             Target(
                 "D1",
@@ -787,7 +787,7 @@ class RoyRegionsExperiment(Experiment):
                     f"Fit through the means: {fit.intercept:.4f} + {fit.slope:.5f} N s, R^2 {fit.r2:.4f} "
                     f"({fit.n} values of N).",
                 ]
-        return lines
+        return lines + regions_ch7.sections(outcomes)
 
     def figures(self, outcomes: list[Outcome], plots: Path) -> list[str]:
         """The region's area and axes per cell, the formation sequence, D(t) (one trial per cell each) and the

@@ -65,7 +65,7 @@ def test_smoke_trials_record_the_region_formation_failures_and_the_mover() -> No
     assert f["area_formula"] == pytest.approx(3.14159265 * 4.284**2 * 45 / 50)
     mv = exp.run_batch([Trial("roy-regions", {"kind": "numerical", "scenario": "ch4-mover"}, 0, 5, True, "")])[0]
     assert mv.metrics["mover_in_periods"] + mv.metrics["mover_out_periods"] == 81
-    with pytest.raises(ValueError, match="kind: no scenario kind 'bench'; known: numerical, cosim"):
+    with pytest.raises(ValueError, match="kind: no scenario kind 'bench'; known: numerical, cosim, ch7"):
         exp.run_batch([Trial("roy-regions", {"kind": "bench", "scenario": "ch4-a"}, 0, 5, True, "")])
 
 
