@@ -20,11 +20,12 @@ then by type:
 - ``STATUS`` (4): id u16, state u8 (``STATES``), flags u8 (bit 0: it has a pose), x, y, yaw (f32: its own estimate).
 - ``SONAR`` (5, version 2): id u16, count m u8, then m ranges u16 (mm; ``NO_ECHO`` 0xFFFF: the beam heard nothing,
   ``NO_READING`` 0xFFFE: the sensor gave nothing usable); ``t_us`` is the window's end.
-- ``PLAN`` (6, version 2): flags u8 (bit 0: done), law u8 (its index in ``LAWS``), unit_m f32 (the length unit of
-  the goals and parameters, m), count n u8, then per agent id u16, group u8 (``NO_GROUP`` 255: none), flags u8
-  (bit 0: leader), goal x, y f32; then the law's parameters: count u8, each a name (u8 length, ASCII) and a typed
-  value (``P_*``: null, f64 number, bool, string, f64 list, a dict of the same, or an N x N matrix over the plan's
-  agents as its non-zero entries: symmetric u8, count u16, then i u8, j u8, value f32, i < j when symmetric).
+- ``PLAN`` (6, version 2): flags u8 (bit 0: done, bit 1: a heading to face follows), law u8 (its index in
+  ``LAWS``), unit_m f32 (the length unit of the goals and parameters, m), count n u8, [face f64: the world heading
+  (rad) the robots should face, only with flag bit 1], then per agent id u16, group u8 (``NO_GROUP`` 255: none),
+  flags u8 (bit 0: leader), goal x, y f32; then the law's parameters: count u8, each a name (u8 length, ASCII) and a
+  typed value (``P_*``: null, f64 number, bool, string, f64 list, a dict of the same, or an N x N matrix over the
+  plan's agents as its non-zero entries: symmetric u8, count u16, then i u8, j u8, value f32, i < j when symmetric).
 
 A datagram that is not one of these (another magic or version, an unknown type, a length that does not match, a
 non-finite number) raises ``PacketError``: the receiver counts it and drops it. An encoder given what does not fit
@@ -144,13 +145,15 @@ class PlanAgent:
 @dataclass(frozen=True, slots=True)
 class PlanPacket:
     """The region controller's plan as the robots get it: the agents' rows, the law by name and its keyword
-    parameters (an N x N matrix over the agents, ``desired``, as nested lists), the unit of lengths (m), done."""
+    parameters (an N x N matrix over the agents, ``desired``, as nested lists), the unit of lengths (m), done, and the
+    heading to face, if any."""
 
     agents: tuple[PlanAgent, ...]
     law: str
     params: dict[str, Any]
     unit_m: float
     done: bool = False
+    face_rad: float | None = None  # the world heading the robots should face (none: as the law turns them)
 
 
 Content = list[PoseEntry] | Odometry | Mission | Status | SonarWindow | PlanPacket
@@ -280,6 +283,8 @@ def encode_plan(seq: int, t_s: float, plan: PlanPacket, limit: int = MAX_DATAGRA
         raise ValueError(f"law: expected one of {', '.join(LAWS)}, got {plan.law!r}")
     if not (math.isfinite(plan.unit_m) and plan.unit_m > 0):
         raise ValueError(f"unit_m: must be finite and > 0, got {plan.unit_m}")
+    if plan.face_rad is not None and not math.isfinite(plan.face_rad):
+        raise ValueError(f"face_rad: a heading must be finite, got {plan.face_rad}")
     rows = []
     for a in plan.agents:
         g = NO_GROUP if a.group is None else a.group
@@ -291,7 +296,10 @@ def encode_plan(seq: int, t_s: float, plan: PlanPacket, limit: int = MAX_DATAGRA
     if len(plan.params) > 255:
         raise ValueError("params: at most 255 entries")
     params = b"".join(_name(k) + _value(v, n, f"params.{k}") for k, v in plan.params.items())
-    body = _PLAN.pack(int(plan.done), LAWS.index(plan.law), plan.unit_m, n) + b"".join(rows)
+    flags = int(plan.done) | (2 if plan.face_rad is not None else 0)
+    body = _PLAN.pack(flags, LAWS.index(plan.law), plan.unit_m, n)
+    body += b"" if plan.face_rad is None else _F64.pack(plan.face_rad)
+    body += b"".join(rows)
     body += bytes([len(plan.params)]) + params
     edges = sum(len(_entries(v, n)[1]) for v in plan.params.values() if _is_matrix(v, n))
     return _fits(_header(PLAN, seq, t_s) + body, f"a plan of {n} agents ({edges} matrix entries)", limit)
@@ -469,12 +477,16 @@ class _Reader:
 def _decode_plan(body: memoryview) -> PlanPacket:
     r = _Reader(body)
     flags, law, unit_m, n = r.take(_PLAN)
-    if flags & ~1:
+    if flags & ~3:
         raise PacketError(f"unknown flags 0x{flags:02x}")
     if law >= len(LAWS):
         raise PacketError(f"unknown law {law}")
     if not (math.isfinite(unit_m) and unit_m > 0):
         raise PacketError(f"unit_m {unit_m} is not a length")
+    face = None
+    if flags & 2:
+        (face,) = r.take(_F64)
+        _finite((face,))
     agents = []
     for _ in range(n):
         rid, group, aflags, gx, gy = r.take(_AGENT)
@@ -485,4 +497,4 @@ def _decode_plan(body: memoryview) -> PlanPacket:
     params = r.entries(n, 0)
     if r.at != len(body):
         raise PacketError(f"{len(body) - r.at} bytes after the plan's parameters")
-    return PlanPacket(tuple(agents), LAWS[law], params, unit_m, bool(flags & 1))
+    return PlanPacket(tuple(agents), LAWS[law], params, unit_m, bool(flags & 1), face)

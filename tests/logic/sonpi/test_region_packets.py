@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import struct
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -72,6 +73,16 @@ def test_a_plan_round_trips_with_its_matrix_as_edges() -> None:
     asym = [[0, 1, 0], [0, 0, 2], [3, 0, 0]]
     got3 = pp.decode(pp.encode_plan(0, 0.0, pp.PlanPacket(_plan(3).agents, "formation", {"desired": asym}, 0.1)))[1]
     assert got3.params["desired"] == asym
+    assert got3.face_rad is None and got.face_rad is None
+
+
+def test_a_plan_carries_the_heading_to_face_exactly_and_refuses_one_that_is_not() -> None:
+    plan = pp.PlanPacket(_plan(3).agents, "split_merge", {"k_c": 3.0}, 0.5, face_rad=-2.0943951023931953)
+    data = pp.encode_plan(1, 2.0, plan)
+    got = pp.decode(data)[1]
+    assert got == plan and len(data) == len(pp.encode_plan(1, 2.0, replace(plan, face_rad=None))) + 8
+    with pytest.raises(ValueError, match="face_rad: a heading must be finite"):
+        pp.encode_plan(0, 0.0, replace(plan, face_rad=math.nan))
 
 
 def test_fourteen_agents_fully_linked_fit_one_datagram_and_more_are_refused_naming_the_size() -> None:
@@ -127,7 +138,9 @@ GOOD = pp.encode_plan(0, 0.0, _plan(3))
         (_v2(pp.SONAR, b"\x01"), "without its id"),
         (GOOD[:-3], "cut short"),
         (GOOD + b"\x00", "after the plan's parameters"),
-        (_v2(pp.PLAN, struct.pack("<BBfB", 2, 0, 0.1, 0) + b"\x00"), "flags"),
+        (_v2(pp.PLAN, struct.pack("<BBfB", 4, 0, 0.1, 0) + b"\x00"), "flags"),
+        (_v2(pp.PLAN, struct.pack("<BBfBd", 2, 0, 0.1, 0, math.inf) + b"\x00"), "not finite"),
+        (_v2(pp.PLAN, struct.pack("<BBfB", 2, 0, 0.1, 0) + b"\x00"), "cut short"),
         (_v2(pp.PLAN, struct.pack("<BBfB", 0, 9, 0.1, 0) + b"\x00"), "unknown law"),
         (_v2(pp.PLAN, struct.pack("<BBfB", 0, 0, -1.0, 0) + b"\x00"), "not a length"),
         (

@@ -7,7 +7,7 @@ It holds still, logging why (topic ``hold``, once per change of reason), when it
 than ``stale_s`` (by its own clock since it arrived), when it has no pose, when the plan does not name it, or when
 the plan's length unit is not its own ``unit_m`` (no guess at a conversion).
 
-When the plan names a heading to face (``planner.FACE``: chapter 6's region held before a wall) and ``face_tol_deg``
+When the plan names a heading to face (``Plan.face``: chapter 6's region held before a wall) and ``face_tol_deg``
 is above 0, a robot turned more than that from it turns in place toward it (its point ahead sent across its heading:
 the tracking layer then turns the body about its axle), until within a third of it, and only then follows the law
 again: its fixed front sonars look at the wall instead of at its teammates.
@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from swarm_logic.families.roy.controller import POS, SonpiAgent
-from swarm_logic.families.roy.regions.planner import FACE, Plan, velocities
+from swarm_logic.families.roy.regions.planner import Plan, velocities
 from swarm_logic.families.roy.regions.sensing import SensingParams, sense
 from swarm_logic.log import plain
 from swarm_logic.robot import Robot
@@ -43,7 +43,7 @@ def to_packet(plan: Plan, unit_m: float) -> pp.PlanPacket:
         pp.PlanAgent(int(i), g, int(i) in leaders, float(x), float(y))
         for i, g, (x, y) in zip(plan.ids, groups, np.asarray(plan.goals, float), strict=True)
     )
-    return pp.PlanPacket(agents, plan.law, plain(dict(plan.params)), unit_m, plan.done)
+    return pp.PlanPacket(agents, plan.law, plain(dict(plan.params)), unit_m, plan.done, plan.face)
 
 
 def from_packet(packet: pp.PlanPacket, t: float) -> Plan:
@@ -59,6 +59,7 @@ def from_packet(packet: pp.PlanPacket, t: float) -> Plan:
         groups=groups,
         leaders=tuple(x.id for x in a if x.leader),
         done=packet.done,
+        face=packet.face_rad,
     )
 
 
@@ -93,6 +94,7 @@ def restrict(plan: Plan, keep: np.ndarray) -> Plan:
         groups=None if plan.groups is None else np.asarray(plan.groups)[keep],
         leaders=tuple(i for i in plan.leaders if i in set(plan.ids[keep].tolist())),
         done=plan.done,
+        face=plan.face,
     )
 
 
@@ -107,7 +109,7 @@ class RegionAgent(SonpiAgent):
         "sonar_period_s": 0.25,  # the thesis' 250 ms windows
         "stale_s": 1.0,  # a plan this old (since it arrived) is not applied
         "d_max": 5.0,  # units: sonar points beyond this are not obstacles (chapter 4's cap, SensingParams)
-        "face_tol_deg": 0.0,  # turn toward the plan's FACE heading when more than this off it (0: never)
+        "face_tol_deg": 0.0,  # turn toward the plan's face heading when more than this off it (0: never)
         "turn_mps": 0.05,  # the point ahead's speed across the heading while turning (0.1 m ahead: 0.5 rad/s)
     }
     ranges: ClassVar[dict[str, str]] = {
@@ -138,13 +140,13 @@ class RegionAgent(SonpiAgent):
         self.bad_readings = 0  # sonar readings sent as "no reading" (not finite, negative, beyond the wire's range)
         self.v = np.zeros(2)
         self.turning = False
-        self.turns = 0  # turns toward the plan's FACE heading begun
+        self.turns = 0  # turns toward the plan's face heading begun
 
     def face(self, plan: Plan, yaw: float) -> bool:
-        """Whether to turn in place toward the plan's FACE heading this step (and, if so, the command sent)."""
+        """Whether to turn in place toward the plan's face heading this step (and, if so, the command sent)."""
         tol = math.radians(float(self.p["face_tol_deg"]))
-        want = plan.params.get(FACE)
-        if tol <= 0 or not isinstance(want, (int, float)) or not math.isfinite(want):
+        want = plan.face
+        if tol <= 0 or want is None:
             self.turning = False
             return False
         err = math.atan2(math.sin(want - yaw), math.cos(want - yaw))

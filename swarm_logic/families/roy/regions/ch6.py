@@ -29,7 +29,7 @@ import numpy as np
 
 from swarm_logic.families.roy.regions.ellipse import RegionParams, RegionState, free_space, step_region
 from swarm_logic.families.roy.regions.laws import CH6_MODES
-from swarm_logic.families.roy.regions.planner import FACE, Observation, Plan, Region, RegionPlanner
+from swarm_logic.families.roy.regions.planner import Observation, Plan, Region, RegionPlanner
 from swarm_logic.families.roy.regions.records import check_fields
 from swarm_logic.families.roy.regions.sensing import DROP_REASONS, SensingParams, beam_points, sense
 from swarm_logic.families.roy.regions.shapes import Ellipse
@@ -92,7 +92,7 @@ class Ch6Params:
       is not a gap: the region holds when it reaches it, and the detector decides; a wall just passed is behind).
     - ``face`` (default False, the plan as before): while the swarm, before its first split, advances (its region
       not waiting for its robots) or has obstacle points within its reach ahead and across its way
-      (``_wall_ahead``: the wall it holds before), the plan asks the robots to face its heading (``planner.FACE``;
+      (``_wall_ahead``: the wall it holds before), the plan asks the robots to face its heading (``Plan.face``;
       the SonPI's ``roy_region`` turns in place toward it, ``face_tol_deg``): robots drawn to one centre end up
       facing it, and five fixed front sonars then read their teammates, not the wall and its lanes.
     - ``goal_radius`` (None: the equal-area radius of each sub-swarm's region): done when every agent is this close to
@@ -576,8 +576,7 @@ class Ch6Planner(RegionPlanner):
         if self.p.law_min_sep > 0:
             params["min_sep"] = self.p.law_min_sep
         before = not self.counts["splits"] and not self.counts["merges"]
-        if self.p.face and before and len(self.swarms) == 1 and self.swarms[0].facing is not None:
-            params[FACE] = self.swarms[0].facing
+        face = self.swarms[0].facing if self.p.face and before and len(self.swarms) == 1 else None
         return Plan(
             t,
             ids,
@@ -589,6 +588,7 @@ class Ch6Planner(RegionPlanner):
             regions=tuple(Region(s.sub.id, s.sub.region) for s in self.swarms),
             events=tuple(events),
             done=self.done_t is not None,
+            face=face,
         )
 
     def summary(self) -> dict[str, Any]:

@@ -10,6 +10,7 @@ keeps whatever state it needs (the region, the formation, the sub-swarms); it ne
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -77,10 +78,11 @@ class Region:
 class Plan:
     """One period's decision. ``goals`` (N, 2): each of ``ids``' point of attraction (the region's centre, its place
     in the formation, its packed circle, its sub-region's centre); ``law`` a name in ``LAWS`` and ``params`` its
-    keyword arguments (JSON values: numbers, lists), except ``FACE``, which no law takes; ``groups`` (N,) each
-    agent's sub-swarm, ``leaders`` the sub-swarms' leaders; ``regions`` what to draw; ``events`` the decisions taken
-    this period (each a JSON dict with a ``kind``: "split", "merge", "formation", "failure", "held", "input", ...);
-    ``done`` when the mission is over."""
+    keyword arguments (JSON values: numbers, lists); ``groups`` (N,) each agent's sub-swarm, ``leaders`` the
+    sub-swarms' leaders; ``regions`` what to draw; ``events`` the decisions taken this period (each a JSON dict with a
+    ``kind``: "split", "merge", "formation", "failure", "held", "input", ...); ``done`` when the mission is over;
+    ``face`` the world heading (rad) the robots should face, if any (no law takes it: chapter 6's planner sets it
+    while the region is held before a wall ahead, so that sonars fixed to the robots' fronts look at it)."""
 
     t: float
     ids: np.ndarray
@@ -92,10 +94,13 @@ class Plan:
     regions: tuple[Region, ...] = ()
     events: tuple[dict[str, Any], ...] = ()
     done: bool = False
+    face: float | None = None
 
     def __post_init__(self) -> None:
         if self.law not in LAWS:
             raise ValueError(f"law: expected one of {', '.join(LAWS)}, got {self.law!r}")
+        if self.face is not None and not math.isfinite(self.face):
+            raise ValueError(f"face: a heading must be finite, got {self.face}")
         if np.shape(self.goals) != (len(self.ids), 2):
             raise ValueError(f"goals: expected ({len(self.ids)}, 2), got {np.shape(self.goals)}")
 
@@ -112,6 +117,7 @@ class Plan:
                 "regions": [r.as_dict() for r in self.regions],
                 "events": list(self.events),
                 "done": self.done,
+                "face": self.face,
             }
         )
 
@@ -175,10 +181,6 @@ def _split_merge(
     return laws.split_merge_law(x, goals, obstacles=obstacles, v_max=v_max, **kw)
 
 
-# a plan param no law takes: the world heading (rad) the robots should face while the region is held before an
-# obstacle ahead, so that sonars fixed to their fronts look at it (chapter 6's planner sets it, ``Ch6Params.face``)
-FACE = "face"
-
 # the local laws a plan may name (chapter 4: eqs. 4.6 and 4.41, chapter 5: eq. 5.2, chapter 6: eq. 6.5)
 LAWS: dict[str, Law] = {
     "formation": _formation,
@@ -197,5 +199,4 @@ def velocities(
     x = np.asarray(positions, dtype=float)
     if x.shape != np.shape(plan.goals):
         raise ValueError(f"positions: expected {np.shape(plan.goals)} (the plan's agents), got {x.shape}")
-    params = {k: v for k, v in plan.params.items() if k != FACE}
-    return LAWS[plan.law](x, np.asarray(plan.goals, dtype=float), obstacles, v_max, **params)
+    return LAWS[plan.law](x, np.asarray(plan.goals, dtype=float), obstacles, v_max, **plan.params)

@@ -104,7 +104,7 @@ def test_a_robot_turns_in_place_toward_the_plans_face_heading_and_then_follows_t
     a.p = RegionAgent.with_defaults({"face_tol_deg": 45})
     a.velocity = SimpleNamespace(set_velocity=lambda vx, vy: sent.append((vx, vy)))
     a.reset()
-    plan = Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {"k_c": 3.0, "face": 0.0})
+    plan = Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {"k_c": 3.0}, face=0.0)
     # facing back (pi): the point ahead goes across the heading, a pure turn (the forward component is 0)
     assert a.face(plan, math.pi) and a.turning and a.turns == 1
     (vx, vy) = sent[-1]
@@ -119,12 +119,14 @@ def test_a_robot_turns_in_place_toward_the_plans_face_heading_and_then_follows_t
     vx, vy = sent[-1]
     yaw = math.radians(50)
     assert -vx * math.sin(yaw) + vy * math.cos(yaw) < 0  # clockwise: the across-heading component points right
-    # no FACE in the plan, or face_tol_deg 0 (the default): never
+    # no heading in the plan, or face_tol_deg 0 (the default): never
     a.turning = False
     assert not a.face(Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {"k_c": 3.0}), math.pi)
     a.p = RegionAgent.with_defaults({})
     assert not a.face(plan, math.pi) and a.turns == 2
-    # the laws never see FACE
+    # the laws never see it; a heading that is not one is refused
+    with pytest.raises(ValueError, match="face: a heading must be finite"):
+        Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {}, face=math.nan)
     assert np.array_equal(
         velocities(plan, np.array([[1.0, 2.0]])),
         velocities(Plan(0.0, np.array([1]), np.zeros((1, 2)), "split_merge", {"k_c": 3.0}), np.array([[1.0, 2.0]])),

@@ -17,7 +17,7 @@ import pytest
 
 from bridge.studies.roy.numerical import ray_segments
 from swarm_logic.families.roy.regions.ch6 import Ch6Params, Ch6Planner
-from swarm_logic.families.roy.regions.planner import FACE, PLANNERS, Observation, velocities
+from swarm_logic.families.roy.regions.planner import PLANNERS, Observation, velocities
 from swarm_logic.families.roy.regions.sensing import SensingParams, ring_angles, sense
 
 ROOT = Path(__file__).resolve().parents[4]
@@ -242,13 +242,13 @@ def test_registered_and_parameters_validated() -> None:
 def test_face_asks_the_robots_to_face_the_way_until_the_split() -> None:
     x0, _, off = run(planner(), TWO_LANES, 16.0)
     x1, _, on = run(planner(face=True), TWO_LANES, 16.0)
-    assert not any(FACE in plan.params for _, plan, _, _ in off)
+    assert all(plan.face is None for _, plan, _, _ in off)
     (split,) = events(on, "split")
     assert events(off, "split")[0]["t"] == split["t"] and np.array_equal(x0, x1)  # point agents ignore it
-    faced = [t for t, plan, _, _ in on if FACE in plan.params]
+    faced = [t for t, plan, _, _ in on if plan.face is not None]
     # from the first region step (the region advancing) through the hold at the wall, never after the split
     assert faced[0] == 0.25 and max(faced) < split["t"] and len(faced) >= 0.8 * split["t"] / 0.25
-    assert all(plan.params[FACE] == pytest.approx(0.0, abs=0.3) for _, plan, _, _ in on if FACE in plan.params)
+    assert all(plan.face == pytest.approx(0.0, abs=0.3) for _, plan, _, _ in on if plan.face is not None)
 
 
 def test_a_wall_ahead_is_across_the_way_ahead_of_every_robot_not_beside_or_among_them() -> None:
