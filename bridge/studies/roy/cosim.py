@@ -120,6 +120,13 @@ def deploy(n: int, seed: int) -> list[list[float]]:
 
 
 GATHERING = "gathering"  # the method that is not RoyApf's optimiser: behaviour roy_gathering (circle gathering)
+# circle gathering on a SonPI's body (docs/roy-regions.md, "Chapter 7's comparisons"): the slot law as a velocity (a
+# differential drive integrating the point agents' double-integrator law overshoots its slot by tens of cm and never
+# settles); "in place" within half r_s (5.6 cm: a robot 18 cm across does not hold 2.8 cm while its neighbours
+# settle); neighbours 2.5 r_s apart on the circle, the middle of the band eq. 7.1 scores as "in formation" (the
+# default circle of radius 2 r_s puts three robots 3.46 r_s apart, outside it; 2 r_s apart their sonars, 4.6 cm from
+# the next body, push them off their slots)
+GATHERING_ON_SONPI = {"tracking": "velocity", "slot_tol": 0.5, "ring_spacing": 2.5}
 
 
 def session_config(case: str, n: int, profile: str, seed: int, workdir: Path, max_s: float | None = None,
@@ -138,6 +145,8 @@ def session_config(case: str, n: int, profile: str, seed: int, workdir: Path, ma
     behaviour = "roy_gathering" if optimiser == GATHERING else "roy_apf"
     if behaviour == "roy_apf":
         params["optimiser"] = optimiser
+    else:
+        params.update(GATHERING_ON_SONPI)
     group: dict[str, Any] = {
         "count": n, "profile": "sonpi", "behaviour": behaviour, "params": params,
         "placement": {"kind": "explicit", "poses": deploy(n, seed)},

@@ -23,7 +23,7 @@ def test_the_enclosing_circle_is_the_smallest() -> None:
     assert np.sum(np.hypot(*(pts - c).T) >= r - 1e-9) >= 2  # it touches at least two points
 
 
-@pytest.mark.parametrize("n", [1, 6, 7, 12, 30])
+@pytest.mark.parametrize("n", [6, 7, 12, 30])
 def test_ring_slots_fill_circles_two_r_s_apart_from_the_inside(n: int) -> None:
     s = ring_slots(n, 1.0)
     radii = np.round(np.hypot(*s.T), 9)
@@ -32,6 +32,21 @@ def test_ring_slots_fill_circles_two_r_s_apart_from_the_inside(n: int) -> None:
     if n > 1:
         d = np.hypot(s[:, None, 0] - s[None, :, 0], s[:, None, 1] - s[None, :, 1]) + np.eye(n) * 99
         assert d.min() >= 1.9  # neighbours about 2 r_s apart
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 6])
+def test_with_a_spacing_a_small_swarm_sits_on_one_circle_its_neighbours_that_far_apart(n: int) -> None:
+    s = ring_slots(n, 1.5, spacing=2.0)
+    assert s.shape == (n, 2)
+    if n == 1:
+        assert np.allclose(s, 0.0)
+        return
+    radii = np.hypot(*s.T)
+    assert np.allclose(radii, radii[0]) and np.allclose(s.mean(0), 0.0, atol=1e-12)
+    d = np.hypot(s[:, None, 0] - s[None, :, 0], s[:, None, 1] - s[None, :, 1]) + np.eye(n) * 99
+    assert d.min() == pytest.approx(3.0)  # 2 r_s
+    assert np.allclose(ring_slots(6, 1.5, spacing=2.0), ring_slots(6, 1.5))  # six: the inner circle of the default
+    assert np.allclose(np.hypot(*ring_slots(3, 1.0, spacing=2.5).T), 2.5 / math.sqrt(3))
 
 
 def test_the_gathering_circle_reaches_the_target_in_open_space_and_waits_for_its_robots() -> None:
