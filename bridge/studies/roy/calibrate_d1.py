@@ -86,6 +86,23 @@ def overrides_text(planner: dict[str, Any]) -> str:
     return " ".join(f"--planner {k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in planner.items())
 
 
+def provenance(
+    scales: list[float],
+    duration: float,
+    seed: int,
+    planner: dict[str, Any],
+    chosen: float,
+    rows: list[tuple[float, dict[int, float | None]]],
+) -> str:
+    """The written profile's ``source``: the command (with its planner overrides), the level chosen and the sweep's
+    COVs per level."""
+    sweep = "; ".join(f"s={s:g}: {_g(c[3])}, {_g(c[6])}" for s, c in rows)
+    cmd = f"calibrate_d1 --scales {' '.join(f'{s:g}' for s in scales)} --duration {duration:g} --seed {seed}"
+    if planner:
+        cmd += " " + overrides_text(planner)
+    return f"{cmd}: s = {chosen:g} (area COV with 3, 6 robots: {sweep})"
+
+
 def measure(
     n: int, prof: dict[str, Any], seed: int, duration: float, planner: dict[str, Any] | None = None
 ) -> dict[str, Any]:
@@ -163,12 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"chosen: s = {best[1]:g} (COV {_g(best[2][3])} with 3 robots, {_g(best[2][6])} with 6)")
     if a.write:
         chosen = profile(best[1])
-        sweep = "; ".join(f"s={s:g}: {_g(c[3])}, {_g(c[6])}" for _, s, c in rows)
-        chosen["source"] = (
-            f"calibrate_d1 --scales {' '.join(f'{s:g}' for s in a.scales)} --duration {a.duration:g} "
-            f"--seed {a.seed}{' ' + overrides_text(planner) if planner else ''}: s = {best[1]:g} (area COV with 3, 6 "
-            f"robots: {sweep})"
-        )
+        chosen["source"] = provenance(a.scales, a.duration, a.seed, planner, best[1], [(s, c) for _, s, c in rows])
         profiles = noise_profiles()
         profiles["d1"] = chosen
         NOISE_FILE.write_text(HEADER + "\n" + to_toml(profiles))

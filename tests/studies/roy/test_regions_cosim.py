@@ -15,7 +15,7 @@ from bridge.core.config import Config, to_toml
 from bridge.experiments.runner import Outcome, Trial, TrialResult
 from bridge.studies.roy import regions_cosim as rc
 from bridge.studies.roy.calibrate_d1 import main as calibrate_d1
-from bridge.studies.roy.calibrate_d1 import overrides_text, planner_override, profile, score
+from bridge.studies.roy.calibrate_d1 import overrides_text, planner_override, profile, provenance, score
 from bridge.studies.roy.regions_experiments import RoyRegionsExperiment
 
 
@@ -88,6 +88,10 @@ def test_the_calibrations_planner_overrides_reach_the_session_and_bad_ones_are_n
     file_params = rc.session_config("d3-ch4-6", 1, tmp_path, 20.0)["services"][1]["options"]["params"]
     assert ctl["planner_params"] == {**file_params["planner_params"], "axes_lag": 0.5, "dynamics": "literal"}
     Config.model_validate(tomllib_roundtrip(cfg))  # still a valid session config
+    assert provenance([0.0, 1.0], 70.0, 1, over, 1.0, [(0.0, {3: 0.5, 6: None}), (1.0, {3: 0.1, 6: 0.02})]) == (
+        "calibrate_d1 --scales 0 1 --duration 70 --seed 1 --planner axes_lag=0.5 --planner dynamics=literal: s = 1 "
+        "(area COV with 3, 6 robots: s=0: 0.5000, -; s=1: 0.1000, 0.0200)"
+    )
     with pytest.raises(ValueError, match=r"planner: 'axes_lgg' is not a parameter of planner 'ch4' \(regions_ch4_d3"):
         rc.session_config("d3-ch4-3", 1, tmp_path, planner={"axes_lgg": 0.5})
     with pytest.raises(ValueError, match=r"planner: regions_ch4_d3\.toml: params\.planner_params: dynamics: expected"):
