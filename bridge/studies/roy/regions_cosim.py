@@ -167,11 +167,14 @@ def override_planner(cfg: dict[str, Any], params: dict[str, Any], source: str) -
     unknown = sorted(set(params) - names)
     if unknown:
         raise ValueError(f"planner: {unknown[0]!r} is not a parameter of planner {opts['planner']!r} ({source})")
-    opts["planner_params"] = {**opts.get("planner_params", {}), **params}
-    try:
-        RegionController.check_params(opts)
-    except ValueError as e:
-        raise ValueError(f"planner: {source}: {e}") from None
+    own = opts.get("planner_params", {})
+    # each override alone (the error names it), then all together (a combination the planner refuses)
+    for what, over in [*((f"{k} = {v!r}", {k: v}) for k, v in params.items()), (f"overrides {params}", params)]:
+        try:
+            RegionController.check_params({**opts, "planner_params": {**own, **over}})
+        except ValueError as e:
+            raise ValueError(f"planner: {source}: {what}: {e}") from None
+    opts["planner_params"] = {**own, **params}
 
 
 def _messages(mcap: Path, suffix: str) -> list[dict[str, Any]]:

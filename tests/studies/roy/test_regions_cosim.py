@@ -94,8 +94,13 @@ def test_the_calibrations_planner_overrides_reach_the_session_and_bad_ones_are_n
     )
     with pytest.raises(ValueError, match=r"planner: 'axes_lgg' is not a parameter of planner 'ch4' \(regions_ch4_d3"):
         rc.session_config("d3-ch4-3", 1, tmp_path, planner={"axes_lgg": 0.5})
-    with pytest.raises(ValueError, match=r"planner: regions_ch4_d3\.toml: params\.planner_params: dynamics: expected"):
+    with pytest.raises(
+        ValueError,
+        match=r"planner: regions_ch4_d3\.toml: dynamics = .wobbly.: params\.planner_params: dynamics: expected",
+    ):
         rc.session_config("d3-ch4-3", 1, tmp_path, planner={"dynamics": "wobbly"})
+    with pytest.raises(ValueError, match=r"axes_lag = 'x=1': params\.planner_params: must be real number"):
+        rc.session_config("d3-ch4-3", 1, tmp_path, planner={"dynamics": "literal", "axes_lag": "x=1"})
     for bad in ("axes_lag", "=0.5", "axes_lag="):
         with pytest.raises(SystemExit):
             calibrate_d1(["--planner", bad])
