@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +34,10 @@ from bridge.core.rng import stream
 from bridge.experiments.runner import Outcome, Trial, TrialResult
 from bridge.experiments.sessions import run_config
 from bridge.experiments.stats import mean, values
+from bridge.services.global_controller.regions import RegionController
 from bridge.studies.roy import regions_judging as judging
 from bridge.studies.roy.regions_judging import Verdict, every, fmt, no_runs
+from swarm_logic.families.roy.regions.planner import PLANNERS
 
 SONPI_DIR = Path(__file__).resolve().parents[3] / "hil_configs" / "sonpi"
 NOISE_FILE = SONPI_DIR / "noise_profiles.toml"
@@ -117,9 +119,11 @@ def session_config(
     workdir: Path,
     max_s: float | None = None,
     profile: dict[str, Any] | None = None,
+    planner: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The session of ``COSIM[name]`` from ``seed`` (the session's seed, the start poses' jitter), cut at ``max_s``;
-    ``profile`` replaces the scenario's sensing profile (``calibrate_d1``'s sweep)."""
+    ``profile`` replaces the scenario's sensing profile and ``planner`` overrides parameters of its region planner
+    (``calibrate_d1``'s sweep; a ValueError names an unknown parameter or a bad value)."""
     if name not in COSIM:
         raise ValueError(f"scenario: no co-simulated scenario {name!r}; known: {', '.join(COSIM)}")
     sc = COSIM[name]
@@ -142,11 +146,35 @@ def session_config(
         (ctl,) = [v["options"] for v in cfg["services"] if v["kind"] == "global_controller"]
         target, r_s = ctl["target"], ctl["params"]["planner_params"]["r_s"] * UNIT_M
         cfg["formation"] = {"target": target, "r_s_m": r_s, "end_on_event": "controller/done", "end_after_event_s": 1.0}
+    if planner:
+        override_planner(cfg, planner, sc.config)
     if profile is None and sc.noise is not None:
         profile = noise_profiles()[sc.noise]
     if profile is not None:
         apply_noise(cfg, profile, workdir)
     return cfg
+
+
+def override_planner(cfg: dict[str, Any], params: dict[str, Any], source: str) -> None:
+    """Set ``params`` in the planner parameters of the session's region controller (``source`` names the file in
+    errors); a ValueError names a parameter the planner does not have or a value it refuses."""
+    ctls = [s for s in cfg["services"] if s["kind"] == "global_controller" and s["options"]["controller"] == "region"]
+    if len(ctls) != 1:
+        raise ValueError(f"planner: {source} has {len(ctls)} region controllers, not one")
+    opts = ctls[0]["options"]["params"]
+    cls = PLANNERS.get(opts["planner"])
+    names = {f.name for f in fields(cls.Params)} if hasattr(cls, "Params") else set()
+    unknown = sorted(set(params) - names)
+    if unknown:
+        raise ValueError(f"planner: {unknown[0]!r} is not a parameter of planner {opts['planner']!r} ({source})")
+    own = opts.get("planner_params", {})
+    # each override alone (the error names it), then all together (a combination the planner refuses)
+    for what, over in [*((f"{k} = {v!r}", {k: v}) for k, v in params.items()), (f"overrides {params}", params)]:
+        try:
+            RegionController.check_params({**opts, "planner_params": {**own, **over}})
+        except ValueError as e:
+            raise ValueError(f"planner: {source}: {what}: {e}") from None
+    opts["planner_params"] = {**own, **params}
 
 
 def _messages(mcap: Path, suffix: str) -> list[dict[str, Any]]:

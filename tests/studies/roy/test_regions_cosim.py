@@ -14,7 +14,8 @@ import pytest
 from bridge.core.config import Config, to_toml
 from bridge.experiments.runner import Outcome, Trial, TrialResult
 from bridge.studies.roy import regions_cosim as rc
-from bridge.studies.roy.calibrate_d1 import profile, score
+from bridge.studies.roy.calibrate_d1 import main as calibrate_d1
+from bridge.studies.roy.calibrate_d1 import overrides_text, planner_override, profile, provenance, score
 from bridge.studies.roy.regions_experiments import RoyRegionsExperiment
 
 
@@ -72,6 +73,40 @@ def test_the_calibration_profiles_scale_both_noises_and_score_by_log_ratio() -> 
     assert score({3: 0.0, 6: 0.02}) == score({3: 1e-16, 6: 0.02}) == math.inf and score({3: 0.05, 6: 0.02}) > score(
         {3: 0.09, 6: 0.02}
     )
+
+
+def test_the_calibrations_planner_overrides_reach_the_session_and_bad_ones_are_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert planner_override("axes_lag=0.25") == ("axes_lag", 0.25)
+    assert planner_override(" dynamics = literal") == ("dynamics", "literal")  # not TOML: a string
+    assert planner_override("barrier=false") == ("barrier", False)
+    over = dict([planner_override("axes_lag=0.5"), planner_override("dynamics=literal")])
+    assert overrides_text(over) == "--planner axes_lag=0.5 --planner dynamics=literal"
+    cfg = rc.session_config("d3-ch4-6", 1, tmp_path, 20.0, planner=over)
+    (ctl,) = [s["options"]["params"] for s in cfg["services"] if s["kind"] == "global_controller"]
+    file_params = rc.session_config("d3-ch4-6", 1, tmp_path, 20.0)["services"][1]["options"]["params"]
+    assert ctl["planner_params"] == {**file_params["planner_params"], "axes_lag": 0.5, "dynamics": "literal"}
+    Config.model_validate(tomllib_roundtrip(cfg))  # still a valid session config
+    assert provenance([0.0, 1.0], 70.0, 1, over, 1.0, [(0.0, {3: 0.5, 6: None}), (1.0, {3: 0.1, 6: 0.02})]) == (
+        "calibrate_d1 --scales 0 1 --duration 70 --seed 1 --planner axes_lag=0.5 --planner dynamics=literal: s = 1 "
+        "(area COV with 3, 6 robots: s=0: 0.5000, -; s=1: 0.1000, 0.0200)"
+    )
+    with pytest.raises(ValueError, match=r"planner: 'axes_lgg' is not a parameter of planner 'ch4' \(regions_ch4_d3"):
+        rc.session_config("d3-ch4-3", 1, tmp_path, planner={"axes_lgg": 0.5})
+    with pytest.raises(
+        ValueError,
+        match=r"planner: regions_ch4_d3\.toml: dynamics = .wobbly.: params\.planner_params: dynamics: expected",
+    ):
+        rc.session_config("d3-ch4-3", 1, tmp_path, planner={"dynamics": "wobbly"})
+    with pytest.raises(ValueError, match=r"axes_lag = 'x=1': params\.planner_params: must be real number"):
+        rc.session_config("d3-ch4-3", 1, tmp_path, planner={"dynamics": "literal", "axes_lag": "x=1"})
+    for bad in ("axes_lag", "=0.5", "axes_lag="):
+        with pytest.raises(SystemExit):
+            calibrate_d1(["--planner", bad])
+        assert f"{bad!r}: write KEY=VALUE" in capsys.readouterr().err
+    assert calibrate_d1(["--scales", "0", "--planner", "axes_lag=0.5", "--planner", "k_vcirr=1"]) == 2
+    assert "calibrate_d1: --planner: 'k_vcirr' is not a parameter of planner 'ch4'" in capsys.readouterr().err
 
 
 def _plan(t: float, *areas: float, a: float = 2.0, b: float = 1.0) -> dict:
