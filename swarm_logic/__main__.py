@@ -7,7 +7,9 @@ session runs, with the wall clock and the devices the HAL config names (any pyth
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -51,6 +53,35 @@ def _own_devices(hal: dict[str, Any]) -> list[str]:
 CLOCKS = {"monotonic": WallClock, "realtime": RealtimeClock}
 
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class _Stop:
+    """Ctrl-C and SIGTERM (a service manager's stop) end the loop alike, whatever disposition the program inherited (a
+    program started in the background, or by a test runner, may have SIGINT ignored or blocked, and a SIGTERM would
+    otherwise end it without stopping the motors): the first raises KeyboardInterrupt in the loop; one that comes
+    while the robot closes (stopping its motors) is let pass, so the close is not cut short. The handlers are the
+    main thread's, and put back after."""
+
+    def __init__(self) -> None:
+        self.closing = False
+        self.old: dict[int, Any] = {}
+
+    def __enter__(self) -> _Stop:
+        if threading.current_thread() is threading.main_thread():
+            self.old = {s: signal.signal(s, self._raise) for s in STOP_SIGNALS}
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, set(STOP_SIGNALS))
+        return self
+
+    def _raise(self, signum: int, frame: Any) -> None:
+        if not self.closing:
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc: object) -> None:
+        for s, h in self.old.items():
+            signal.signal(s, h)
+
+
 def main(argv: list[str] | None = None, clock: Clock | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m swarm_logic", description=__doc__)
     ap.add_argument("--hal", required=True, help="HAL config (TOML) naming the robot's devices")
@@ -64,17 +95,21 @@ def main(argv: list[str] | None = None, clock: Clock | None = None) -> int:
     behaviour = a.behaviour or hal.get("behaviour", "random_walk")
     seed = a.seed if a.seed is not None else int(hal.get("seed", robot_id))
     cls = load_behaviour(behaviour)
-    try:
-        robot = Robot.open(robot_id, hal, clock or CLOCKS[hal.get("clock", "monotonic")](), seed,
-                           hal.get("params", {}))
-    except (OSError, ValueError, LookupError, serial.SerialException, can.CanError) as e:
-        raise SystemExit(f"{a.hal}: cannot open the robot's devices: {e}") from None
-    try:
-        run_controller(cls(), robot, a.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        robot.close()
+    with _Stop() as stop:
+        try:
+            robot = Robot.open(robot_id, hal, clock or CLOCKS[hal.get("clock", "monotonic")](), seed,
+                               hal.get("params", {}))
+        except (OSError, ValueError, LookupError, serial.SerialException, can.CanError) as e:
+            raise SystemExit(f"{a.hal}: cannot open the robot's devices: {e}") from None
+        except KeyboardInterrupt:  # stopped while its devices opened
+            return 0
+        try:
+            run_controller(cls(), robot, a.duration)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            stop.closing = True
+            robot.close()
     return 0
 
 

@@ -3,6 +3,10 @@ python-can's ``virtual`` bus wired to the emulated LLC, with the wall clock (no 
 
 from __future__ import annotations
 
+import select
+import signal
+import subprocess
+import sys
 import threading
 import uuid
 from pathlib import Path
@@ -12,6 +16,7 @@ import pytest
 from swarm_logic.__main__ import load_hal, main
 from tests.logic.test_llc_client import VirtualWiredLlc
 
+ROOT = Path(__file__).resolve().parents[2]
 DRIVE_CMD = 0x100
 
 
@@ -123,3 +128,33 @@ def test_shipped_zebro_robot_config_is_valid_and_a_missing_bus_is_named() -> Non
         pytest.skip("this machine has an I2C bus 1")
     with pytest.raises(SystemExit, match=r"decizebro_real\.toml: cannot open the robot's devices: .*i2c-1"):
         main(["--hal", str(p), "--duration", "1"])
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_the_program_stops_cleanly_on_sigint_and_sigterm_even_with_sigint_ignored(tmp_path: Path, sig: int) -> None:
+    """A program started in the background (or by a test runner) may inherit SIGINT ignored, and a service manager
+    stops it with SIGTERM: either must end the loop and close the robot (its motors stopped), exit 0, no traceback."""
+    log = tmp_path / "log.jsonl"
+    hal = tmp_path / "hal.toml"
+    hal.write_text(f'robot_id = 1\nbehaviour = "random_walk"\n[llc_can]\ninterface = "virtual"\n'
+                   f'channel = "{uuid.uuid4().hex}"\n[log]\npath = "{log}"\n')
+    p = subprocess.Popen([sys.executable, "-X", "faulthandler", "-m", "swarm_logic", "--hal", str(hal)], cwd=ROOT,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        while not log.exists():  # the robot's devices are open (its log with them)
+            assert p.poll() is None, p.stderr.read() if p.stderr else ""
+            select.select([], [], [], 0.05)
+        p.send_signal(sig)
+        try:
+            p.wait(timeout=120)  # a guard against a hang, not a wait: it exits at once
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGABRT)  # its stacks (faulthandler) in the failure
+            p.wait()
+        err = p.stderr.read() if p.stderr else ""
+        assert p.returncode == 0, err
+        assert "Traceback" not in err
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
