@@ -1,9 +1,12 @@
 """``swarm-sitl bench``: the demo behaviour at several robot counts and process packings; with ``--study NAME``, that
 study's own figures (its ``Study.bench``).
 
-Prints, per case: robots, processes, real-time factor, per-tick barrier latency (median and p99: from
-sending a quantum's ticks to the last answer, physics overlapped), CPU per robot (all processes,
-start-up included), resident memory per robot, and start-up time. Figures only, never pass/fail: the
+Prints, per case: robots, processes, real-time factor, and beside it the physical limits of this machine for that
+case: the bare lock-step barrier over as many participant processes (no physics, no firmware: ``barrier_limit``)
+and the bare physics of the same world stepped alone (no process, no firmware: ``physics_limit``), each as the
+real-time factor it would allow, and the share of the lower one the session reached; then the per-tick barrier
+latency (median and p99: from sending a quantum's ticks to the last answer, physics overlapped), CPU per robot (all
+processes, start-up included), resident memory per robot, and start-up time. Figures only, never pass/fail: the
 machine is shared and noisy.
 """
 
@@ -60,19 +63,23 @@ def run_bench(quick: bool = False, duration: float | None = None, out_dir: str =
     rows = []
     for n, k in cases:
         out = Path(out_dir) / f"n{n}_k{k}"
+        overrides = {"robots.count": n, "session.robots_per_process": k, "session.duration_s": dur,
+                     "session.speed": "max"}
         env_before = os.environ.get("SWARM_SITL_PROFILE")
         if profile:
             (out / "profile").mkdir(parents=True, exist_ok=True)
             os.environ["SWARM_SITL_PROFILE"] = str((out / "profile").resolve())
         try:
-            res = run_session(cfg, {"robots.count": n, "session.robots_per_process": k, "session.duration_s": dur,
-                                    "session.speed": "max"}, str(out), progress=None, plot=False)
+            res = run_session(cfg, overrides, str(out), progress=None, plot=False)
         finally:
             if env_before is None:
                 os.environ.pop("SWARM_SITL_PROFILE", None)
         s = res.summary
-        rows.append((n, k, s))
-        print(f"  ran {n} robots, {k} per process: rtf {s['rtf']}x (exit {res.code})", file=sys.stderr)
+        limits = (barrier_limit(int(s["processes"]) - 1, quantum_s(cfg, overrides)),
+                  physics_limit(cfg, overrides)) if s.get("processes") else (None, None)
+        rows.append((n, k, s, limits))
+        print(f"  ran {n} robots, {k} per process: rtf {s['rtf']}x (exit {res.code}); bare barrier "
+              f"{_fmt(limits[0], '.1f', 'x')}, bare physics {_fmt(limits[1], '.1f', 'x')}", file=sys.stderr)
         if profile:
             _print_profile(out / "profile" / "world.prof")
     _print_table(rows, dur, markdown)
@@ -99,6 +106,37 @@ def _echo_main(proc: str, endpoint: str, namespace: str, parent_pid: int) -> Non
     die_with_parent()
     code = serve(proc, endpoint, namespace, _EchoHost(), parent_pid)
     os._exit(code)
+
+
+def quantum_s(config: str, overrides: dict[str, Any]) -> float:
+    """The session's quantum (s)."""
+    from bridge.core.config import load_config
+
+    return load_config(config, overrides).session.quantum_ms / 1000
+
+
+def barrier_limit(procs: int, q_s: float, quanta: int = 2000) -> float:
+    """The real-time factor the bare lock-step barrier over ``procs`` participant processes allows at quantum
+    ``q_s``: what a session of that many processes could reach with no physics and no firmware."""
+    return barrier_yardstick(procs, quanta)[0] * q_s
+
+
+def physics_limit(config: str, overrides: dict[str, Any], quanta: int = 1000) -> float:
+    """The real-time factor the session's world allows alone: its arena, obstacles and robots built as the world
+    process builds them, stepped ``quanta`` quanta in this process with no firmware and no logic (the robots idle)."""
+    from bridge.core.config import load_config
+    from bridge.core.plan import make_plan
+    from bridge.core.world import World
+
+    cfg = load_config(config, overrides)
+    world = World(cfg, make_plan(cfg).robots)
+    q = round(cfg.session.quantum_ms * 1e6)
+    t0 = time.perf_counter()
+    for k in range(quanta):
+        world.step_quantum(k * q, q)
+    wall = time.perf_counter() - t0
+    world.close()
+    return quanta * q / 1e9 / wall
 
 
 def barrier_yardstick(procs: int = 6, quanta: int = 3000) -> tuple[float, float]:
@@ -146,22 +184,25 @@ def barrier_yardstick(procs: int = 6, quanta: int = 3000) -> tuple[float, float]
     return rate, lat[len(lat) // 2] * 1e6
 
 
-def _fmt(v: float | None, spec: str) -> str:
-    return "-" if v is None else format(v, spec)
+def _fmt(v: float | None, spec: str, unit: str = "") -> str:
+    return "-" if v is None else format(v, spec) + unit
 
 
 def _print_table(rows: list, dur: float, markdown: bool) -> None:
-    head = ["robots", "robots/proc", "processes", "RTF", "target", "barrier median", "barrier p99",
-            "CPU per robot", "RSS per robot", "start-up"]
+    head = ["robots", "robots/proc", "processes", "RTF", "target", "bare barrier", "bare physics", "of the limit",
+            "barrier median", "barrier p99", "CPU per robot", "RSS per robot", "start-up"]
     lines = []
-    for n, k, s in rows:
+    for n, k, s, (bar, phys) in rows:
         target = TARGETS.get((n, k))
+        limit = min((v for v in (bar, phys) if v), default=None)
         lines.append([
-            str(n), str(k), str(s["processes"]), _fmt(s["rtf"], ".2f") + "x",
+            str(n), str(k), str(s["processes"]), _fmt(s["rtf"], ".2f", "x"),
             f">= {target:g}x" if target else "",
-            _fmt(s["barrier_us_median"], ".0f") + " us", _fmt(s["barrier_us_p99"], ".0f") + " us",
-            _fmt(s["cpu_s_per_robot_per_sim_s"] and s["cpu_s_per_robot_per_sim_s"] * 1000, ".0f") + " ms/sim-s",
-            _fmt(s["rss_mb_per_robot"], ".0f") + " MB", _fmt(s["startup_s"], ".1f") + " s",
+            _fmt(bar, ".1f", "x"), _fmt(phys, ".1f", "x"),
+            _fmt(s["rtf"] and limit and 100 * s["rtf"] / limit, ".0f", " %"),
+            _fmt(s["barrier_us_median"], ".0f", " us"), _fmt(s["barrier_us_p99"], ".0f", " us"),
+            _fmt(s["cpu_s_per_robot_per_sim_s"] and s["cpu_s_per_robot_per_sim_s"] * 1000, ".0f", " ms/sim-s"),
+            _fmt(s["rss_mb_per_robot"], ".0f", " MB"), _fmt(s["startup_s"], ".1f", " s"),
         ])
     print(f"\nswarm-sitl bench: demo behaviour, {dur:g} s simulated per case, quantum 10 ms, {os.cpu_count()} cores")
     if markdown:
@@ -174,6 +215,8 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
         print("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
         for line in lines:
             print("  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)))
+    print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
+          "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
 
 
 def _print_profile(path: Path, top: int = 12) -> None:

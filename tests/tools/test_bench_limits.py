@@ -1,0 +1,31 @@
+"""``swarm-sitl bench``'s physical limits beside each case: the bare barrier over as many processes and the bare
+physics of the same world, as the real-time factors they allow, and the table that sets them beside the RTF."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from bridge.tools import bench
+
+
+def test_the_bare_physics_of_a_sessions_world_is_stepped_alone() -> None:
+    rtf = bench.physics_limit(str(bench.DEMO), {"robots.count": 3}, quanta=50)
+    assert math.isfinite(rtf) and rtf > 0
+    assert bench.quantum_s(str(bench.DEMO), {}) == pytest.approx(0.01)
+
+
+def test_the_bare_barrier_over_n_processes_as_a_real_time_factor() -> None:
+    rtf = bench.barrier_limit(2, 0.01, quanta=50)
+    assert math.isfinite(rtf) and rtf > 0
+
+
+def test_the_table_sets_the_limits_and_the_share_beside_the_rtf(capsys: pytest.CaptureFixture[str]) -> None:
+    s = {"processes": 21, "rtf": 2.5, "barrier_us_median": 2400.0, "barrier_us_p99": 6000.0,
+         "cpu_s_per_robot_per_sim_s": 0.1, "rss_mb_per_robot": 250.0, "startup_s": 9.0}
+    bench._print_table([(10, 1, s, (5.0, 40.0)), (10, 5, {**s, "rtf": None}, (None, None))], 30.0, markdown=True)
+    out = capsys.readouterr().out
+    assert "| bare barrier | bare physics | of the limit |" in out
+    assert "| 10 | 1 | 21 | 2.50x | >= 5x | 5.0x | 40.0x | 50 % |" in out  # 2.5 of the barrier's 5
+    assert "| 10 | 5 | 21 | - |  | - | - | - |" in out
