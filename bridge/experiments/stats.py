@@ -58,9 +58,9 @@ def quartiles(v: np.ndarray) -> tuple[float, float, float]:
     return q25, q50, q75
 
 
-def mean_pm_sd(v: np.ndarray) -> str:
-    """``mean +- sample sd`` to one decimal (sd 0 for a single value)."""
-    return f"{np.mean(v):.1f} +- {np.std(v, ddof=1) if len(v) > 1 else 0.0:.1f}"
+def mean_pm_sd(v: np.ndarray, nd: int = 1) -> str:
+    """``mean +- sample sd`` to ``nd`` decimals (sd 0 for a single value)."""
+    return f"{np.mean(v):.{nd}f} +- {np.std(v, ddof=1) if len(v) > 1 else 0.0:.{nd}f}"
 
 
 def pooled_mean_sd(results: list[TrialResult], key: str) -> tuple[float, float, int]:

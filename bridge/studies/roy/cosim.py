@@ -130,10 +130,10 @@ GATHERING_ON_SONPI = {"tracking": "velocity", "slot_tol": 0.5, "ring_spacing": 2
 
 
 def session_config(case: str, n: int, profile: str, seed: int, workdir: Path, max_s: float | None = None,
-                   optimiser: str = "bat") -> dict[str, Any]:
+                   method: str = "bat") -> dict[str, Any]:
     """One session of ``case`` with ``n`` SonPIs in ``profile``, deployed from ``seed`` (the same deployment in both
-    profiles); ``max_s`` cuts the session short (smoke runs). ``optimiser``: RoyApf's, or ``GATHERING`` for the
-    circle-gathering baseline in its place."""
+    profiles); ``max_s`` cuts the session short (smoke runs). ``method``: RoyApf's optimiser, or ``GATHERING`` for
+    the circle-gathering baseline in RoyApf's place."""
     if case not in CASES:
         raise ValueError(f"case: no case {case!r}; known: {', '.join(CASES)}")
     if profile not in PROFILES:
@@ -142,9 +142,9 @@ def session_config(case: str, n: int, profile: str, seed: int, workdir: Path, ma
     ideal = profile == "simulation"
     params = {"v_max": V_MAX, "r_s": R_S_UNITS, "unit_m": UNIT_M,
               "target_x": TARGET_M[0] / UNIT_M, "target_y": TARGET_M[1] / UNIT_M}
-    behaviour = "roy_gathering" if optimiser == GATHERING else "roy_apf"
+    behaviour = "roy_gathering" if method == GATHERING else "roy_apf"
     if behaviour == "roy_apf":
-        params["optimiser"] = optimiser
+        params["optimiser"] = method
     else:
         params.update(GATHERING_ON_SONPI)
     group: dict[str, Any] = {

@@ -123,7 +123,7 @@ def cosim_trials(cell: dict[str, Any], trials: list[Trial]) -> list[TrialResult]
         wd = Path(t.workdir)
         wd.mkdir(parents=True, exist_ok=True)
         cfg = cosim.session_config(cell["scenario"], int(cell["n"]), cell["profile"], t.seed % (1 << 31), wd,
-                                   SMOKE_S if t.smoke else None, optimiser=cell["method"])
+                                   SMOKE_S if t.smoke else None, method=cell["method"])
         out.append(TrialResult(cosim.session_metrics(cosim.run_session(cfg, wd))))
     return out
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from bridge.experiments.runner import Outcome, Trial, TrialResult
-from bridge.experiments.stats import values
+from bridge.experiments.stats import mean, mean_pm_sd, values
 from bridge.studies.roy import cosim
 from bridge.studies.roy.regions_judging import Verdict, fmt, no_runs, whole
 
@@ -67,7 +67,7 @@ def trial(cell: dict[str, Any], t: Trial) -> TrialResult:
     wd = Path(t.workdir)
     wd.mkdir(parents=True, exist_ok=True)
     cfg = cosim.session_config(cell["scenario"], int(cell["agents"]), PROFILE, t.seed % (1 << 31), wd,
-                               SMOKE_S if t.smoke else None, optimiser=cell["method"])
+                               SMOKE_S if t.smoke else None, method=cell["method"])
     s = cosim.run_session(cfg, wd)
     m = cosim.session_metrics(s)
     timings = {"session_wall_s": float(s["wall_time_s"]), "cpu_s": float(m.pop("cpu_s") or 0.0)}
@@ -94,11 +94,6 @@ def _time(res: list[TrialResult]) -> str:
     return f"{'>=' if k < len(res) else ''}{fmt(t, 0)} s ({k}/{len(res)})"
 
 
-def _fe(res: list[TrialResult], key: str = "fe_mean") -> float:
-    v = values(res, key)
-    return float(np.mean(v)) if len(v) else math.nan
-
-
 def judge_c11(outcomes: list[Outcome]) -> Verdict:
     """Proposed faster than CG in every (case, N); CG's FE lower in case 3; CG never arrives with 4 robots in case 4."""
     parts, good = [], True
@@ -112,7 +107,7 @@ def judge_c11(outcomes: list[Outcome]) -> Verdict:
         text = f"{CASES[case]} N={n}: time {_time(p)} vs CG {_time(g)}"
         good &= faster
         if CASES[case] == "low":
-            fp, fg = _fe(p), _fe(g)
+            fp, fg = mean(p, "fe_mean"), mean(g, "fe_mean")
             text += f", FE {fmt(fp)} vs CG {fmt(fg)}"
             good &= fg < fp
         if (case, n) == ("ch7-moving-high", 4):
@@ -133,7 +128,7 @@ def judge_c12(outcomes: list[Outcome]) -> Verdict:
                            f"smoke run: the sessions stop at {SMOKE_S:g} s")
         fe = []
         for k in range(1, len(phases) + 1):
-            fp, fb = _fe(p, f"ph{k}_fe"), _fe(b, f"ph{k}_fe")
+            fp, fb = mean(p, f"ph{k}_fe"), mean(b, f"ph{k}_fe")
             fe.append(f"{fmt(fp)}/{fmt(fb)}")
             if k == 1:
                 good &= math.isfinite(fp) and math.isfinite(fb) and abs(fp - fb) <= FIRST_PHASE_TOL
@@ -151,9 +146,7 @@ def judge_c12(outcomes: list[Outcome]) -> Verdict:
 
 def _pm(res: list[TrialResult], key: str, nd: int = 2) -> str:
     v = values(res, key)
-    if not len(v):
-        return "-"
-    return f"{fmt(float(np.mean(v)), nd)} +- {fmt(float(np.std(v, ddof=1)), nd)}" if len(v) > 1 else fmt(v[0], nd)
+    return mean_pm_sd(v, nd) if len(v) else "-"
 
 
 def sections(outcomes: list[Outcome]) -> list[str]:
