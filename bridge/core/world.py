@@ -390,16 +390,17 @@ class World:
                 self._walls_boxed = True
             self._walls_synced = True
         z0 = self.profiles[src].height_m * 0.9
-        frm = [[float(self.pos[src, 0]), float(self.pos[src, 1]), z0]] * len(dsts)
+        frm = [float(self.pos[src, 0]), float(self.pos[src, 1]), z0]
         to = [[float(self.pos[d, 0]), float(self.pos[d, 1]), self.profiles[d].height_m * 0.9] for d in dsts.tolist()]
+        rays = list(range(len(dsts)))  # a ray with no k-th wall has no (k+1)-th: only those that hit go on
         for level in range(self.MAX_WALLS):
-            hits = pb.rayTestBatch(frm, to, numThreads=1, reportHitNumber=level,
+            hits = pb.rayTestBatch([frm] * len(rays), [to[i] for i in rays], numThreads=1, reportHitNumber=level,
                                    collisionFilterMask=self.STATIC_RAY_MASK, fractionEpsilon=1e-4,
                                    physicsClientId=self.walls_cid)
-            hit = np.array([h[0] >= 0 for h in hits])
-            if not hit.any():
+            rays = [i for i, h in zip(rays, hits, strict=True) if h[0] >= 0]
+            if not rays:
                 break
-            counts += hit
+            counts[rays] += 1
         return counts
 
     # -- sensing ------------------------------------------------------------------------------------
