@@ -370,9 +370,13 @@ class World:
         in the walls scene (``walls_cid``), which holds the static bodies alone.
         """
         dsts = np.asarray(dsts, dtype=int)
-        row = self._walls_rows.get(src)  # robots move only in step_quantum: a row holds for the quantum
+        row = self._walls_rows.get(src)  # robots move only in step_quantum: a count holds for the quantum
         if row is None:
-            row = self._walls_rows[src] = self._cast_walls(src, np.arange(self.n))
+            row = self._walls_rows[src] = np.full(self.n, -1, dtype=int)  # -1: not cast yet
+        todo = dsts[row[dsts] < 0]
+        if len(todo):  # only the pairs asked for (a ranging exchange asks for one, a broadcast for all)
+            todo = np.unique(todo)
+            row[todo] = self._cast_walls(src, todo)
         return row[dsts]
 
     def _cast_walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
