@@ -42,6 +42,21 @@ def _run_checked(version: str, ref: _Ref, trials: list[Trial]) -> list[_Done]:
     return _run_trials(ref, trials)
 
 
+def _reach(address: str, timeout_s: float) -> None:
+    """Connect to the scheduler and take its handshake within ``timeout_s``, or raise. (distributed's own connect
+    retries until its timeout, but then waits for the handshake without one: a port that accepts and never answers
+    would hang the client.)"""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def probe() -> None:
+        comm = await asyncio.wait_for(connect(address, timeout=timeout_s), timeout_s)
+        await comm.close()
+
+    asyncio.run(probe())
+
+
 class ClusterWorkers:
     """The workers of the Dask cluster whose scheduler listens at ``address`` (a ``runner.Workers``)."""
 
@@ -52,10 +67,11 @@ class ClusterWorkers:
         self.version = installed_version()
         self.pending: dict[Any, int] = {}
         try:
+            _reach(address, timeout_s)
             self.client = Client(address, timeout=timeout_s, set_as_default=False)
         except Exception as e:  # refused, timed out, not an address
-            raise ClusterError(f"cannot reach the Dask scheduler at {address} within {timeout_s:g} s "
-                               f"({_first_line(e)})") from None
+            why = f"no answer within {timeout_s:g} s" if isinstance(e, TimeoutError) else _first_line(e)
+            raise ClusterError(f"cannot reach the Dask scheduler at {address}: {why}") from None
         try:
             self.client.wait_for_workers(1, timeout=timeout_s)
             self._check_versions()
