@@ -12,10 +12,14 @@ from __future__ import annotations
 
 import contextlib
 import importlib.metadata
+import logging
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bridge.experiments.runner import Trial, _Done, _no_interrupts, _Ref, _run_trials, _task_results
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 PACKAGE = "swarm-sitl"
 
@@ -64,22 +68,32 @@ class ClusterWorkers:
         from distributed import Client
 
         self.address, self.timeout_s = address, timeout_s
+        # what goes wrong is said once, by ClusterError: not also as the client's logged tracebacks (a lost
+        # scheduler), written by the handlers distributed gives its loggers
+        names = [n for n in list(logging.root.manager.loggerDict) if n.split(".")[0] == "distributed"]
+        self.quieted = list({id(h): (h, h.level) for n in names for h in logging.getLogger(n).handlers}.values())
+        for h, _ in self.quieted:
+            h.setLevel(logging.CRITICAL)
         self.version = installed_version()
         self.pending: dict[Any, int] = {}
+        self.client: Client | None = None
         try:
-            _reach(address, timeout_s)
-            self.client = Client(address, timeout=timeout_s, set_as_default=False)
-        except Exception as e:  # refused, timed out, not an address
-            why = f"no answer within {timeout_s:g} s" if isinstance(e, TimeoutError) else _first_line(e)
-            raise ClusterError(f"cannot reach the Dask scheduler at {address}: {why}") from None
-        try:
-            self.client.wait_for_workers(1, timeout=timeout_s)
+            try:
+                _reach(address, timeout_s)
+                self.client = Client(address, timeout=timeout_s, set_as_default=False)
+            except Exception as e:  # refused, timed out, not an address
+                why = f"no answer within {timeout_s:g} s" if isinstance(e, TimeoutError) else _first_line(e)
+                raise ClusterError(f"cannot reach the Dask scheduler at {address}: {why}") from None
+            try:
+                self.client.wait_for_workers(1, timeout=timeout_s)
+            except TimeoutError:
+                raise ClusterError(
+                    f"the Dask scheduler at {address} has no worker (waited {timeout_s:g} s): "
+                    f"start some with `dask worker {address}`"
+                ) from None
             self._check_versions()
-        except BaseException as e:
+        except BaseException:
             self.close()
-            if isinstance(e, TimeoutError):
-                raise ClusterError(f"the Dask scheduler at {address} has no worker (waited {timeout_s:g} s): "
-                                   f"start some with `dask worker {address}`") from None
             raise
         n = len(self.client.scheduler_info().get("workers", {}))
         self.what = f"on the Dask cluster at {address} ({n} worker{'s' if n != 1 else ''} when it started)"
@@ -87,22 +101,29 @@ class ClusterWorkers:
     def _check_versions(self) -> None:
         """Refuse a cluster with a worker that does not run this swarm-sitl (or none at all)."""
         found = self.client.run(importlib.metadata.version, PACKAGE, on_error="return")
-        wrong = {w: (v if isinstance(v, str) else "not installed") for w, v in sorted(found.items())
-                 if v != self.version}
+        wrong = {
+            w: (v if isinstance(v, str) else "not installed") for w, v in sorted(found.items()) if v != self.version
+        }
         if wrong:
             listed = ", ".join(f"{w} has {v}" for w, v in wrong.items())
-            raise ClusterError(f"the Dask cluster at {self.address} runs another swarm-sitl than this one "
-                               f"({self.version}): {listed}; install this version on every worker")
+            raise ClusterError(
+                f"the Dask cluster at {self.address} runs another swarm-sitl than this one "
+                f"({self.version}): {listed}; install this version on every worker"
+            )
 
     def run(self, ref: _Ref, tasks: list[list[Trial]]) -> Iterator[tuple[int, list[_Done]]]:
         from distributed import as_completed
 
-        self.pending = {self.client.submit(_run_checked, self.version, ref, t, pure=False): j
-                        for j, t in enumerate(tasks)}
+        self.pending = {
+            self.client.submit(_run_checked, self.version, ref, t, pure=False): j for j, t in enumerate(tasks)
+        }
         for f in as_completed(list(self.pending), loop=self.client.loop):
             j = self.pending.pop(f)
             if f.status == "cancelled":  # not by us: the scheduler went away, or dropped this client
-                raise ClusterError(f"lost the Dask scheduler at {self.address}")
+                raise ClusterError(
+                    f"lost the Dask scheduler at {self.address} (the trials that finished are kept "
+                    "in the output's results/: run again with --resume to go on)"
+                )
             res = _task_results(f, len(tasks[j]))
             f.release()
             yield j, res
@@ -123,5 +144,8 @@ class ClusterWorkers:
         return late
 
     def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.client.close(timeout=self.timeout_s)
+        if self.client is not None:
+            with contextlib.suppress(Exception):
+                self.client.close(timeout=self.timeout_s)
+        for h, level in self.quieted:
+            h.setLevel(level)

@@ -120,8 +120,9 @@ def test_a_cluster_run_writes_what_a_local_run_writes(tmp_path: Path, cluster: L
             assert {**a, "wall_s": 0, "timings": {}} == {**b, "wall_s": 0, "timings": {}}
 
 
-def test_a_lost_worker_s_trial_runs_on_another_and_a_raising_trial_fails_once(tmp_path: Path,
-                                                                             cluster: LocalCluster) -> None:
+def test_a_lost_worker_s_trial_runs_on_another_and_a_raising_trial_fails_once(
+    tmp_path: Path, cluster: LocalCluster
+) -> None:
     local, remote = tmp_path / "local", tmp_path / "remote"
     (local / "attempts").mkdir(parents=True)
     (local / "attempts" / "2").write_text("a worker died here before\n")  # so that this process does not exit
@@ -137,16 +138,33 @@ def test_a_lost_worker_s_trial_runs_on_another_and_a_raising_trial_fails_once(tm
     # it, to the same result)
 
 
+def _start_gated(address: str, out: Path, *extra: str) -> subprocess.Popen:
+    """``swarm-sitl experiment test-gated --cluster ADDRESS`` in a process of its own, as a user runs it."""
+    code = (
+        f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_cluster; "
+        f"from bridge.tools.cli import main; main(['experiment', 'test-gated', '--cluster', {address!r}, '--out', "
+        f"{str(out)!r}, *{list(extra)!r}])"
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        start_new_session=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _stored(out: Path) -> list[str]:
+    return sorted(f.name for f in out.glob("results/*/*.json"))
+
+
 def test_results_are_stored_as_they_arrive_and_resume_goes_on(tmp_path: Path, cluster: LocalCluster) -> None:
     out, whole = tmp_path / "gated", tmp_path / "whole"
-    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_cluster; "
-            f"from bridge.tools.cli import main; main(['experiment', 'test-gated', '--cluster', "
-            f"{cluster.scheduler_address!r}, '--out', {str(out)!r}])")
-    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
+    p = _start_gated(cluster.scheduler_address, out)
     try:
         # the finishing trials' results are in results/ while the run goes on (the others wait for the gate)
-        wait_until(lambda: len(list(out.glob("results/*/*.json"))) == FINISHING, "the first results were not stored")
+        wait_until(lambda: len(_stored(out)) == FINISHING, "the first results were not stored")
         p.send_signal(signal.SIGINT)  # Ctrl-C
         stdout, stderr = p.communicate(timeout=120)
     finally:
@@ -155,7 +173,7 @@ def test_results_are_stored_as_they_arrive_and_resume_goes_on(tmp_path: Path, cl
             p.kill()
     assert p.returncode == 130, stderr
     assert "Traceback" not in stderr and "interrupted: 3/8 trials ran" in stdout
-    assert sorted(f.name for f in out.glob("results/*/*.json")) == [f"{i}.json" for i in range(FINISHING)]
+    assert _stored(out) == [f"{i}.json" for i in range(FINISHING)]
     assert len(_rows(out / "trials.csv")) == FINISHING and "**Interrupted**" in (out / "report.md").read_text()
     assert _experiment("test-gated", "--resume", "--cluster", cluster.scheduler_address, "--out", str(out)) == 0
     whole.mkdir()
@@ -165,8 +183,7 @@ def test_results_are_stored_as_they_arrive_and_resume_goes_on(tmp_path: Path, cl
     assert "(3 taken from an earlier run into this directory: --resume)" in (out / "report.md").read_text()
 
 
-def test_a_cluster_that_cannot_be_reached_is_a_usage_error(tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_cluster_that_cannot_be_reached_is_a_usage_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with socket.socket() as mute:  # listens, never answers: the client's handshake times out
         mute.bind(("127.0.0.1", 0))
         mute.listen()
@@ -178,6 +195,22 @@ def test_a_cluster_that_cannot_be_reached_is_a_usage_error(tmp_path: Path,
     assert len(err.splitlines()) == 1 and not out.exists()  # nothing written
     assert _experiment("test-pi", "--cluster", address, "--jobs", "2") == 2
     assert "--jobs and --cluster exclude each other" in capsys.readouterr().err
+    with LocalCluster(
+        n_workers=0,
+        host="127.0.0.1",
+        scheduler_port=0,
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+    ) as idle:
+        assert (
+            _experiment("test-pi", "--cluster", idle.scheduler_address, "--cluster-timeout", "1", "--out", str(out))
+            == 2
+        )
+    assert capsys.readouterr().err == (
+        f"swarm-sitl experiment: the Dask scheduler at {idle.scheduler_address} has no "
+        f"worker (waited 1 s): start some with `dask worker {idle.scheduler_address}`\n"
+    )
+    assert not out.exists()
 
 
 def _search_first(path: str, on: bool = True) -> None:
@@ -188,12 +221,14 @@ def _search_first(path: str, on: bool = True) -> None:
         sys.path.remove(path)
 
 
-def test_a_cluster_with_another_swarm_sitl_is_refused(tmp_path: Path, cluster: LocalCluster,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_cluster_with_another_swarm_sitl_is_refused(
+    tmp_path: Path, cluster: LocalCluster, capsys: pytest.CaptureFixture[str]
+) -> None:
     other = tmp_path / "site"
     (other / "swarm_sitl-9.9.9.dist-info").mkdir(parents=True)
-    (other / "swarm_sitl-9.9.9.dist-info" / "METADATA").write_text("Metadata-Version: 2.1\nName: swarm-sitl\n"
-                                                                   "Version: 9.9.9\n")
+    (other / "swarm_sitl-9.9.9.dist-info" / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: swarm-sitl\nVersion: 9.9.9\n"
+    )
     with Client(cluster.scheduler_address, set_as_default=False) as client:
         worker = sorted(client.scheduler_info()["workers"])[0]
         client.run(_search_first, str(other), workers=[worker])  # that worker now finds swarm-sitl 9.9.9 first
@@ -206,34 +241,93 @@ def test_a_cluster_with_another_swarm_sitl_is_refused(tmp_path: Path, cluster: L
     assert not (tmp_path / "x").exists()
 
 
+def _start_cluster(popen: Any, scheduler: tuple[Any, str], workers: list[tuple[Any, str]], tmp_path: Path) -> str:
+    """A scheduler and single-threaded workers, each started as a user does (``dask scheduler``, ``dask worker``;
+    ``popen(host, argv, **kwargs)``, each given (host, its address)); the scheduler's address once every worker
+    joined."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "2"}
+    dask_cmd = [sys.executable, "-m", "dask"]
+    host, at = scheduler
+    info = tmp_path / "scheduler.json"
+    no_dashboard = ["--no-dashboard", "--dashboard-address"]  # and the HTTP endpoints on a port of the system's
+    popen(
+        host,
+        [*dask_cmd, "scheduler", "--host", at, "--port", "0", *no_dashboard, f"{at}:0", "--scheduler-file", str(info)],
+        cwd=ROOT,
+        env=env,
+        stderr=subprocess.DEVNULL,
+    )
+    wait_until(lambda: info.exists() and info.stat().st_size > 0, "the scheduler did not start")
+    address = json.loads(info.read_text())["address"]
+    assert address.startswith(f"tcp://{at}:")
+    logs = []
+    for n, (host, at) in enumerate(workers):
+        logs.append(tmp_path / f"worker-{n}.log")
+        with open(logs[-1], "w") as f:
+            popen(
+                host,
+                [*dask_cmd, "worker", address, "--host", at, "--nthreads", "1", *no_dashboard, f"{at}:0"],
+                cwd=ROOT,
+                env=env,
+                stderr=f,
+            )
+    for log in logs:  # until each says it joined
+        wait_until(lambda log=log: "Registered to:" in log.read_text(), f"the worker of {log.name} did not join")
+    return address
+
+
+def test_a_lost_scheduler_ends_the_run_and_keeps_what_finished(tmp_path: Path) -> None:
+    started: list[subprocess.Popen] = []
+
+    def popen(host: Any, argv: list[str], **kwargs: Any) -> subprocess.Popen:
+        started.append(subprocess.Popen(argv, start_new_session=True, **kwargs))
+        return started[-1]
+
+    out = tmp_path / "gated"
+    p = None
+    try:
+        address = _start_cluster(popen, (None, "127.0.0.1"), [(None, "127.0.0.1")], tmp_path)
+        p = _start_gated(address, out, "--quiet", "--cluster-timeout", "2")
+        wait_until(lambda: len(_stored(out)) == FINISHING, "the first results were not stored")
+        started[0].kill()  # the scheduler
+        _, stderr = p.communicate(timeout=120)
+    finally:
+        (out / "open").touch()
+        for q in [*started, *([p] if p else [])]:
+            if q.poll() is None:
+                os.killpg(q.pid, signal.SIGKILL)
+                q.wait()
+    assert p.returncode == 2
+    assert stderr == (
+        f"swarm-sitl experiment: lost the Dask scheduler at {address} (the trials that finished are kept in the "
+        "output's results/: run again with --resume to go on)\n"
+    )
+    assert _stored(out) == [f"{i}.json" for i in range(FINISHING)]
+    assert _experiment("test-gated", "--resume", "--jobs", "2", "--out", str(out)) == 0
+    assert "(3 taken from an earlier run" in (out / "report.md").read_text()
+
+
 @pytest.mark.skipif(Lab.unavailable() is not None, reason=str(Lab.unavailable()))
 def test_workers_on_other_hosts(tmp_path: Path) -> None:
     """The scheduler and the client on one host (the lab's hub), a worker on each of two others."""
     out, local = tmp_path / "pi", tmp_path / "local"
     assert _experiment("test-pi", "--trials", "3", "--jobs", "1", "--out", str(local)) == 0
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "2"}
-    dask_cmd = [sys.executable, "-m", "dask"]
     with Lab() as lab:
         hosts = [lab.add_host("w1"), lab.add_host("w2")]
-        info = tmp_path / "scheduler.json"
-        lab.popen(lab.hub, [*dask_cmd, "scheduler", "--host", lab.hub.address, "--port", "0", "--no-dashboard",
-                            "--dashboard-address", f"{lab.hub.address}:0", "--scheduler-file", str(info)],
-                  cwd=ROOT, env=env, stderr=subprocess.DEVNULL)
-        wait_until(lambda: info.exists() and info.stat().st_size > 0, "the scheduler did not start")
-        address = json.loads(info.read_text())["address"]
-        assert address.startswith(f"tcp://{lab.hub.address}:")
-        logs = [tmp_path / f"{h.name}.log" for h in hosts]
-        for h, log in zip(hosts, logs, strict=True):
-            with open(log, "w") as f:
-                lab.popen(h, [*dask_cmd, "worker", address, "--host", h.address, "--nthreads", "1", "--no-dashboard",
-                              "--dashboard-address", f"{h.address}:0", "--name", h.name], cwd=ROOT, env=env, stderr=f)
-        for log in logs:  # until each says it joined
-            wait_until(lambda log=log: "Registered to:" in log.read_text(), f"the worker of {log.name} did not join")
-        code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_experiment; "
-                f"from bridge.tools.cli import main; main(['experiment', 'test-pi', '--trials', '3', '--quiet', "
-                f"'--cluster', {address!r}, '--out', {str(out)!r}])")
-        client = lab.popen(lab.hub, [sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True)
+        address = _start_cluster(lab.popen, (lab.hub, lab.hub.address), [(h, h.address) for h in hosts], tmp_path)
+        code = (
+            f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_experiment; "
+            f"from bridge.tools.cli import main; main(['experiment', 'test-pi', '--trials', '3', '--quiet', "
+            f"'--cluster', {address!r}, '--out', {str(out)!r}])"
+        )
+        client = lab.popen(
+            lab.hub,
+            [sys.executable, "-c", code],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         _, stderr = client.communicate(timeout=600)
     assert client.returncode == 0, stderr
     assert (out / "trials.csv").read_bytes() == (local / "trials.csv").read_bytes()
