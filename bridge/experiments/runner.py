@@ -1050,8 +1050,11 @@ def _failure_lines(outcomes: list[Outcome], failed: int) -> list[str]:
 
 def run_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
                    smoke: bool = False, seed: int = 0, progress: bool = True,
-                   only: dict[str, list[str]] | None = None, resume: bool = False) -> Path:
+                   only: dict[str, list[str]] | None = None, resume: bool = False, cluster: str | None = None,
+                   cluster_timeout_s: float = 30.0) -> Path:
     """Run experiment `name`: `trials` per cell (default its own), on `jobs` processes (default: one per CPU;
-    1 runs in this process), into `out` (default runs/experiments/NAME[-smoke]), the cells `only` selects (default
-    all). Returns the output directory; execute_experiment() also returns the outcomes, failures and verdicts."""
-    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only, resume).out
+    1 runs in this process) or the Dask cluster whose scheduler is at `cluster`, into `out` (default
+    runs/experiments/NAME[-smoke]), the cells `only` selects (default all). Returns the output directory;
+    execute_experiment() also returns the outcomes, failures and verdicts."""
+    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only, resume, cluster,
+                              cluster_timeout_s).out

@@ -199,12 +199,12 @@ def test_a_cluster_that_cannot_be_reached_is_a_usage_error(tmp_path: Path, capsy
         scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
     ) as idle:
         assert (
-            _experiment("test-pi", "--cluster", idle.scheduler_address, "--cluster-timeout", "1", "--out", str(out))
+            _experiment("test-pi", "--cluster", idle.scheduler_address, "--cluster-timeout", "5", "--out", str(out))
             == 2
         )
     assert capsys.readouterr().err == (
         f"swarm-sitl experiment: the Dask scheduler at {idle.scheduler_address} has no "
-        f"worker (waited 1 s): start some with `dask worker {idle.scheduler_address}`\n"
+        f"worker (waited 5 s): start some with `dask worker {idle.scheduler_address}`\n"
     )
     assert not out.exists()
 
@@ -283,7 +283,7 @@ def test_a_lost_scheduler_ends_the_run_and_keeps_what_finished(tmp_path: Path) -
     p = None
     try:
         address = _start_cluster(popen, (None, "127.0.0.1"), [(None, "127.0.0.1")], tmp_path)
-        p = _start_gated(address, out, "--quiet", "--cluster-timeout", "2")
+        p = _start_gated(address, out, "--quiet", "--cluster-timeout", "10")
         wait_until(lambda: len(_stored(out)) == FINISHING, "the first results were not stored")
         started[0].kill()  # the scheduler
         _, stderr = p.communicate(timeout=120)
