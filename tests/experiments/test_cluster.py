@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from distributed import Client, LocalCluster
 
-from bridge.experiments.cluster import installed_version
-from bridge.experiments.runner import Experiment, Trial, TrialResult, register
+from bridge.experiments.cluster import ClusterError, _run_checked, installed_version
+from bridge.experiments.runner import Experiment, Trial, TrialResult, _ref, register
 from bridge.tools.cli import main
 from bridge.tools.netns import Lab
 from tests.experiments.test_experiment import ROOT, Flaky, MonteCarloPi, _rows, wait_until
@@ -155,13 +155,14 @@ def _stored(out: Path) -> list[str]:
     return sorted(f.name for f in out.glob("results/*/*.json"))
 
 
-def test_results_are_stored_as_they_arrive_and_resume_goes_on(tmp_path: Path, cluster: LocalCluster) -> None:
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_results_are_stored_as_they_arrive_and_resume_goes_on(tmp_path: Path, cluster: LocalCluster, sig: int) -> None:
     out, whole = tmp_path / "gated", tmp_path / "whole"
     p = _start_gated(cluster.scheduler_address, out)
     try:
         # the finishing trials' results are in results/ while the run goes on (the others wait for the gate)
         wait_until(lambda: len(_stored(out)) == FINISHING, "the first results were not stored")
-        p.send_signal(signal.SIGINT)  # Ctrl-C
+        p.send_signal(sig)  # Ctrl-C, or a kill
         stdout, stderr = p.communicate(timeout=120)
     finally:
         (out / "open").touch()  # the trials the interrupt left running on the workers end
@@ -235,6 +236,11 @@ def test_a_cluster_with_another_swarm_sitl_is_refused(
     err = capsys.readouterr().err
     assert f"runs another swarm-sitl than this one ({installed_version()}): {worker} has 9.9.9" in err
     assert not (tmp_path / "x").exists()
+    # each task checks again, for a worker that joins once the run is going
+    trial = Trial("test-pi", {"n": 100}, 0, 1, False, str(tmp_path / "w"))
+    with pytest.raises(ClusterError, match=f"this worker runs swarm-sitl {installed_version()}, the client 9.9.9"):
+        _run_checked("9.9.9", _ref(MonteCarloPi), [trial])
+    assert _run_checked(installed_version(), _ref(MonteCarloPi), [trial])[0][1] is None
 
 
 def _start_cluster(popen: Any, scheduler: tuple[Any, str], workers: list[tuple[Any, str]], tmp_path: Path) -> str:
