@@ -171,6 +171,7 @@ def _cell_choice(text: str) -> tuple[str, list[str]]:
 
 
 def cmd_experiment(a: argparse.Namespace) -> int:
+    from bridge.experiments.cluster import ClusterError
     from bridge.experiments.runner import UnknownExperimentError, execute_experiment, experiments
 
     if a.list:
@@ -188,8 +189,9 @@ def cmd_experiment(a: argparse.Namespace) -> int:
         chosen += [v for v in values if v not in chosen]
     try:
         run = execute_experiment(a.name, trials=a.trials, jobs=a.jobs, out=a.out, smoke=a.smoke, seed=a.seed,
-                                 progress=not a.quiet, only=only or None, resume=a.resume)
-    except (UnknownExperimentError, ValueError) as e:
+                                 progress=not a.quiet, only=only or None, resume=a.resume, cluster=a.cluster,
+                                 cluster_timeout_s=a.cluster_timeout)
+    except (UnknownExperimentError, ValueError, ClusterError) as e:
         print(f"swarm-sitl experiment: {e}", file=sys.stderr)
         return 2
     for t, ours, ok, _note in run.verdicts:
@@ -335,6 +337,11 @@ def _parser_experiment(sub: Any) -> None:
     p.add_argument("--resume", action="store_true",
                    help="take the trials an earlier run into the same --out finished (same cell, index and seed) "
                         "instead of running them again: an interrupted run goes on, added cells run alone")
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the trials on the Dask cluster whose scheduler is at ADDRESS (tcp://HOST:PORT; its "
+                        "workers run this swarm-sitl) instead of local worker processes; the same outputs")
+    p.add_argument("--cluster-timeout", type=_positive, default=30.0, metavar="SECONDS",
+                   help="how long to wait for the cluster's scheduler and a first worker (default 30)")
     p.set_defaults(fn=cmd_experiment)
 
 
