@@ -120,6 +120,7 @@ def run_bench(quick: bool = False, duration: float | None = None, out_dir: str =
     rate, median_us = barrier_yardstick()
     print(f"machine yardstick: bare lock-step barrier over zenoh, world + 6 participant processes, no physics or "
           f"firmware: {rate:.0f} quanta/s, median {median_us:.0f} us (compare machines and moments by this)")
+    _print_round_trip(rows)
     failed = [r for r in rows if r[1]["exit_code"] != 0]
     return 1 if failed else 0
 
@@ -252,6 +253,19 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
           "hil_configs/demos/random_walk.toml; pavilion: hil_configs/rdpso/pavilion_sar_60.toml (3 rangers, 60 scouts)")
     print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
           "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
+
+
+def _print_round_trip(rows: list) -> None:
+    """The bare zenoh round trip (one participant process, nothing to compute), and each 10-robot case's barrier
+    median as a multiple of it: what waking many processes costs beyond one message each way."""
+    cases = [(case, s) for case, s, _ in rows if case.robots == 10 and s.get("barrier_us_median")]
+    if not cases:
+        return
+    _, rtt_us = barrier_yardstick(1, 2000)
+    print(f"bare zenoh round trip (world and one participant process): median {rtt_us:.0f} us")
+    for case, s in cases:
+        print(f"  {case.label}, 10 robots, {case.per_process} per process: barrier median {s['barrier_us_median']:.0f} "
+              f"us = {s['barrier_us_median'] / rtt_us:.1f}x the round trip")
 
 
 def _print_profile(path: Path, top: int = 12) -> None:

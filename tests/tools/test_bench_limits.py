@@ -38,3 +38,12 @@ def test_the_scale_cases_are_the_goals_configs() -> None:
     for case in bench.SCALE:
         assert case.config.exists() and case.goal
         bench.quantum_s(str(case.config), {"session.robots_per_process": case.per_process})
+
+
+def test_the_barrier_at_ten_robots_is_set_beside_the_bare_round_trip(capsys: pytest.CaptureFixture[str]) -> None:
+    s = {"barrier_us_median": 2400.0}
+    bench._print_round_trip([(bench.Case("radio demo", 10, 1), s, (None, None)),
+                             (bench.Case("radio demo", 25, 5), s, (None, None))])
+    out = capsys.readouterr().out
+    assert "bare zenoh round trip (world and one participant process): median" in out
+    assert "radio demo, 10 robots, 1 per process: barrier median 2400 us = " in out and "25 robots" not in out
