@@ -327,12 +327,18 @@ class World:
     def _ride(self) -> None:
         """Robots on board sit on their carrier's deck and move with it (their wheels turn in the air)."""
         c = self.cid
-        get = pb.getBasePositionAndOrientation
+        decks: dict[int, tuple] = {}  # a carrier's pose and velocity, read once (a carrier that rides is read anew)
         for i, (carrier, _slot) in self.carried.items():
-            (x, y, z), orn = get(self.bodies[carrier], physicsClientId=c)
+            deck = decks.get(carrier)
+            if deck is None:
+                b = self.bodies[carrier]
+                deck = (*pb.getBasePositionAndOrientation(b, physicsClientId=c),
+                        *pb.getBaseVelocity(b, physicsClientId=c))
+                if carrier not in self.carried:
+                    decks[carrier] = deck
+            (x, y, z), orn, v, w = deck
             top = z + self.profiles[carrier].height_m / 2 + self.profiles[i].height_m / 2 + 1e-3
             pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, top], orn, physicsClientId=c)
-            v, w = pb.getBaseVelocity(self.bodies[carrier], physicsClientId=c)
             pb.resetBaseVelocity(self.bodies[i], v, w, physicsClientId=c)
 
     def _read_poses(self) -> None:
