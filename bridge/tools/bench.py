@@ -31,36 +31,60 @@ from bridge.core.launcher import ZENOH_RUNTIME, run_session
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "hil_configs" / "demo.toml"
-RANDOM_WALK = ROOT / "hil_configs" / "demos" / "random_walk.toml"
-PAVILION_60 = ROOT / "hil_configs" / "rdpso" / "pavilion_sar_60.toml"
+SCALE = ROOT / "hil_configs" / "bench" / "scale.toml"  # the scale goals' cases (--scale)
 
 
 
 @dataclass(frozen=True)
 class Case:
-    """One benchmark case: a session config with its robot count and packing, and the goal set for it (an RTF)."""
+    """One benchmark case: a session config with its robot count (None: the config's own) and packing, and the goal
+    set for it (an RTF)."""
 
     label: str
-    robots: int
+    robots: int | None
     per_process: int
     config: Path = DEMO
     goal: float | None = None
-    extra: tuple[tuple[str, Any], ...] = ()  # more overrides
 
 
 # the demo (XBee Series 2 and UWB on every robot): (robots, robots per process)
 FULL = [Case("radio demo", n, k) for n, k in ((1, 1), (10, 1), (10, 5), (25, 5), (50, 10), (50, 25), (100, 25))]
 QUICK = [Case("radio demo", 10, 1)]
-# the scale goals: the radio swarm at 5x on two cores, hundreds of robots at real time
-SCALE = [
-    Case("radio demo", 10, 1, goal=5.0),
-    Case("radio demo", 10, 5, goal=8.0),
-    Case("radio demo", 25, 5, goal=4.0),
-    Case("radio demo", 50, 10, goal=2.0),
-    Case("no radios", 10, 1, RANDOM_WALK, goal=8.0),
-    Case("pavilion, 60 scouts", 63, 16, PAVILION_60, goal=2.0),
-    Case("no radios", 200, 50, RANDOM_WALK, goal=1.0),
-]
+
+
+class CasesError(ValueError):
+    """A cases file that cannot be used: the message names the file, the case and the field."""
+
+
+def load_cases(path: str | Path) -> list[Case]:
+    """The cases of a TOML file (``[[cases]]`` with ``label``, ``config`` relative to the project or absolute,
+    ``robots`` (optional), ``per_process``, ``goal`` (optional))."""
+    import tomllib
+
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise CasesError(f"{path}: {e}") from None
+    cases = []
+    for i, c in enumerate(data.get("cases", [])):
+        where = f"{path}: cases[{i}]"
+        unknown = set(c) - {"label", "config", "robots", "per_process", "goal"}
+        if unknown:
+            raise CasesError(f"{where}: unknown field(s) {', '.join(sorted(unknown))}")
+        config = Path(c.get("config", DEMO))
+        config = config if config.is_absolute() else ROOT / config
+        if not config.exists():
+            raise CasesError(f"{where}.config: no such file {config}")
+        robots, k, goal = c.get("robots"), c.get("per_process", 1), c.get("goal")
+        if not (robots is None or (isinstance(robots, int) and robots > 0)) or not (isinstance(k, int) and k > 0):
+            raise CasesError(f"{where}: robots and per_process must be positive integers")
+        if goal is not None and not (isinstance(goal, int | float) and goal > 0):
+            raise CasesError(f"{where}.goal: must be a positive real-time factor")
+        cases.append(Case(str(c.get("label", config.stem)), robots, k, config, goal))
+    if not cases:
+        raise CasesError(f"{path}: no [[cases]]")
+    return cases
 
 
 def run_study_bench(name: str, quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
@@ -82,10 +106,16 @@ def run_study_bench(name: str, quick: bool = False, duration: float | None = Non
 
 
 def run_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench",
-              markdown: bool = False, profile: bool = False, config: str | None = None, scale: bool = False) -> int:
-    """The cases (``scale``: the scale goals' cases, ``quick``: one), each beside its limits, in one table."""
-    if scale:
-        cases = SCALE[:1] if quick else SCALE
+              markdown: bool = False, profile: bool = False, config: str | None = None, scale: bool = False,
+              cases_file: str | None = None) -> int:
+    """The cases (``scale``: the scale goals' cases; ``cases_file``: a file's; ``quick``: one), each beside its
+    limits, in one table."""
+    if cases_file or scale:
+        try:
+            cases = load_cases(cases_file or SCALE)
+        except CasesError as e:
+            raise SystemExit(f"swarm-sitl bench: {e}") from None
+        cases = cases[:1] if quick else cases
     else:
         cases = QUICK if quick else FULL
     if config:
@@ -94,11 +124,10 @@ def run_bench(quick: bool = False, duration: float | None = None, out_dir: str =
     rows = []
     for case in cases:
         n, k, cfg = case.robots, case.per_process, str(case.config)
-        out = Path(out_dir) / f"{case.config.stem}_n{n}_k{k}"
-        overrides = {"robots.count": n, "session.robots_per_process": k, "session.duration_s": dur,
-                     "session.speed": "max", **dict(case.extra)}
-        if case.config == PAVILION_60:  # two groups (scouts, rangers): the count is the file's
-            overrides.pop("robots.count")
+        out = Path(out_dir) / f"{case.config.stem}_n{n or 'cfg'}_k{k}"
+        overrides: dict[str, Any] = {"session.robots_per_process": k, "session.duration_s": dur, "session.speed": "max"}
+        if n is not None:
+            overrides["robots.count"] = n
         env_before = os.environ.get("SWARM_SITL_PROFILE")
         if profile:
             (out / "profile").mkdir(parents=True, exist_ok=True)
@@ -112,8 +141,9 @@ def run_bench(quick: bool = False, duration: float | None = None, out_dir: str =
         limits = (barrier_limit(int(s["processes"]) - 1, quantum_s(cfg, overrides)),
                   physics_limit(cfg, overrides)) if s.get("processes") else (None, None)
         rows.append((case, s, limits))
-        print(f"  ran {case.label}, {n} robots, {k} per process: rtf {s['rtf']}x (exit {res.code}); bare barrier "
-              f"{_fmt(limits[0], '.1f', 'x')}, bare physics {_fmt(limits[1], '.1f', 'x')}", file=sys.stderr)
+        print(f"  ran {case.label}, {s.get('robots')} robots, {k} per process: rtf {s['rtf']}x (exit {res.code}); "
+              f"bare barrier {_fmt(limits[0], '.1f', 'x')}, bare physics {_fmt(limits[1], '.1f', 'x')}",
+              file=sys.stderr)
         if profile:
             _print_profile(out / "profile" / "world.prof")
     _print_table(rows, dur, markdown)
@@ -230,7 +260,8 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
     for case, s, (bar, phys) in rows:
         limit = min((v for v in (bar, phys) if v), default=None)
         lines.append([
-            case.label, str(case.robots), str(case.per_process), str(s["processes"]), _fmt(s["rtf"], ".2f", "x"),
+            case.label, str(s.get("robots", case.robots)), str(case.per_process), str(s["processes"]),
+            _fmt(s["rtf"], ".2f", "x"),
             f">= {case.goal:g}x" if case.goal else "",
             _fmt(bar, ".1f", "x"), _fmt(phys, ".1f", "x"),
             _fmt(s["rtf"] and limit and 100 * s["rtf"] / limit, ".0f", " %"),
@@ -249,8 +280,9 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
         print("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
         for line in lines:
             print("  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)))
-    print("radio demo: XBee Series 2 and UWB on every robot (hil_configs/demo.toml); no radios: "
-          "hil_configs/demos/random_walk.toml; pavilion: hil_configs/rdpso/pavilion_sar_60.toml (3 rangers, 60 scouts)")
+    configs = sorted({(case.label, str(case.config.relative_to(ROOT)) if case.config.is_relative_to(ROOT)
+                       else str(case.config)) for case, _, _ in rows})
+    print("cases: " + "; ".join(f"{label}: {cfg}" for label, cfg in configs))
     print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
           "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
 

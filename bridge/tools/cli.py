@@ -127,7 +127,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
         return run_study_bench(study, quick=a.quick, duration=a.duration, out_dir=a.out)
 
     return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
-                     config=a.config, scale=a.scale)
+                     config=a.config, scale=a.scale, cases_file=a.cases)
 
 
 def cmd_radio_survey(a: argparse.Namespace) -> int:
@@ -287,9 +287,10 @@ def _parser_bench(sub: Any) -> None:
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
     p.add_argument("--config", help="session config to benchmark (default: the demo)")
-    p.add_argument("--scale", action="store_true", help="the scale goals' cases: the radio demo at 10 to 50 robots, "
-                                                        "10 robots without radios, the 60-scout pavilion packed, 200 "
-                                                        "robots packed; each with its goal")
+    p.add_argument("--scale", action="store_true",
+                   help="the scale goals' cases (hil_configs/bench/scale.toml): the radio demo at 10 to 50 robots, 10 "
+                        "robots without radios, the 60-scout pavilion packed, 200 robots packed; each with its goal")
+    p.add_argument("--cases", help="a TOML file of cases ([[cases]]: label, config, robots, per_process, goal)")
     p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time and the 12-robot "
                                    "arena's real-time factor; zebro: 20 Zebros' real-time factor by packing and body "
                                    "model, and the numerical 360-run table's wall time; roy: 100 numerical runs of "

@@ -35,9 +35,26 @@ def test_the_table_sets_the_limits_and_the_share_beside_the_rtf(capsys: pytest.C
 
 def test_the_scale_cases_are_the_goals_configs() -> None:
     """Each scale case names a config that exists and loads with the case's robot count and packing."""
-    for case in bench.SCALE:
-        assert case.config.exists() and case.goal
-        bench.quantum_s(str(case.config), {"session.robots_per_process": case.per_process})
+    cases = bench.load_cases(bench.SCALE)
+    assert len(cases) == 7 and all(c.goal for c in cases)
+    for case in cases:
+        over = {"session.robots_per_process": case.per_process}
+        if case.robots is not None:
+            over["robots.count"] = case.robots
+        assert bench.quantum_s(str(case.config), over) == pytest.approx(0.01)
+
+
+def test_a_bad_cases_file_names_the_file_the_case_and_the_field(tmp_path) -> None:
+    f = tmp_path / "cases.toml"
+    for text, msg in (('[[cases]]\nconfig = "nosuch.toml"\n', "cases[0].config: no such file"),
+                      ('[[cases]]\nrobots = 0\n', "cases[0]: robots and per_process must be positive"),
+                      ('[[cases]]\ngoal = -1\n', "cases[0].goal: must be a positive"),
+                      ('[[cases]]\nspeed = 2\n', "cases[0]: unknown field(s) speed"),
+                      ('x = 1\n', "no [[cases]]")):
+        f.write_text(text)
+        with pytest.raises(bench.CasesError) as e:
+            bench.load_cases(f)
+        assert str(e.value).startswith(f"{f}: ") and msg in str(e.value)
 
 
 def test_the_barrier_at_ten_robots_is_set_beside_the_bare_round_trip(capsys: pytest.CaptureFixture[str]) -> None:
