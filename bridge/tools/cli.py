@@ -60,7 +60,8 @@ def cmd_join(a: argparse.Namespace) -> int:
     from bridge.hil.join import JoinError, join
 
     try:
-        code = join(a.endpoint, a.session, a.robot, timeout_s=a.timeout, world_timeout_s=a.world_timeout)
+        code = join(a.endpoint, a.session, a.robot, timeout_s=a.timeout, world_timeout_s=a.world_timeout,
+                    host=a.host)
     except JoinError as e:
         print(f"swarm-sitl join: {e}", file=sys.stderr)
         code = 2
@@ -258,12 +259,16 @@ def _parser_run(sub: Any) -> None:
 
 
 def _parser_join(sub: Any) -> None:
-    p = sub.add_parser("join", help="run a remote robot's swarm logic on this computer for a session on another one "
-                                    "(its config: session.listen, the robot's logic = \"remote\")")
+    p = sub.add_parser("join", help="run a remote robot's swarm logic, or a host's processes, on this computer for a "
+                                    "session on another one (its config: session.listen, the robot's logic = "
+                                    "\"remote\" or [[hosts]])")
     p.add_argument("endpoint", help="where the session's world listens: its session.listen with that computer's "
                                     "address, e.g. tcp/192.168.1.10:7447")
     p.add_argument("--session", required=True, help="the session's name (session.name in its config)")
-    p.add_argument("--robot", type=int, help="the robot whose logic to run (default: the session's only remote robot)")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--robot", type=int, help="the robot whose logic to run (default: the session's only remote "
+                                                 "robot)")
+    which.add_argument("--host", help="run all the processes the session places on this host (its [[hosts]] name)")
     p.add_argument("--timeout", type=_positive, default=10.0,
                    help="wall seconds to wait for the session to answer (default 10)")
     p.add_argument("--world-timeout", type=_positive, default=10.0,

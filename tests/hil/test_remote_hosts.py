@@ -1,0 +1,240 @@
+"""A session across computers: robot groups' firmware and logic processes on hosts of ``[[hosts]]``, each host in a
+network namespace of its own (``bridge.tools.netns.Lab``), started by the launcher through its ``launch`` command.
+
+The world listens on the lab hub's address; each host reaches it only over its link. Remote processes run in the
+session's lock-step, so the recording equals the same config's run on one computer byte for byte; a host that
+vanishes fails its robots at once, and only those.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import psutil
+import pytest
+from mcap.reader import make_reader
+
+from bridge.core.config import ConfigError, load_config
+from bridge.core.launcher import join_commands, launch_command
+from bridge.core.plan import make_plan
+from bridge.tools.netns import Lab
+from tests.conftest import ROOT
+from tests.hil.test_remote_logic import cli, summary, wait_line, wait_lines
+
+CONFIG = """
+[session]
+name = "{name}"
+duration_s = 3
+seed = 9
+robots_per_process = 2
+hang_timeout_s = 60
+startup_timeout_s = 240
+{listen}
+[arena]
+width_m = 6
+length_m = 6
+{hosts}
+[[robots]]
+count = 2
+behaviour = "random_walk"
+[robots.placement]
+kind = "random"
+region = [0.5, 0.5, 5.5, 2.0]
+min_separation_m = 0.6
+[[robots]]
+count = 2
+behaviour = "random_walk"
+{host_a}
+[robots.placement]
+kind = "random"
+region = [0.5, 2.2, 5.5, 3.8]
+min_separation_m = 0.6
+[[robots]]
+count = 2
+behaviour = "random_walk"
+{host_b}
+[robots.placement]
+kind = "random"
+region = [0.5, 4.0, 5.5, 5.5]
+min_separation_m = 0.6
+"""
+
+PORT = """
+import socket, sys
+with socket.socket() as s:
+    s.bind((sys.argv[1], 0))
+    print(s.getsockname()[1])
+"""
+
+
+def write(path: Path, name: str, listen: str | None = None, launch: dict[str, str] | None = None) -> Path:
+    """The test's config: robots 0-1 here; 2-3 (firmware and logic) on host a, 4-5 (logic only) on host b when
+    ``launch`` gives the hosts' commands; all of them here otherwise."""
+    hosts = "".join(f'[[hosts]]\nname = "{h}"\nlaunch = {json.dumps(cmd)}\n' for h, cmd in (launch or {}).items())
+    path.write_text(
+        CONFIG.format(
+            name=name,
+            listen=f'listen = "{listen}"' if listen else "",
+            hosts=hosts,
+            host_a='host = "a"' if launch else "",
+            host_b='host = { logic = "b" }' if launch else "",
+        )
+    )
+    return path
+
+
+def lab_port(lab: Lab) -> int:
+    """A TCP port free on the hub's address (bound in its namespace, read, closed): no fixed port."""
+    p = lab.popen(lab.hub, [sys.executable, "-c", PORT, lab.hub.address], stdout=subprocess.PIPE, text=True)
+    out, _ = p.communicate(timeout=60)
+    return int(out)
+
+
+def hosted(lab: Lab, tmp_path: Path, name: str, *extra: str) -> tuple[subprocess.Popen, Path]:
+    """The launcher in the lab's hub, with hosts a and b in namespaces of their own; its output directory."""
+    endpoint = f"tcp/{lab.hub.address}:{lab_port(lab)}"
+    launch = {}
+    for h in (lab.add_host("a"), lab.add_host("b")):
+        enter = " ".join(map(shlex.quote, lab.enter_argv(h, inside=True)))
+        launch[h.name] = (
+            f"exec {enter} {shlex.quote(sys.executable)} -m bridge.tools.cli join {{endpoint}} "
+            "--session {session} --host {name} --timeout 120"
+        )
+    cfg = write(tmp_path / f"{name}.toml", name, endpoint, launch)
+    out = tmp_path / name
+    launcher = lab.popen(
+        lab.hub,
+        cli("run", str(cfg), "--out", str(out), *extra),
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    return launcher, out
+
+
+def joiner_of(host: str, session: str) -> psutil.Process:
+    """Host ``host``'s swarm-sitl join process for ``session`` (its launch command's), found by its command line."""
+    for p in psutil.process_iter(["cmdline"]):
+        cmd = p.info["cmdline"] or []
+        if (
+            "join" in cmd
+            and "--host" in cmd
+            and cmd[cmd.index("--host") + 1] == host
+            and (cmd[cmd.index("--session") + 1] == session)
+        ):
+            return p
+    raise AssertionError(f"no join process for host {host}")
+
+
+pytestmark = pytest.mark.skipif(Lab.unavailable() is not None, reason=str(Lab.unavailable()))
+
+
+@pytest.mark.session
+def test_hosts_in_their_own_namespaces_record_what_one_computer_records(tmp_path: Path) -> None:
+    local_out = tmp_path / "local"
+    local = subprocess.Popen(
+        cli("run", str(write(tmp_path / "local.toml", "hosted")), "--out", str(local_out), "--quiet"),
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    with Lab() as lab:
+        launcher, out = hosted(lab, tmp_path, "hosted", "--quiet")
+        try:  # the timeouts only bound a hang: every wait ends on a process's exit
+            assert launcher.wait(timeout=280) == 0, launcher.stderr.read()
+            assert local.wait(timeout=280) == 0, local.stderr.read()
+        finally:
+            for p in (launcher, local):
+                if p.poll() is None:
+                    p.kill()
+    s, ref = summary(out), summary(local_out)
+    assert s["remote_processes"] == ["fw2", "lg1", "lg2"] and s["processes"] == ref["processes"] == 7
+    assert s["hosts"] == {
+        "a": {"processes": ["fw2", "lg1"], "robots": [2, 3], "failed_robots": [], "launch_exit": 0},
+        "b": {"processes": ["lg2"], "robots": [4, 5], "failed_robots": [], "launch_exit": 0},
+    }
+    assert s["failures"] == [] and all(r["alive"] and r["distance_m"] > 0.05 for r in s["per_robot"])
+    logs = {h: (out / "logs" / f"host-{h}.log").read_text() for h in "ab"}
+    assert "host 'a' joined session 'hosted' at tcp/127.77.0.1:" in logs["a"]
+    assert "session 'hosted' ended (the world said stop); host 'b' ran 1 processes" in logs["b"]
+    # the same seed gives the same bytes whether robots 2-5 run on other computers or here
+    assert (s["digest"], s["messages"]) == (ref["digest"], ref["messages"])
+
+
+@pytest.mark.session
+def test_a_host_that_vanishes_fails_only_its_robots(tmp_path: Path) -> None:
+    with Lab() as lab:
+        # far longer than the test: it ends when the test says so, after the loss, never before it
+        launcher, out = hosted(lab, tmp_path, "loss", "--speed", "2", "--duration", "3600")
+        try:
+            wait_line(launcher.stderr, "started:", launcher)
+            victim = joiner_of("a", "loss")
+            children = victim.children()
+            assert sorted(c.cmdline()[c.cmdline().index("--proc") + 1] for c in children) == ["fw2", "lg1"]
+            victim.kill()  # the join and, with it, its processes (they die with their parent)
+            psutil.wait_procs([victim, *children], timeout=120)
+            wait_lines(launcher.stderr, ["robot 2 failed at sim t=", "robot 3 failed at sim t="], launcher)
+            wait_line(launcher.stderr, "rtf", launcher)  # the rest went on: a progress line after the loss
+            launcher.send_signal(signal.SIGINT)
+            assert launcher.wait(timeout=120) == 130
+        finally:
+            if launcher.poll() is None:
+                launcher.kill()
+    s = summary(out)
+    assert sorted((f["robot"], f["kind"]) for f in s["failures"]) == [(2, "died"), (3, "died")]
+    assert all("host a" in f["detail"] for f in s["failures"]), s["failures"]
+    assert [r["alive"] for r in s["per_robot"]] == [True, True, False, False, True, True]
+    assert s["hosts"]["a"]["failed_robots"] == [2, 3] and s["hosts"]["b"]["failed_robots"] == []
+    assert s["hosts"]["b"]["launch_exit"] == 0  # b's join left when the world said stop
+    assert s["sim_time_s"] > max(f["t_s"] for f in s["failures"])
+    with open(out / "session.mcap", "rb") as f:  # the recording is whole: readable to its end
+        poses = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/world/poses"])]
+    assert len(poses) == round(s["sim_time_s"] * 100) and poses[-1]["alive"] == [True, True, False, False, True, True]
+
+
+def test_host_config_errors_and_commands(tmp_path: Path) -> None:
+    launch = {"a": "ssh {name}.lan {join}", "b": "ssh b {join}"}
+    cfg = load_config(str(write(tmp_path / "ok.toml", "two hosts", "tcp/0.0.0.0:7447", launch)))
+    plan = make_plan(cfg)
+    assert [(p.name, p.robots, p.host) for p in plan.procs] == [
+        ("fw0", (0, 1), None),
+        ("fw1", (4, 5), None),
+        ("fw2", (2, 3), "a"),
+        ("lg0", (0, 1), None),
+        ("lg1", (2, 3), "a"),
+        ("lg2", (4, 5), "b"),
+    ]
+    assert launch_command(cfg.hosts[0].launch, "tcp/10.0.0.1:7447", "two hosts", "a") == (
+        "ssh a.lan swarm-sitl join tcp/10.0.0.1:7447 --session 'two hosts' --host a"
+    )
+    assert join_commands("two hosts", "tcp/10.0.0.1:7447", plan, cfg.hosts) == []  # both launched
+    cfg.hosts[1].launch = None
+    assert join_commands("two hosts", "tcp/10.0.0.1:7447", plan, cfg.hosts) == [
+        "host b (lg2: robots 4-5): swarm-sitl join tcp/10.0.0.1:7447 --session 'two hosts' --host b"
+    ]
+    text = (tmp_path / "ok.toml").read_text()
+    bad = {
+        'host = "a"': ('host = "c"', r"robots\[1\].host: 'c' is not a host of \[\[hosts\]\] \(hosts: a, b\)"),
+        'host = { logic = "b" }': ('host = { logic = "a" }', r"hosts\[1\]: host 'b' runs no process"),
+        "{join}": ("{joined}", r"hosts\[0\].launch: \{joined\} is not a placeholder"),
+        'name = "b"': ('name = "a"', r"hosts\[1\].name: 'a' names another host already"),
+        'listen = "tcp/0.0.0.0:7447"': ("", r"session.listen: \[\[hosts\]\] join over zenoh"),
+    }
+    for old, (new, err) in bad.items():
+        p = tmp_path / "bad.toml"
+        p.write_text(text.replace(old, new, 1))
+        with pytest.raises(ConfigError, match=err):
+            load_config(str(p))
+    pty = text.replace('host = "a"', 'host = "a"\nxbee = { pty = "r{id}-xbee" }', 1).replace(
+        "seed = 9", "seed = 9\nspeed = 1"
+    )
+    p.write_text(pty)
+    with pytest.raises(ConfigError, match=r"robots\[1\].host: xbee.pty is a device or port of the world's computer"):
+        load_config(str(p))
