@@ -73,6 +73,26 @@ def cmd_join(a: argparse.Namespace) -> int:
     os._exit(code)  # zenoh-python can hang in interpreter teardown
 
 
+def _counts(v: str) -> list[int]:
+    try:
+        out = [int(x) for x in v.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected host counts such as 1,2, got {v!r}") from None
+    if not all(n >= 1 for n in out):
+        raise argparse.ArgumentTypeError(f"host counts are >= 1, got {v}")
+    return out
+
+
+def _delays(v: str) -> list[float]:
+    try:
+        out = [float(x) for x in v.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected delays in ms such as 0.2,1, got {v!r}") from None
+    if not all(d >= 0 for d in out):
+        raise argparse.ArgumentTypeError(f"delays are >= 0, got {v}")
+    return out
+
+
 def _positive(v: str) -> float:
     try:
         f = float(v)
@@ -126,6 +146,12 @@ def cmd_bench(a: argparse.Namespace) -> int:
     study = "rdpso" if a.rdpso else a.study
     if study:
         return run_study_bench(study, quick=a.quick, duration=a.duration, out_dir=a.out)
+    if a.hosts:
+        from bridge.tools.bench_hosts import run_hosts_bench
+
+        return run_hosts_bench(a.hosts, a.link_delay_ms, robots=a.robots or 10, per_process=a.robots_per_process or 5,
+                               duration=a.duration or 10.0, out_dir=a.out if a.out != "runs/bench" else
+                               "runs/bench-hosts", config=a.config, markdown=a.markdown)
 
     return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
                      config=a.config)
@@ -296,6 +322,13 @@ def _parser_bench(sub: Any) -> None:
                                    "chapter 3's scenario with BAT, wall time and runs/s, the SonPI camera sessions, "
                                    "chapter 6 with 1000 agents and the SonPIs under chapter 6's region planner)")
     p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
+    p.add_argument("--hosts", type=_counts, help="N[,N...]: the robots' processes on N other hosts (joins on this "
+                                                 "machine over TCP), against all here: RTF and barrier per case")
+    p.add_argument("--link-delay-ms", type=_delays, default=[0.2, 1.0], metavar="D[,D...]",
+                   help="with --hosts: one-way delays of the hosts' links (a delay relay each way; default 0.2,1), "
+                        "besides loopback without a relay")
+    p.add_argument("--robots", type=_at_least_one, help="with --hosts: robot count (default 10)")
+    p.add_argument("--robots-per-process", type=_at_least_one, help="with --hosts: packing (default 5)")
     p.set_defaults(fn=cmd_bench)
 
 
