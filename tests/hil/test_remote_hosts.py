@@ -24,7 +24,7 @@ from bridge.core.launcher import join_commands, launch_command
 from bridge.core.plan import make_plan
 from bridge.tools.netns import Lab
 from tests.conftest import ROOT
-from tests.hil.test_remote_logic import cli, summary, wait_line, wait_lines
+from tests.hil.test_remote_logic import cli, free_port, summary, wait_line, wait_lines
 
 CONFIG = """
 [session]
@@ -182,21 +182,50 @@ def test_a_host_that_vanishes_fails_only_its_robots(tmp_path: Path) -> None:
             psutil.wait_procs([victim, *children], timeout=120)
             wait_lines(launcher.stderr, ["robot 2 failed at sim t=", "robot 3 failed at sim t="], launcher)
             wait_line(launcher.stderr, "rtf", launcher)  # the rest went on: a progress line after the loss
+            leaver = joiner_of("b", "loss")
+            children = leaver.children()
+            leaver.send_signal(signal.SIGINT)  # b's join leaves: it ends its processes and tells the world
+            psutil.wait_procs([leaver, *children], timeout=120)
+            wait_lines(launcher.stderr, ["robot 4 failed at sim t=", "robot 5 failed at sim t="], launcher)
             launcher.send_signal(signal.SIGINT)
             assert launcher.wait(timeout=120) == 130
         finally:
             if launcher.poll() is None:
                 launcher.kill()
     s = summary(out)
-    assert sorted((f["robot"], f["kind"]) for f in s["failures"]) == [(2, "died"), (3, "died")]
-    assert all("host a" in f["detail"] for f in s["failures"]), s["failures"]
-    assert [r["alive"] for r in s["per_robot"]] == [True, True, False, False, True, True]
-    assert s["hosts"]["a"]["failed_robots"] == [2, 3] and s["hosts"]["b"]["failed_robots"] == []
-    assert s["hosts"]["b"]["launch_exit"] == 0  # b's join left when the world said stop
+    assert sorted((f["robot"], f["kind"]) for f in s["failures"]) == [
+        (2, "died"),
+        (3, "died"),
+        (4, "died"),
+        (5, "died"),
+    ]
+    lost, left = s["failures"][:2], s["failures"][2:]
+    assert all("host a" in f["detail"] for f in lost), lost
+    assert all("swarm-sitl join on host b stopped (SIGINT)" in f["detail"] for f in left), left
+    assert max(f["t_s"] for f in lost) < min(f["t_s"] for f in left)  # robots 0, 1, 4, 5 went on after a's loss
+    assert [r["alive"] for r in s["per_robot"]] == [True, True, False, False, False, False]
+    assert s["hosts"]["a"]["failed_robots"] == [2, 3] and s["hosts"]["b"]["failed_robots"] == [4, 5]
+    assert s["hosts"]["b"]["launch_exit"] == 130  # b's join, interrupted
     assert s["sim_time_s"] > max(f["t_s"] for f in s["failures"])
     with open(out / "session.mcap", "rb") as f:  # the recording is whole: readable to its end
         poses = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/world/poses"])]
-    assert len(poses) == round(s["sim_time_s"] * 100) and poses[-1]["alive"] == [True, True, False, False, True, True]
+    assert len(poses) == round(s["sim_time_s"] * 100) and poses[-1]["alive"] == [True, True] + [False] * 4
+
+
+def test_a_host_whose_launch_command_fails_stops_the_start(tmp_path: Path) -> None:
+    port = free_port()
+    cfg = write(
+        tmp_path / "f.toml",
+        "fails",
+        f"tcp/127.0.0.1:{port}",
+        {"a": "echo no route to {name} >&2; exit 3", "b": "exit 0"},
+    )
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "f")), cwd=ROOT, capture_output=True, text=True,
+                       timeout=300)  # fmt: skip
+    assert r.returncode == 1, r.stderr
+    s = summary(tmp_path / "f")
+    assert s["error"].startswith("host-a's launch command exited (code 3) before the session started; see ")
+    assert (tmp_path / "f" / "logs" / "host-a.log").read_text() == "no route to a\n"
 
 
 def test_host_config_errors_and_commands(tmp_path: Path) -> None:
