@@ -205,6 +205,13 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
             _fmt(s["rss_mb_per_robot"], ".0f", " MB"), _fmt(s["startup_s"], ".1f", " s"),
         ])
     print(f"\nswarm-sitl bench: demo behaviour, {dur:g} s simulated per case, quantum 10 ms, {os.cpu_count()} cores")
+    print_table(head, lines, markdown)
+    print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
+          "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
+
+
+def print_table(head: list[str], lines: list[list[str]], markdown: bool) -> None:
+    """A table of figures: Markdown, or columns aligned right."""
     if markdown:
         print("| " + " | ".join(head) + " |")
         print("|" + "|".join("---" for _ in head) + "|")
@@ -215,8 +222,6 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
         print("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
         for line in lines:
             print("  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)))
-    print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
-          "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
 
 
 def _print_profile(path: Path, top: int = 12) -> None:

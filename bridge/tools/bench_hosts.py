@@ -20,7 +20,7 @@ from typing import Any
 
 from bridge.core.config import read_toml, to_toml
 from bridge.core.launcher import run_session
-from bridge.tools.bench import DEMO, _fmt
+from bridge.tools.bench import DEMO, _fmt, print_table
 from bridge.tools.delay_relay import start_relay
 
 
@@ -127,13 +127,4 @@ def _print(rows: list, robots: int, per_process: int, duration: float, markdown:
         f"\nswarm-sitl bench --hosts: {robots} robots of the radio demo, {per_process} per process, {duration:g} s "
         f"simulated per case, {os.cpu_count()} cores (hosts and world on this machine)"
     )
-    if markdown:
-        print("| " + " | ".join(head) + " |")
-        print("|" + "|".join("---" for _ in head) + "|")
-        for line in lines:
-            print("| " + " | ".join(line) + " |")
-    else:
-        widths = [max(len(x), *(len(r[i]) for r in lines)) for i, x in enumerate(head)]
-        print("  ".join(x.rjust(w) for x, w in zip(head, widths, strict=True)))
-        for line in lines:
-            print("  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)))
+    print_table(head, lines, markdown)

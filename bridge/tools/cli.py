@@ -73,24 +73,19 @@ def cmd_join(a: argparse.Namespace) -> int:
     os._exit(code)  # zenoh-python can hang in interpreter teardown
 
 
-def _counts(v: str) -> list[int]:
-    try:
-        out = [int(x) for x in v.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected host counts such as 1,2, got {v!r}") from None
-    if not all(n >= 1 for n in out):
-        raise argparse.ArgumentTypeError(f"host counts are >= 1, got {v}")
-    return out
+def _numbers(cast: type, least: float, example: str) -> Any:
+    """An argparse type: comma-separated numbers, each at least ``least`` (e.g. ``1,2``)."""
 
+    def parse(v: str) -> list:
+        try:
+            out = [cast(x) for x in v.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected numbers such as {example}, got {v!r}") from None
+        if not all(x >= least for x in out):
+            raise argparse.ArgumentTypeError(f"each must be >= {least}, got {v}")
+        return out
 
-def _delays(v: str) -> list[float]:
-    try:
-        out = [float(x) for x in v.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected delays in ms such as 0.2,1, got {v!r}") from None
-    if not all(d >= 0 for d in out):
-        raise argparse.ArgumentTypeError(f"delays are >= 0, got {v}")
-    return out
+    return parse
 
 
 def _positive(v: str) -> float:
@@ -322,9 +317,10 @@ def _parser_bench(sub: Any) -> None:
                                    "chapter 3's scenario with BAT, wall time and runs/s, the SonPI camera sessions, "
                                    "chapter 6 with 1000 agents and the SonPIs under chapter 6's region planner)")
     p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
-    p.add_argument("--hosts", type=_counts, help="N[,N...]: the robots' processes on N other hosts (joins on this "
-                                                 "machine over TCP), against all here: RTF and barrier per case")
-    p.add_argument("--link-delay-ms", type=_delays, default=[0.2, 1.0], metavar="D[,D...]",
+    p.add_argument("--hosts", type=_numbers(int, 1, "1,2"), metavar="N[,N...]",
+                   help="the robots' processes on N other hosts (joins on this machine over TCP), against all here: "
+                        "RTF and barrier per case")
+    p.add_argument("--link-delay-ms", type=_numbers(float, 0, "0.2,1"), default=[0.2, 1.0], metavar="D[,D...]",
                    help="with --hosts: one-way delays of the hosts' links (a delay relay each way; default 0.2,1), "
                         "besides loopback without a relay")
     p.add_argument("--robots", type=_at_least_one, help="with --hosts: robot count (default 10)")

@@ -39,28 +39,15 @@ startup_timeout_s = 240
 width_m = 6
 length_m = 6
 {hosts}
+"""
+GROUP = """
 [[robots]]
 count = 2
 behaviour = "random_walk"
+{host}
 [robots.placement]
 kind = "random"
-region = [0.5, 0.5, 5.5, 2.0]
-min_separation_m = 0.6
-[[robots]]
-count = 2
-behaviour = "random_walk"
-{host_a}
-[robots.placement]
-kind = "random"
-region = [0.5, 2.2, 5.5, 3.8]
-min_separation_m = 0.6
-[[robots]]
-count = 2
-behaviour = "random_walk"
-{host_b}
-[robots.placement]
-kind = "random"
-region = [0.5, 4.0, 5.5, 5.5]
+region = [0.5, {y0}, 5.5, {y1}]
 min_separation_m = 0.6
 """
 
@@ -76,15 +63,10 @@ def write(path: Path, name: str, listen: str | None = None, launch: dict[str, st
     """The test's config: robots 0-1 here; 2-3 (firmware and logic) on host a, 4-5 (logic only) on host b when
     ``launch`` gives the hosts' commands; all of them here otherwise."""
     hosts = "".join(f'[[hosts]]\nname = "{h}"\nlaunch = {json.dumps(cmd)}\n' for h, cmd in (launch or {}).items())
-    path.write_text(
-        CONFIG.format(
-            name=name,
-            listen=f'listen = "{listen}"' if listen else "",
-            hosts=hosts,
-            host_a='host = "a"' if launch else "",
-            host_b='host = { logic = "b" }' if launch else "",
-        )
-    )
+    text = CONFIG.format(name=name, listen=f'listen = "{listen}"' if listen else "", hosts=hosts)
+    for host, y0, y1 in (("", 0.5, 2.0), ('host = "a"', 2.2, 3.8), ('host = { logic = "b" }', 4.0, 5.5)):
+        text += GROUP.format(host=host if launch else "", y0=y0, y1=y1)
+    path.write_text(text)
     return path
 
 
