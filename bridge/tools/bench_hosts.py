@@ -13,21 +13,14 @@ from __future__ import annotations
 
 import os
 import shlex
-import socket
 import sys
 from pathlib import Path
 from typing import Any
 
 from bridge.core.config import read_toml, to_toml
 from bridge.core.launcher import run_session
-from bridge.tools.bench import DEMO, _fmt, print_table
+from bridge.tools.bench import DEMO, _fmt, _free_port, barrier_yardstick, print_table
 from bridge.tools.delay_relay import start_relay
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def hosts_config(
@@ -104,7 +97,24 @@ def run_hosts_bench(
         f"digest: {'the same in every case' if len(digests) == 1 else 'DIFFERS: ' + ', '.join(sorted(digests))} "
         f"({next(iter(digests))[:16]})"
     )
+    _routing(delays_ms, max(len(s["remote_processes"]) for _, _, s in rows), markdown)  # one host's, at most
     return 0 if all(s["exit_code"] == 0 for _, _, s in rows) and len(digests) == 1 else 1
+
+
+def _routing(delays_ms: list[float], procs: int, markdown: bool, quanta: int = 2000) -> None:
+    """The bare barrier (no physics, no firmware) over each link, with a host's ``procs`` processes each connecting
+    to the world (as a host's do) or all through one zenoh router on the host (one connection per host)."""
+    lines = []
+    for d in [-1.0, *delays_ms]:
+        direct = barrier_yardstick(procs, quanta, link_delay_ms=d)[1]
+        routed = barrier_yardstick(procs, quanta, link_delay_ms=d, router=True)[1]
+        lines.append([
+            "loopback" if d < 0 else f"{d:g} ms + relay", f"{direct:.0f} us", f"{routed:.0f} us",
+            f"{routed - direct:+.0f} us",
+        ])  # fmt: skip
+    print(f"\nbare barrier over the link, {procs} processes on one host, {quanta} quanta: each its own connection to "
+          "the world, or one router on the host")  # fmt: skip
+    print_table(["link (one way)", "a connection each", "one router", "router - direct"], lines, markdown)
 
 
 def _print(rows: list, robots: int, per_process: int, duration: float, markdown: bool) -> None:
