@@ -220,8 +220,8 @@ class Hub:
         told as the launcher tells one, so its robots fail at once rather than after hang_timeout_s."""
         if p in self.procs and self.procs[p].remote:
             where = f"host {self.procs[p].host}" if self.procs[p].host else "the other computer"
-            self.q.put(("control", transport.pack({"op": "dead", "proc": p, "detail": f"lost {where}: its "
-                                                   "swarm-sitl join ended or its network failed"})))
+            self.q.put(("control", transport.pack({"op": "dead", "proc": p, "lost": True, "detail": f"lost {where}: "
+                                                   "its swarm-sitl join ended or its network failed"})))
 
     def status(self, **msg: Any) -> None:
         """Tell the launcher (nothing to tell before ``open``, e.g. a hub driven directly by tests)."""
@@ -267,6 +267,8 @@ class Hub:
                 elif key == "control":
                     if msg.get("op") == "dead" and msg.get("proc") in remote:  # a joiner left: it may join again
                         p = msg["proc"]
+                        if msg.get("lost") and p in missing:  # its token went after it left, or before it joined
+                            continue
                         missing.add(p)
                         self.joinable = frozenset(missing & remote)
                         self.status(op="notice", left=p, text=f"{p} left before the start ({msg.get('detail')}); "

@@ -198,6 +198,7 @@ class _Watch:
         self.signal: int | None = None
         self.dropped: dict[str, dict[str, Any]] = {}  # process -> the world's failure event naming it
         self.failed: dict[int, dict[str, Any]] = {}  # our robot -> its failure; its process goes on until the stop
+        self.started = False  # the world said every process has joined
         self.ended = False
         self.left = False  # the world took our leaving before the start (its notice naming our process)
         self.world_lost_at: float | None = None
@@ -228,6 +229,8 @@ class _Watch:
                 self.dropped[msg["process"]] = msg
             else:
                 self.failed[msg["robot"]] = msg
+        elif op == "started":
+            self.started = True
         elif op == "end":
             self.ended = True
 
@@ -376,14 +379,21 @@ def _run_host(zs: zenoh.Session, endpoint: str, ns: str, session: str, host: str
             end_group(p)
         for s, h in old.items():
             signal.signal(s, h)
+    ended_here = [p for p, c in exits.items() if c is None]  # still running: ended above
+    exits = {p: children[p].returncode if c is None else c for p, c in exits.items()}
     if watch.signal is not None:
         name = signal.Signals(watch.signal).name
-        watch.leave([p for p, c in exits.items() if c is None],
-                    f"swarm-sitl join on host {host} stopped ({name})")
+        watch.leave(ended_here, f"swarm-sitl join on host {host} stopped ({name})")
         print(f"swarm-sitl join: interrupted ({name}); host {host!r}'s robots ({id_ranges(robots)}) fail in session "
               f"{session!r}", file=out, flush=True)
         return 130
     bad = {p: c for p, c in exits.items() if c != 0}
+    if bad and not watch.started:  # a process died before the start: the host leaves whole (the world waits again)
+        watch.leave([p.name for p in procs], f"a process of host {host} did not start on its computer")
+        print(f"swarm-sitl join: host {host!r}: " + ", ".join(f"{p} exited {c}" for p, c in sorted(bad.items())
+                                                                if p not in ended_here)
+              + f" before the session started; see {work}", file=out, flush=True)
+        return 1
     failed = sorted(watch.failed) + sorted(r for p in watch.dropped for r in watch.procs[p])
     if not bad:
         shutil.rmtree(work, ignore_errors=True)
@@ -413,6 +423,8 @@ def _supervise_host(watch: _Watch, children: dict[str, subprocess.Popen], work: 
                 exits[p] = end_group(child)
             elif (code := child.poll()) is not None:
                 exits[p] = code
+                if code != 0 and not watch.started:  # the host cannot start: leave, to be joined again whole
+                    return exits
                 if code != 0 and not watch.ended:  # it died: its robots fail at once
                     watch.control.put(transport.pack({"op": "dead", "proc": p, "detail": f"exit code {code} on "
                                                       f"another computer; see {work}/{p}.log there"}))
