@@ -1,8 +1,9 @@
 """zenoh, configured explicitly: peer mode, no multicast or gossip scouting, a unix socket endpoint in
 the session's private directory, and a namespace per session, so two sessions on one machine never see
 each other and nothing leaves the machine. A session whose config sets ``session.listen`` also listens on
-that TCP endpoint, so that a robot's swarm logic on another computer can join it (``swarm-sitl join``); its
-namespace then follows from the session's name, which the joiner gives.
+that TCP endpoint, so that a robot's swarm logic or a host's processes on another computer can join it (``swarm-sitl
+join``), each process with a connection of its own; its namespace then follows from the session's name, which the
+joiner gives.
 
 Key space (relative to the session namespace ``swarm-sitl/<session id>``, or ``swarm-sitl/<session name>``
 for a session that listens on TCP):

@@ -249,3 +249,26 @@ def test_host_config_errors_and_commands(tmp_path: Path) -> None:
     p.write_text(pty)
     with pytest.raises(ConfigError, match=r"robots\[1\].host: xbee.pty is a device or port of the world's computer"):
         load_config(str(p))
+
+
+def test_a_service_runs_on_a_host(tmp_path: Path) -> None:
+    from bridge.core.config import read_toml, to_toml
+
+    raw = read_toml(ROOT / "hil_configs" / "demos" / "overhead_camera.toml")
+    raw["session"]["listen"] = "tcp/127.0.0.1:7447"
+    raw["hosts"] = [{"name": "cam"}]
+    raw["services"][0]["host"] = "cam"
+    (tmp_path / "s.toml").write_text(to_toml(raw))
+    cfg = load_config(str(tmp_path / "s.toml"))
+    plan = make_plan(cfg)
+    assert [(p.name, p.remote, p.host) for p in plan.procs if p.kind == "service"] == [
+        ("svc-camera", True, "cam"),
+        ("svc-controller", False, None),
+    ]
+    assert join_commands("s", "tcp/127.0.0.1:7447", plan, cfg.hosts) == [
+        "host cam (svc-camera): swarm-sitl join tcp/127.0.0.1:7447 --session s --host cam"
+    ]
+    raw["services"][0]["host"] = "nowhere"
+    (tmp_path / "s.toml").write_text(to_toml(raw))
+    with pytest.raises(ConfigError, match=r"services\[0\].host: 'nowhere' is not a host of \[\[hosts\]\]"):
+        load_config(str(tmp_path / "s.toml"))
