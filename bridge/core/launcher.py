@@ -295,8 +295,8 @@ def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, sto
         _reap_running(w.children, world, control, logs)
         if w.t_started is None and not w.startup_error and (
                 gone := [c for c in w.children if c.kind == "host" and c.exit_code not in (None, 0)]):
-            w.startup_error = (f"{gone[0].name}'s launch command exited (code {gone[0].exit_code}) before the session "
-                               f"started; see {logs / gone[0].name}.log")
+            w.startup_error = (f"host {gone[0].name.removeprefix('host-')}'s launch command exited (code "
+                               f"{gone[0].exit_code}) before the session started; see {logs / gone[0].name}.log")
             prog.note(f"[{cfg.session.name}] {w.startup_error}")
             control.put(transport.pack({"op": "stop", "reason": w.startup_error}))
         if world.exit_code is not None:
@@ -317,9 +317,8 @@ def _on_status(cfg, w: _Watch, msg: dict[str, Any], prog: _Progress, ports: list
     op = msg.get("op")
     if op == "started":
         w.t_started = time.monotonic()
-        prog.note(f"[{cfg.session.name}] started: {sum(c.kind != 'host' for c in w.children) + remote} processes "
-                  "joined in "
-                  f"{w.t_started - w.t_launch:.1f} s")
+        procs = sum(c.kind != "host" for c in w.children) + remote  # a host's launch command is none of them
+        prog.note(f"[{cfg.session.name}] started: {procs} processes joined in {w.t_started - w.t_launch:.1f} s")
         for line in ports:
             prog.note(f"[{cfg.session.name}] port: {line}")
         if msg.get("mavlink"):

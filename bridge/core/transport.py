@@ -124,7 +124,6 @@ def wait_matched(pub: zenoh.Publisher, timeout_s: float, what: str) -> None:
         time.sleep(0.005)
 
 
-
 def on_gone(session: zenoh.Session, prefix: str, fn: Any) -> Any:
     """Call ``fn(name)`` from a zenoh thread when the liveliness token ``prefix/<name>`` goes away (its session
     closed, its connection broke or its lease ran out); the subscriber, to keep."""

@@ -206,7 +206,7 @@ def test_a_host_whose_launch_command_fails_stops_the_start(tmp_path: Path) -> No
                        timeout=300)  # fmt: skip
     assert r.returncode == 1, r.stderr
     s = summary(tmp_path / "f")
-    assert s["error"].startswith("host-a's launch command exited (code 3) before the session started; see ")
+    assert s["error"].startswith("host a's launch command exited (code 3) before the session started; see ")
     assert (tmp_path / "f" / "logs" / "host-a.log").read_text() == "no route to a\n"
 
 
