@@ -203,3 +203,61 @@ def test_a_moving_obstacle_follows_its_path_and_the_sonars_see_it() -> None:
                      ({"waypoints": [[2.0, 2.0, 1.5], [1.0, 1.0, 1.5]]}, "increasing")):
         with pytest.raises(ValueError, match=why):
             Config.model_validate({"obstacles": [{**car, "motion": bad}], "robots": [one]})
+
+
+def _walls_by_every_ray(w: World, src: int) -> np.ndarray:
+    """The walls between ``src`` and every robot, casting every ray (what ``World.walls`` must equal)."""
+    z = [p.height_m * 0.9 for p in w.profiles]
+    frm = [[float(w.pos[src, 0]), float(w.pos[src, 1]), z[src]]] * w.n
+    to = [[float(w.pos[d, 0]), float(w.pos[d, 1]), z[d]] for d in range(w.n)]
+    counts = np.zeros(w.n, dtype=int)
+    for level in range(w.MAX_WALLS):
+        hits = pb.rayTestBatch(frm, to, numThreads=1, reportHitNumber=level, collisionFilterMask=w.STATIC_RAY_MASK,
+                               fractionEpsilon=1e-4, physicsClientId=w.cid)
+        counts += np.array([h[0] >= 0 for h in hits])
+    return counts
+
+
+def test_wall_counts_from_the_walls_scene_are_those_of_the_full_scene() -> None:
+    """The radio's wall counts, cast in the scene of static bodies only, are those of casting every ray in the full
+    scene among the robots: crates at angles, pillars, a partition lower than any antenna, an obstacle on a path,
+    robots of two heights, over time."""
+    obstacles = [{"type": "box", "x": 3.0, "y": 3.0, "size": [1.2, 0.8, 0.6], "yaw_deg": 30},
+                 {"type": "box", "x": 6.5, "y": 6.0, "size": [3.0, 0.15, 0.05]},
+                 {"type": "cylinder", "x": 2.0, "y": 7.0, "radius": 0.3},
+                 {"type": "box", "x": 5.0, "y": 1.0, "size": [0.6, 0.6, 0.5],
+                  "motion": {"waypoints": [[3.0, 5.0, 8.0]], "repeat": False}}]
+    robots = [{"count": 14, "placement": {"kind": "random", "region": [0.5, 0.5, 9.5, 9.5], "min_separation_m": 0.5}},
+              {"profile": "sonpi", "count": 6,
+               "placement": {"kind": "random", "region": [0.5, 0.5, 9.5, 9.5], "min_separation_m": 0.5}}]
+    w = world(arena={"width_m": 10, "length_m": 10}, obstacles=obstacles, robots=robots, session={"seed": 3})
+    q = 10_000_000
+    try:
+        assert pb.getNumBodies(physicsClientId=w.walls_cid) == 1 + 4 + 4  # floor, arena walls, obstacles: no robot
+        crossed = 0
+        for k in range(300):
+            w.step_quantum(k * q, q)
+            if k % 50 == 49:
+                for src in range(w.n):
+                    got = w.walls(src, np.arange(w.n))
+                    assert got.tolist() == _walls_by_every_ray(w, src).tolist()
+                    crossed += int((got > 0).sum())
+        assert crossed > 0
+    finally:
+        w.close()
+
+
+def test_a_ray_grazing_a_corner_counts_the_same_in_both_scenes() -> None:
+    """A ray that passes a crate's corner within Bullet's contact threshold hits it in the full scene (whose bounding
+    boxes a physics step grows by that threshold); the walls scene must count it too (a case met at 50 robots)."""
+    crate = {"type": "box", "x": 1.5, "y": 13.0, "size": [0.8, 0.8, 0.6]}
+    robots = [{"count": 2, "placement": {"kind": "explicit", "poses": [[1.2, 14.3, 0], [4.6, 10.0, 0]]}}]
+    w = world(arena={"width_m": 10, "length_m": 20}, obstacles=[crate], robots=robots)
+    try:
+        w.step_quantum(0, 10_000_000)
+        w.pos = np.array([[1.2029111281102864, 14.269854860451373], [4.646179552547476, 9.974670034576127]])
+        w._walls_rows.clear()
+        assert _walls_by_every_ray(w, 0).tolist() == [0, 1]
+        assert w.walls(0, np.array([1])).tolist() == [1]
+    finally:
+        w.close()
