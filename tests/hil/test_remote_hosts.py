@@ -59,10 +59,13 @@ with socket.socket() as s:
 """
 
 
-def write(path: Path, name: str, listen: str | None = None, launch: dict[str, str] | None = None) -> Path:
+def write(path: Path, name: str, listen: str | None = None, launch: dict[str, str | None] | None = None) -> Path:
     """The test's config: robots 0-1 here; 2-3 (firmware and logic) on host a, 4-5 (logic only) on host b when
-    ``launch`` gives the hosts' commands; all of them here otherwise."""
-    hosts = "".join(f'[[hosts]]\nname = "{h}"\nlaunch = {json.dumps(cmd)}\n' for h, cmd in (launch or {}).items())
+    ``launch`` gives the hosts' commands (None: joined by hand); all of them here otherwise."""
+    hosts = "".join(
+        f'[[hosts]]\nname = "{h}"\n' + (f"launch = {json.dumps(cmd)}\n" if cmd else "")
+        for h, cmd in (launch or {}).items()
+    )
     text = CONFIG.format(name=name, listen=f'listen = "{listen}"' if listen else "", hosts=hosts)
     for host, y0, y1 in (("", 0.5, 2.0), ('host = "a"', 2.2, 3.8), ('host = { logic = "b" }', 4.0, 5.5)):
         text += GROUP.format(host=host if launch else "", y0=y0, y1=y1)
@@ -77,15 +80,20 @@ def lab_port(lab: Lab) -> int:
     return int(out)
 
 
-def hosted(lab: Lab, tmp_path: Path, name: str, *extra: str) -> tuple[subprocess.Popen, Path]:
-    """The launcher in the lab's hub, with hosts a and b in namespaces of their own; its output directory."""
+def hosted(lab: Lab, tmp_path: Path, name: str, *extra: str, by_hand: str = "") -> tuple[subprocess.Popen, Path]:
+    """The launcher in the lab's hub, with hosts a and b in namespaces of their own, each started by its launch
+    command but those named in ``by_hand``; its output directory."""
     endpoint = f"tcp/{lab.hub.address}:{lab_port(lab)}"
-    launch = {}
+    launch: dict[str, str | None] = {}
     for h in (lab.add_host("a"), lab.add_host("b")):
         enter = " ".join(map(shlex.quote, lab.enter_argv(h, inside=True)))
         launch[h.name] = (
-            f"exec {enter} {shlex.quote(sys.executable)} -m bridge.tools.cli join {{endpoint}} "
-            "--session {session} --host {name} --timeout 120"
+            None
+            if h.name in by_hand
+            else (
+                f"exec {enter} {shlex.quote(sys.executable)} -m bridge.tools.cli join {{endpoint}} "
+                "--session {session} --host {name} --timeout 120"
+            )
         )
     cfg = write(tmp_path / f"{name}.toml", name, endpoint, launch)
     out = tmp_path / name
@@ -128,24 +136,34 @@ def test_hosts_in_their_own_namespaces_record_what_one_computer_records(tmp_path
         text=True,
     )
     with Lab() as lab:
-        launcher, out = hosted(lab, tmp_path, "hosted", "--quiet")
+        launcher, out = hosted(lab, tmp_path, "hosted", by_hand="b")
+        joiner = None
         try:  # the timeouts only bound a hang: every wait ends on a process's exit
-            assert launcher.wait(timeout=280) == 0, launcher.stderr.read()
+            # b is joined by hand, in its namespace, with the command the launcher printed
+            line = wait_line(launcher.stderr, "host b (lg2: robots 4-5): swarm-sitl join ", launcher)
+            command = shlex.split(line.split("): ", 1)[1])
+            assert command == ["swarm-sitl", "join", f"tcp/{lab.hub.address}:{command[2].rpartition(':')[2]}",
+                               "--session", "hosted", "--host", "b"]  # fmt: skip
+            joiner = lab.popen(lab.hosts[1], [*cli(*command[1:]), "--timeout", "120"], cwd=ROOT,
+                               stdout=subprocess.PIPE, text=True)  # fmt: skip
+            _, err = launcher.communicate(timeout=280)
+            assert launcher.returncode == 0, err
             assert local.wait(timeout=280) == 0, local.stderr.read()
+            j_out, _ = joiner.communicate(timeout=120)
+            assert joiner.returncode == 0, j_out
         finally:
-            for p in (launcher, local):
-                if p.poll() is None:
+            for p in (launcher, local, joiner):
+                if p is not None and p.poll() is None:
                     p.kill()
     s, ref = summary(out), summary(local_out)
     assert s["remote_processes"] == ["fw2", "lg1", "lg2"] and s["processes"] == ref["processes"] == 7
     assert s["hosts"] == {
         "a": {"processes": ["fw2", "lg1"], "robots": [2, 3], "failed_robots": [], "launch_exit": 0},
-        "b": {"processes": ["lg2"], "robots": [4, 5], "failed_robots": [], "launch_exit": 0},
+        "b": {"processes": ["lg2"], "robots": [4, 5], "failed_robots": [], "launch_exit": None},
     }
     assert s["failures"] == [] and all(r["alive"] and r["distance_m"] > 0.05 for r in s["per_robot"])
-    logs = {h: (out / "logs" / f"host-{h}.log").read_text() for h in "ab"}
-    assert "host 'a' joined session 'hosted' at tcp/127.77.0.1:" in logs["a"]
-    assert "session 'hosted' ended (the world said stop); host 'b' ran 1 processes" in logs["b"]
+    assert "host 'a' joined session 'hosted' at tcp/127.77.0.1:" in (out / "logs" / "host-a.log").read_text()
+    assert "session 'hosted' ended (the world said stop); host 'b' ran 1 processes" in j_out
     # the same seed gives the same bytes whether robots 2-5 run on other computers or here
     assert (s["digest"], s["messages"]) == (ref["digest"], ref["messages"])
 
