@@ -439,6 +439,21 @@ class RobotGroup(_Model):
         None, description="the host of [[hosts]] the robots' firmware and logic processes run on, or by kind, e.g. "
                           "{ logic = \"pi1\" } (the firmware stays on the world's computer); none: the world's")
 
+    @field_validator("host", mode="before")
+    @classmethod
+    def _host_or_kinds(cls, v: Any) -> Any:
+        """A host's name, or a table of hosts by process kind; anything else refused in one clear message."""
+        if isinstance(v, dict):
+            stray = sorted(set(v) - set(GroupHostsCfg.model_fields))
+            if stray or not all(isinstance(h, str | None) for h in v.values()):
+                raise ValueError(f"{v!r}: a table of hosts by process kind takes firmware and logic, each a host's "
+                                 "name")
+            return GroupHostsCfg(**v)
+        if v is not None and not isinstance(v, str | GroupHostsCfg):
+            raise ValueError(f"{v!r}: a host's name (all the group's processes there), or {{ firmware = ..., "
+                             "logic = ... }")
+        return v
+
     def hosts(self) -> tuple[str | None, str | None]:
         """The hosts of the group's firmware and logic processes (None: the world's computer)."""
         if isinstance(self.host, GroupHostsCfg):

@@ -255,6 +255,7 @@ def test_host_config_errors_and_commands(tmp_path: Path) -> None:
         "{join}": ("{joined}", r"hosts\[0\].launch: \{joined\} is not a placeholder"),
         'name = "b"': ('name = "a"', r"hosts\[1\].name: 'a' names another host already"),
         'listen = "tcp/0.0.0.0:7447"': ("", r"session.listen: \[\[hosts\]\] join over zenoh"),
+        'logic = "b"': ('logik = "b"', r"robots\[2\].host: \{'logik': 'b'\}: a table of hosts by process kind takes"),
     }
     for old, (new, err) in bad.items():
         p = tmp_path / "bad.toml"
