@@ -26,14 +26,21 @@ from bridge.tools.delay_relay import start_relay
 def hosts_config(
     base: Path, robots: int, per_process: int, duration: float, listen: str | None, endpoints: list[str]
 ) -> dict[str, Any]:
-    """The base config's first robot group as two groups (robots split in halves), packed ``per_process``; with one
-    endpoint, both groups on host h0, with two, one on h0 and one on h1, each host's join connecting to its endpoint
-    (the world listens on ``listen``)."""
+    """The base config's first robot group as two groups (robots and a random placement's region split in halves),
+    packed ``per_process``; with one endpoint, both groups on host h0, with two, one on h0 and one on h1, each host's
+    join connecting to its endpoint (the world listens on ``listen``)."""
     raw = read_toml(base)
     raw["session"].update(name="bench-hosts", duration_s=duration, speed="max", robots_per_process=per_process)
     group = raw["robots"][0]
     half = robots // 2
     groups = [{**group, "count": half}, {**group, "count": robots - half}]
+    placement = group.get("placement", {})
+    if placement.get("kind", "random") == "random":  # each group in its half of the region, so none overlap
+        a = raw.get("arena", {})
+        x0, y0, x1, y1 = placement.get("region") or (0.0, 0.0, a.get("width_m", 10.0), a.get("length_m", 20.0))
+        ym = (y0 + y1) / 2
+        for g, (lo, hi) in zip(groups, ((y0, ym), (ym, y1)), strict=True):
+            g["placement"] = {**placement, "region": [x0, lo, x1, hi]}
     if endpoints:
         raw["session"]["listen"] = listen
         raw["hosts"] = [
