@@ -298,7 +298,7 @@ def join(endpoint: str, session: str, robot: int | None = None, timeout_s: float
         from bridge.hosts.logic import LogicHost
 
         try:
-            host = _Tracked(LogicHost(plan, (robot,)))
+            logic = _Tracked(LogicHost(plan, (robot,)))
         except Exception as e:
             raise JoinError(f"robot {robot}'s logic ({rp.behaviour!r}) does not start on this computer: {e}") from None
         watch = _Watch(zs, {proc: (robot,)}, world_timeout_s, out,
@@ -308,7 +308,7 @@ def join(endpoint: str, session: str, robot: int | None = None, timeout_s: float
         try:
             from bridge.hosts.participant import serve
 
-            code = serve(proc, endpoint, ns, host, session=zs, watch=watch)
+            code = serve(proc, endpoint, ns, logic, session=zs, watch=watch)
         except TimeoutError as e:
             raise JoinError(f"session {session!r} at {endpoint} stopped answering while joining ({e})") from None
         finally:
@@ -316,8 +316,8 @@ def join(endpoint: str, session: str, robot: int | None = None, timeout_s: float
                 signal.signal(s, h)
         if code != 0:  # the world will not say stop: end the robot's thread here
             with contextlib.suppress(Exception):
-                host.stop()
-        ran = (f"{host.runs} runs, the last at sim t={host.t_ns / 1e9:.3f} s" if host.t_ns is not None
+                logic.stop()
+        ran = (f"{logic.runs} runs, the last at sim t={logic.t_ns / 1e9:.3f} s" if logic.t_ns is not None
                else "it never ran")
         if code == 0:
             print(f"swarm-sitl join: session {session!r} ended (the world said stop); robot {robot}'s logic: {ran}"
