@@ -9,6 +9,7 @@ vanishes fails its robots at once, and only those.
 from __future__ import annotations
 
 import json
+import os
 import shlex
 import signal
 import subprocess
@@ -291,3 +292,40 @@ def test_a_service_runs_on_a_host(tmp_path: Path) -> None:
     (tmp_path / "s.toml").write_text(to_toml(raw))
     with pytest.raises(ConfigError, match=r"services\[0\].host: 'nowhere' is not a host of \[\[hosts\]\]"):
         load_config(str(tmp_path / "s.toml"))
+
+
+BEHAVIOUR = '''
+from swarm_logic.controller import Controller
+
+
+class Idle(Controller):
+    """A behaviour this computer has and the host has not."""
+
+    def step(self):
+        self.robot.llc.drive(0.0, 0.0)
+'''
+
+
+@pytest.mark.session
+def test_a_host_whose_process_cannot_start_leaves_whole_and_the_start_stops(tmp_path: Path) -> None:
+    """Host b lacks the behaviour its logic runs (a plugin installed on the world's computer only): its logic process
+    dies before the start, so b's join leaves whole (exit 1) and, as its launch command failed, the start stops."""
+    site = tmp_path / "site"
+    (site / "onlyhere").mkdir(parents=True)
+    (site / "onlyhere" / "__init__.py").write_text(BEHAVIOUR)
+    info = site / "onlyhere-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: onlyhere\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[swarm_sitl.behaviours]\nidle_here = onlyhere:Idle\n")
+    join = f"exec env -u PYTHONPATH {shlex.quote(sys.executable)} -m bridge.tools.cli join {{endpoint}} --session {{session}} --host {{name}} --timeout 120"  # noqa: E501
+    cfg = write(tmp_path / "g.toml", "gone", f"tcp/127.0.0.1:{free_port()}", {"a": join, "b": join})
+    b_group = 'behaviour = "random_walk"\nhost = { logic = "b" }'
+    cfg.write_text(cfg.read_text().replace(b_group, b_group.replace("random_walk", "idle_here")))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(ROOT)])}
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "g")), cwd=ROOT, capture_output=True, text=True,
+                       timeout=300, env=env)  # fmt: skip
+    assert r.returncode == 1, r.stderr
+    s = summary(tmp_path / "g")
+    assert s["error"].startswith("host b's launch command exited (code 1) before the session started; see ")
+    log = (tmp_path / "g" / "logs" / "host-b.log").read_text()
+    assert "swarm-sitl join: host 'b': lg2 exited 1 before the session started; see " in log, log
