@@ -25,6 +25,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -209,7 +210,10 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         return p
 
     stops = _Stops()
-    old = {s: signal.signal(s, stops) for s in (signal.SIGINT, signal.SIGTERM)}
+    # Ctrl-C and SIGTERM stop the session; a session run from another thread (an experiment's trial on a Dask worker)
+    # cannot take them: it ends with the process it runs in
+    main = threading.current_thread() is threading.main_thread()
+    old = {s: signal.signal(s, stops) for s in (signal.SIGINT, signal.SIGTERM)} if main else {}
     try:
         res = _supervise(cfg, plan, out, logs, spawn, stops, endpoint, namespace, session_dir, prog, ports, remote,
                          plot)

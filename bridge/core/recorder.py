@@ -121,12 +121,11 @@ def register_schema(name: str, schema: dict[str, Any]) -> None:
 _TIME = struct.Struct("<q")
 
 
+_COMPACT = json.JSONEncoder(separators=(",", ":"))  # json.dumps(msg, separators=...) without a new encoder per call
+
+
 def _digest_update(h: Any, log_time: int, topic: str, data: bytes) -> None:
-    h.update(_TIME.pack(log_time))
-    h.update(topic.encode())
-    h.update(b"\0")
-    h.update(_TIME.pack(len(data)))
-    h.update(data)
+    h.update(b"".join((_TIME.pack(log_time), topic.encode(), b"\0", _TIME.pack(len(data)), data)))
 
 
 class Recorder:
@@ -156,7 +155,7 @@ class Recorder:
         return cid
 
     def write(self, t_ns: int, topic: str, schema: str, msg: dict[str, Any]) -> None:
-        self.write_json(t_ns, topic, schema, json.dumps(msg, separators=(",", ":")).encode())
+        self.write_json(t_ns, topic, schema, _COMPACT.encode(msg).encode())
 
     def write_json(self, t_ns: int, topic: str, schema: str, data: bytes) -> None:
         """Record an already JSON-encoded message (hot paths encode fixed shapes themselves)."""

@@ -327,12 +327,18 @@ class World:
     def _ride(self) -> None:
         """Robots on board sit on their carrier's deck and move with it (their wheels turn in the air)."""
         c = self.cid
-        get = pb.getBasePositionAndOrientation
+        decks: dict[int, tuple] = {}  # a carrier's pose and velocity, read once (a carrier that rides is read anew)
         for i, (carrier, _slot) in self.carried.items():
-            (x, y, z), orn = get(self.bodies[carrier], physicsClientId=c)
+            deck = decks.get(carrier)
+            if deck is None:
+                b = self.bodies[carrier]
+                deck = (*pb.getBasePositionAndOrientation(b, physicsClientId=c),
+                        *pb.getBaseVelocity(b, physicsClientId=c))
+                if carrier not in self.carried:
+                    decks[carrier] = deck
+            (x, y, z), orn, v, w = deck
             top = z + self.profiles[carrier].height_m / 2 + self.profiles[i].height_m / 2 + 1e-3
             pb.resetBasePositionAndOrientation(self.bodies[i], [x, y, top], orn, physicsClientId=c)
-            v, w = pb.getBaseVelocity(self.bodies[carrier], physicsClientId=c)
             pb.resetBaseVelocity(self.bodies[i], v, w, physicsClientId=c)
 
     def _read_poses(self) -> None:
@@ -370,9 +376,13 @@ class World:
         in the walls scene (``walls_cid``), which holds the static bodies alone.
         """
         dsts = np.asarray(dsts, dtype=int)
-        row = self._walls_rows.get(src)  # robots move only in step_quantum: a row holds for the quantum
+        row = self._walls_rows.get(src)  # robots move only in step_quantum: a count holds for the quantum
         if row is None:
-            row = self._walls_rows[src] = self._cast_walls(src, np.arange(self.n))
+            row = self._walls_rows[src] = np.full(self.n, -1, dtype=int)  # -1: not cast yet
+        todo = dsts[row[dsts] < 0]
+        if len(todo):  # only the pairs asked for (a ranging exchange asks for one, a broadcast for all)
+            todo = np.unique(todo)
+            row[todo] = self._cast_walls(src, todo)
         return row[dsts]
 
     def _cast_walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
@@ -390,16 +400,17 @@ class World:
                 self._walls_boxed = True
             self._walls_synced = True
         z0 = self.profiles[src].height_m * 0.9
-        frm = [[float(self.pos[src, 0]), float(self.pos[src, 1]), z0]] * len(dsts)
+        frm = [float(self.pos[src, 0]), float(self.pos[src, 1]), z0]
         to = [[float(self.pos[d, 0]), float(self.pos[d, 1]), self.profiles[d].height_m * 0.9] for d in dsts.tolist()]
+        rays = list(range(len(dsts)))  # a ray with no k-th wall has no (k+1)-th: only those that hit go on
         for level in range(self.MAX_WALLS):
-            hits = pb.rayTestBatch(frm, to, numThreads=1, reportHitNumber=level,
+            hits = pb.rayTestBatch([frm] * len(rays), [to[i] for i in rays], numThreads=1, reportHitNumber=level,
                                    collisionFilterMask=self.STATIC_RAY_MASK, fractionEpsilon=1e-4,
                                    physicsClientId=self.walls_cid)
-            hit = np.array([h[0] >= 0 for h in hits])
-            if not hit.any():
+            rays = [i for i, h in zip(rays, hits, strict=True) if h[0] >= 0]
+            if not rays:
                 break
-            counts += hit
+            counts[rays] += 1
         return counts
 
     # -- sensing ------------------------------------------------------------------------------------

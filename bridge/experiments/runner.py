@@ -26,11 +26,11 @@ import time
 import traceback
 import warnings
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -447,56 +447,117 @@ def _chunks(trials: list[Trial], size: int | Callable[[dict[str, Any]], int]) ->
     return out
 
 
-def _execute(ref: _Ref, trials: list[Trial], jobs: int, bar: _Progress,
+def _task_results(f: Any, n: int) -> list[_Done]:
+    """A finished task's results; a task that did not come back (its worker died, its result could not be sent, the
+    cluster gave it up) is a failure of each of its ``n`` trials."""
+    try:
+        return f.result()
+    except Exception as e:
+        return [(None, f"worker: {_error_text(e, frames=0)}", 0.0)] * n
+
+
+class Workers(Protocol):
+    """Where a run's tasks (each a batch of one cell's trials, ``_run_trials``) execute: this process, worker
+    processes of this machine, or a cluster (``bridge.experiments.cluster``). The runner stores, counts and orders
+    the results the same way whichever runs them."""
+
+    what: str  # for the report's last line: "with 4 jobs (spawn workers)"
+
+    def run(self, ref: _Ref, tasks: list[list[Trial]]) -> Iterator[tuple[int, list[_Done]]]:
+        """Run the tasks; yield (task number, its trials' results) as each finishes, in whatever order."""
+        ...
+
+    def abort(self) -> list[tuple[int, list[_Done]]]:
+        """After an interrupt or error: cancel what is pending, stop what runs; the tasks that had finished but were
+        not yielded yet."""
+        ...
+
+    def close(self) -> None: ...
+
+
+class _InProcess:
+    """Trials one after the other in this process (``--jobs 1``, for a debugger)."""
+
+    what = "with 1 job (in-process)"
+
+    def run(self, ref: _Ref, tasks: list[list[Trial]]) -> Iterator[tuple[int, list[_Done]]]:
+        for j, task in enumerate(tasks):
+            res = _run_trials(ref, task)
+            # a trial's session may catch the interrupt to shut down cleanly and end as a failed trial: the flag
+            # stops the run all the same, and that trial, cut short, is not kept
+            if _STOP.is_set():
+                raise KeyboardInterrupt
+            yield j, res
+
+    def abort(self) -> list[tuple[int, list[_Done]]]:
+        return []
+
+    def close(self) -> None:
+        pass
+
+
+class _LocalPool:
+    """Spawned worker processes of this machine, each dying with the runner."""
+
+    def __init__(self, jobs: int) -> None:
+        self.jobs = jobs
+        self.what = f"with {jobs} jobs ({_start_method()} workers)"
+        self.pool: ProcessPoolExecutor | None = None
+        self.pending: dict[Future, int] = {}
+
+    def run(self, ref: _Ref, tasks: list[list[Trial]]) -> Iterator[tuple[int, list[_Done]]]:
+        self.pool = ProcessPoolExecutor(max_workers=min(self.jobs, len(tasks)), initializer=_worker_init,
+                                        mp_context=multiprocessing.get_context(_start_method()))
+        self.pending = {self.pool.submit(_run_trials, ref, t): j for j, t in enumerate(tasks)}
+        for f in as_completed(list(self.pending)):
+            j = self.pending.pop(f)
+            yield j, _task_results(f, len(tasks[j]))
+
+    def abort(self) -> list[tuple[int, list[_Done]]]:
+        if self.pool is not None:
+            _abort(self.pool)
+        return [(j, f.result()) for f, j in self.pending.items()
+                if f.done() and not f.cancelled() and f.exception() is None]
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True)
+
+
+def _workers(jobs: int, cluster: str | None = None, cluster_timeout_s: float = 30.0) -> Workers:
+    """This process (``jobs`` 1), ``jobs`` local worker processes, or the Dask cluster whose scheduler is at
+    ``cluster`` (connected now, so that a cluster that cannot run the trials is refused before anything is
+    written)."""
+    if cluster is not None:
+        from bridge.experiments.cluster import ClusterWorkers
+
+        return ClusterWorkers(cluster, cluster_timeout_s)
+    return _InProcess() if jobs == 1 else _LocalPool(jobs)
+
+
+def _execute(ref: _Ref, trials: list[Trial], workers: Workers, bar: _Progress,
              batch: int | Callable[[dict[str, Any]], int] = 1,
              on_done: Callable[[int, _Done], None] = lambda k, d: None) -> tuple[dict[int, _Done], bool]:
-    """Run the trials (``batch`` of one cell per task); returns what finished by position in `trials`, and whether
-    Ctrl-C cut the run short. ``on_done`` sees each finished trial as it comes."""
+    """Run the trials (``batch`` of one cell per task) on ``workers``; returns what finished by position in
+    `trials`, and whether Ctrl-C cut the run short. ``on_done`` sees each finished trial as it comes."""
     done: dict[int, _Done] = {}
     groups = _chunks(trials, batch if callable(batch) else max(1, batch))
-    if jobs == 1:
-        # in-process, a trial's session may catch the interrupt to shut down cleanly and end as a failed trial:
-        # the flag stops the run all the same, and that trial, cut short, is not kept
-        try:
-            for g in groups:
-                res = _run_trials(ref, [trials[k] for k in g])
-                if _STOP.is_set():
-                    return done, True
-                for k, r in zip(g, res, strict=True):
-                    done[k] = r
-                    on_done(k, r)
-                    bar.advance(r[1] is not None)
-        except KeyboardInterrupt:
-            return done, True
-        return done, False
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(groups)), initializer=_worker_init,
-                               mp_context=multiprocessing.get_context(_start_method()))
-    futures: dict[Future, list[int]] = {}
     try:
-        for g in groups:
-            futures[pool.submit(_run_trials, ref, [trials[k] for k in g])] = g
-        for f in as_completed(futures):
-            g = futures[f]
-            try:
-                res = f.result()
-            except Exception as e:  # the worker died, or the result could not be sent back
-                res = [(None, f"worker: {_error_text(e, frames=0)}", 0.0)] * len(g)
-            for k, r in zip(g, res, strict=True):
+        for j, res in workers.run(ref, [[trials[k] for k in g] for g in groups]):
+            for k, r in zip(groups[j], res, strict=True):
                 done[k] = r
                 on_done(k, r)
                 bar.advance(r[1] is not None)
     except BaseException as e:
-        _abort(pool)
+        late = workers.abort()
         if not isinstance(e, KeyboardInterrupt):
             raise
-        for f, g in futures.items():  # finished as the interrupt came; a trial the interrupt cut short is not kept
-            if g[0] not in done and f.done() and not f.cancelled() and f.exception() is None:
-                for k, r in zip(g, f.result(), strict=True):
-                    if r[1] is None:
-                        done[k] = r
-                        on_done(k, r)
+        for j, res in late:  # finished as the interrupt came; a trial the interrupt cut short is not kept
+            for k, r in zip(groups[j], res, strict=True):
+                if r[1] is None:
+                    done[k] = r
+                    on_done(k, r)
         return done, True
-    pool.shutdown(wait=True)
     return done, False
 
 
@@ -784,15 +845,20 @@ def select_cells(cells: list[dict[str, Any]], only: dict[str, list[str]] | None)
 
 def execute_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
                        smoke: bool = False, seed: int = 0, progress: bool = True,
-                       only: dict[str, list[str]] | None = None, resume: bool = False) -> ExperimentRun:
+                       only: dict[str, list[str]] | None = None, resume: bool = False, cluster: str | None = None,
+                       cluster_timeout_s: float = 30.0) -> ExperimentRun:
     """Run experiment `name` and write its outputs; see run_experiment. Ctrl-C keeps what finished. `only` runs
     the cells whose values match (key to accepted values); a trial's seed does not depend on which cells run.
     `resume` takes each trial an earlier run into the same `out` finished (its results/ file: the same cell, index
-    and seed) instead of running it again."""
+    and seed) instead of running it again. `cluster` runs the trials on the Dask cluster whose scheduler is at that
+    address instead of `jobs` local processes (``bridge.experiments.cluster``; reached within `cluster_timeout_s`)."""
     t_start = time.monotonic()
     cls = get_experiment(name)
     exp = cls()
     n = trials if trials is not None else (cls.smoke_trials if smoke else cls.trials)
+    if cluster is not None and jobs is not None:
+        raise ValueError("--jobs and --cluster exclude each other: a cluster's workers are its own "
+                         "(dask worker --nworkers N)")
     jobs = jobs if jobs is not None else (os.cpu_count() or 1)
     if n < 1 or jobs < 1:
         raise ValueError(f"trials and jobs must be >= 1 (got {n}, {jobs})")
@@ -801,26 +867,31 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     cells = select_cells(all_cells, only)
     default_out = Path("runs/experiments") / (f"{name}-smoke" if smoke else name)
     out_dir = Path(out) if out is not None else default_out
-    _clear_outputs(out_dir)
-    work = (out_dir / "work").absolute()
-    if not resume:  # a fresh run: no earlier trial's result stays to be taken for this run's
-        shutil.rmtree(out_dir / RESULTS_DIR, ignore_errors=True)
-    counts = [exp.cell_trials(c, n) for c in cells]
-    plan = [Trial(name, dict(c), i, trial_seed(seed, name, {k: v for k, v in c.items() if k not in cls.seed_ignores},
-                                               i), smoke, str(work / _slug(c) / str(i)))
-            for c, m in zip(cells, counts, strict=True) for i in range(m)]
-    cell_of = [j for j, m in enumerate(counts) for _ in range(m)]
-    ref = _ref(cls)
-    _INSTANCES.setdefault(ref, exp)
-    kept = {k: d for k, t in enumerate(plan) if resume and (d := _stored(_result_path(out_dir, t), t)) is not None}
-    todo = [k for k in range(len(plan)) if k not in kept]
-    bar = _Progress(name, len(todo), progress)
+    # a cluster is reached, and refused should it not do, before anything is written
+    with contextlib.closing(_workers(jobs, cluster, cluster_timeout_s)) as workers:
+        _clear_outputs(out_dir)
+        work = (out_dir / "work").absolute()
+        if not resume:  # a fresh run: no earlier trial's result stays to be taken for this run's
+            shutil.rmtree(out_dir / RESULTS_DIR, ignore_errors=True)
+        counts = [exp.cell_trials(c, n) for c in cells]
+        plan = [Trial(name, dict(c), i, trial_seed(seed, name, {k: v for k, v in c.items()
+                                                                if k not in cls.seed_ignores}, i),
+                      smoke, str(work / _slug(c) / str(i)))
+                for c, m in zip(cells, counts, strict=True) for i in range(m)]
+        cell_of = [j for j, m in enumerate(counts) for _ in range(m)]
+        ref = _ref(cls)
+        _INSTANCES.setdefault(ref, exp)
+        kept = {k: d for k, t in enumerate(plan)
+                if resume and (d := _stored(_result_path(out_dir, t), t)) is not None}
+        todo = [k for k in range(len(plan)) if k not in kept]
+        bar = _Progress(name, len(todo), progress)
 
-    def store(j: int, d: _Done) -> None:
-        _store(_result_path(out_dir, plan[todo[j]]), plan[todo[j]], d)
+        def store(j: int, d: _Done) -> None:
+            _store(_result_path(out_dir, plan[todo[j]]), plan[todo[j]], d)
 
-    ran, interrupted = (_execute_interruptible(ref, [plan[k] for k in todo], jobs, bar,
-                                               lambda c: int(exp.cell_batch(c)), store) if todo else ({}, False))
+        ran, interrupted = (_execute_interruptible(ref, [plan[k] for k in todo], workers, bar,
+                                                   lambda c: int(exp.cell_batch(c)), store)
+                            if todo else ({}, False))
     done = {**kept, **{todo[j]: d for j, d in ran.items()}}
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
@@ -863,8 +934,7 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
     lines += _cell_lines(cells, by_cell, metric_keys) + _failure_lines(outcomes, failed)
     walls = [d[2] for d in done.values()]
     lines += ["", "---", "",
-              f"Wall time {wall:.1f} s with {jobs} job{'s' if jobs != 1 else ''} "
-              f"({'in-process' if jobs == 1 else _start_method() + ' workers'}); trials took "
+              f"Wall time {wall:.1f} s {workers.what}; trials took "
               f"{float(np.median(walls)) if walls else 0:.3g} s median, {sum(walls):.1f} s in all "
               f"(per trial: timings.csv).{' Curves per trial: curves/.' if (out_dir / 'curves').exists() else ''}"]
     (out_dir / "report.md").write_text(re.sub(r"\n{3,}", "\n\n", "\n".join(lines)).rstrip() + "\n")
@@ -880,7 +950,7 @@ def _clear_outputs(out_dir: Path) -> None:
         shutil.rmtree(out_dir / d, ignore_errors=True)
 
 
-def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: int, bar: _Progress,
+def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], workers: Workers, bar: _Progress,
                            batch: int | Callable[[dict[str, Any]], int] = 1,
                            on_done: Callable[[int, _Done], None] = lambda k, d: None) -> tuple[dict[int, tuple], bool]:
     """``_execute`` with SIGTERM ending the run as Ctrl-C does (no orphans), the handlers restored after."""
@@ -890,7 +960,7 @@ def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], jobs: i
         old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
         old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
     try:
-        return _execute(ref, plan, jobs, bar, batch, on_done)
+        return _execute(ref, plan, workers, bar, batch, on_done)
     finally:
         bar.close()
         if old_term is not None:
@@ -980,8 +1050,11 @@ def _failure_lines(outcomes: list[Outcome], failed: int) -> list[str]:
 
 def run_experiment(name: str, trials: int | None = None, jobs: int | None = None, out: str | Path | None = None,
                    smoke: bool = False, seed: int = 0, progress: bool = True,
-                   only: dict[str, list[str]] | None = None, resume: bool = False) -> Path:
+                   only: dict[str, list[str]] | None = None, resume: bool = False, cluster: str | None = None,
+                   cluster_timeout_s: float = 30.0) -> Path:
     """Run experiment `name`: `trials` per cell (default its own), on `jobs` processes (default: one per CPU;
-    1 runs in this process), into `out` (default runs/experiments/NAME[-smoke]), the cells `only` selects (default
-    all). Returns the output directory; execute_experiment() also returns the outcomes, failures and verdicts."""
-    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only, resume).out
+    1 runs in this process) or the Dask cluster whose scheduler is at `cluster`, into `out` (default
+    runs/experiments/NAME[-smoke]), the cells `only` selects (default all). Returns the output directory;
+    execute_experiment() also returns the outcomes, failures and verdicts."""
+    return execute_experiment(name, trials, jobs, out, smoke, seed, progress, only, resume, cluster,
+                              cluster_timeout_s).out

@@ -8,7 +8,6 @@ Robot code needs no change for this: it calls ``clock.sleep`` and ``bus.recv`` a
 
 from __future__ import annotations
 
-import contextlib
 import threading
 import traceback
 from collections import deque
@@ -54,10 +53,8 @@ class RobotRuntime:
         self.error: str | None = None
         self.finished = False
         self.stopping = False
-        # the hand-off: two raw locks used as binary semaphores, each released by the other thread (the host and the
-        # robot thread strictly alternate); cheaper than threading.Semaphore, whose every step is a Python Condition
-        self._go = _taken_lock()
-        self._back = _taken_lock()
+        self._go = threading.Semaphore(0)
+        self._back = threading.Semaphore(0)
         self.thread: threading.Thread | None = None
 
     # -- host side --------------------------------------------------------------------------------
@@ -122,8 +119,7 @@ class RobotRuntime:
         if self.thread is None or self.finished:
             return
         self.stopping = True
-        with contextlib.suppress(RuntimeError):  # a second stop of a thread that did not end after the first
-            self._go.release()
+        self._go.release()
         self._back.acquire(timeout=timeout_s)
 
     # -- robot side ---------------------------------------------------------------------------------
@@ -146,12 +142,6 @@ class RobotRuntime:
 
     def close_bus(self, name: str) -> None:
         self.rx.pop(name, None)
-
-
-def _taken_lock() -> threading.Lock:
-    lock = threading.Lock()
-    lock.acquire()
-    return lock
 
 
 class Timer(Protocol):

@@ -22,6 +22,7 @@ import sys
 import tempfile
 import time
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,11 +31,36 @@ from bridge.core.launcher import ZENOH_RUNTIME, run_session
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "hil_configs" / "demo.toml"
+RANDOM_WALK = ROOT / "hil_configs" / "demos" / "random_walk.toml"
+PAVILION_60 = ROOT / "hil_configs" / "rdpso" / "pavilion_sar_60.toml"
 
-# (robots, robots per process)
-FULL = [(1, 1), (10, 1), (10, 5), (25, 5), (50, 10), (50, 25), (100, 25)]
-QUICK = [(10, 1)]
-TARGETS = {(10, 1): 5.0, (50, 10): 1.0, (50, 25): 1.0}
+
+
+@dataclass(frozen=True)
+class Case:
+    """One benchmark case: a session config with its robot count and packing, and the goal set for it (an RTF)."""
+
+    label: str
+    robots: int
+    per_process: int
+    config: Path = DEMO
+    goal: float | None = None
+    extra: tuple[tuple[str, Any], ...] = ()  # more overrides
+
+
+# the demo (XBee Series 2 and UWB on every robot): (robots, robots per process)
+FULL = [Case("radio demo", n, k) for n, k in ((1, 1), (10, 1), (10, 5), (25, 5), (50, 10), (50, 25), (100, 25))]
+QUICK = [Case("radio demo", 10, 1)]
+# the scale goals: the radio swarm at 5x on two cores, hundreds of robots at real time
+SCALE = [
+    Case("radio demo", 10, 1, goal=5.0),
+    Case("radio demo", 10, 5, goal=8.0),
+    Case("radio demo", 25, 5, goal=4.0),
+    Case("radio demo", 50, 10, goal=2.0),
+    Case("no radios", 10, 1, RANDOM_WALK, goal=8.0),
+    Case("pavilion, 60 scouts", 63, 16, PAVILION_60, goal=2.0),
+    Case("no radios", 200, 50, RANDOM_WALK, goal=1.0),
+]
 
 
 def run_study_bench(name: str, quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench") -> int:
@@ -56,15 +82,23 @@ def run_study_bench(name: str, quick: bool = False, duration: float | None = Non
 
 
 def run_bench(quick: bool = False, duration: float | None = None, out_dir: str = "runs/bench",
-              markdown: bool = False, profile: bool = False, config: str | None = None) -> int:
-    cases = QUICK if quick else FULL
+              markdown: bool = False, profile: bool = False, config: str | None = None, scale: bool = False) -> int:
+    """The cases (``scale``: the scale goals' cases, ``quick``: one), each beside its limits, in one table."""
+    if scale:
+        cases = SCALE[:1] if quick else SCALE
+    else:
+        cases = QUICK if quick else FULL
+    if config:
+        cases = [Case(Path(config).stem, c.robots, c.per_process, Path(config)) for c in cases]
     dur = duration or (10.0 if quick else 30.0)
-    cfg = config or str(DEMO)
     rows = []
-    for n, k in cases:
-        out = Path(out_dir) / f"n{n}_k{k}"
+    for case in cases:
+        n, k, cfg = case.robots, case.per_process, str(case.config)
+        out = Path(out_dir) / f"{case.config.stem}_n{n}_k{k}"
         overrides = {"robots.count": n, "session.robots_per_process": k, "session.duration_s": dur,
-                     "session.speed": "max"}
+                     "session.speed": "max", **dict(case.extra)}
+        if case.config == PAVILION_60:  # two groups (scouts, rangers): the count is the file's
+            overrides.pop("robots.count")
         env_before = os.environ.get("SWARM_SITL_PROFILE")
         if profile:
             (out / "profile").mkdir(parents=True, exist_ok=True)
@@ -77,8 +111,8 @@ def run_bench(quick: bool = False, duration: float | None = None, out_dir: str =
         s = res.summary
         limits = (barrier_limit(int(s["processes"]) - 1, quantum_s(cfg, overrides)),
                   physics_limit(cfg, overrides)) if s.get("processes") else (None, None)
-        rows.append((n, k, s, limits))
-        print(f"  ran {n} robots, {k} per process: rtf {s['rtf']}x (exit {res.code}); bare barrier "
+        rows.append((case, s, limits))
+        print(f"  ran {case.label}, {n} robots, {k} per process: rtf {s['rtf']}x (exit {res.code}); bare barrier "
               f"{_fmt(limits[0], '.1f', 'x')}, bare physics {_fmt(limits[1], '.1f', 'x')}", file=sys.stderr)
         if profile:
             _print_profile(out / "profile" / "world.prof")
@@ -86,7 +120,8 @@ def run_bench(quick: bool = False, duration: float | None = None, out_dir: str =
     rate, median_us = barrier_yardstick()
     print(f"machine yardstick: bare lock-step barrier over zenoh, world + 6 participant processes, no physics or "
           f"firmware: {rate:.0f} quanta/s, median {median_us:.0f} us (compare machines and moments by this)")
-    failed = [r for r in rows if r[2]["exit_code"] != 0]
+    _print_round_trip(rows)
+    failed = [r for r in rows if r[1]["exit_code"] != 0]
     return 1 if failed else 0
 
 
@@ -248,23 +283,24 @@ def _fmt(v: float | None, spec: str, unit: str = "") -> str:
 
 
 def _print_table(rows: list, dur: float, markdown: bool) -> None:
-    head = ["robots", "robots/proc", "processes", "RTF", "target", "bare barrier", "bare physics", "of the limit",
-            "barrier median", "barrier p99", "CPU per robot", "RSS per robot", "start-up"]
+    head = ["case", "robots", "robots/proc", "processes", "RTF", "goal", "bare barrier", "bare physics",
+            "of the limit", "barrier median", "barrier p99", "CPU per robot", "RSS per robot", "start-up"]
     lines = []
-    for n, k, s, (bar, phys) in rows:
-        target = TARGETS.get((n, k))
+    for case, s, (bar, phys) in rows:
         limit = min((v for v in (bar, phys) if v), default=None)
         lines.append([
-            str(n), str(k), str(s["processes"]), _fmt(s["rtf"], ".2f", "x"),
-            f">= {target:g}x" if target else "",
+            case.label, str(case.robots), str(case.per_process), str(s["processes"]), _fmt(s["rtf"], ".2f", "x"),
+            f">= {case.goal:g}x" if case.goal else "",
             _fmt(bar, ".1f", "x"), _fmt(phys, ".1f", "x"),
             _fmt(s["rtf"] and limit and 100 * s["rtf"] / limit, ".0f", " %"),
             _fmt(s["barrier_us_median"], ".0f", " us"), _fmt(s["barrier_us_p99"], ".0f", " us"),
             _fmt(s["cpu_s_per_robot_per_sim_s"] and s["cpu_s_per_robot_per_sim_s"] * 1000, ".0f", " ms/sim-s"),
             _fmt(s["rss_mb_per_robot"], ".0f", " MB"), _fmt(s["startup_s"], ".1f", " s"),
         ])
-    print(f"\nswarm-sitl bench: demo behaviour, {dur:g} s simulated per case, quantum 10 ms, {os.cpu_count()} cores")
+    print(f"\nswarm-sitl bench: {dur:g} s simulated per case, {os.cpu_count()} cores")
     print_table(head, lines, markdown)
+    print("radio demo: XBee Series 2 and UWB on every robot (hil_configs/demo.toml); no radios: "
+          "hil_configs/demos/random_walk.toml; pavilion: hil_configs/rdpso/pavilion_sar_60.toml (3 rangers, 60 scouts)")
     print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
           "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
 
@@ -281,6 +317,19 @@ def print_table(head: list[str], lines: list[list[str]], markdown: bool) -> None
         print("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
         for line in lines:
             print("  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)))
+
+
+def _print_round_trip(rows: list) -> None:
+    """The bare zenoh round trip (one participant process, nothing to compute), and each 10-robot case's barrier
+    median as a multiple of it: what waking many processes costs beyond one message each way."""
+    cases = [(case, s) for case, s, _ in rows if case.robots == 10 and s.get("barrier_us_median")]
+    if not cases:
+        return
+    _, rtt_us = barrier_yardstick(1, 2000)
+    print(f"bare zenoh round trip (world and one participant process): median {rtt_us:.0f} us")
+    for case, s in cases:
+        print(f"  {case.label}, 10 robots, {case.per_process} per process: barrier median {s['barrier_us_median']:.0f} "
+              f"us = {s['barrier_us_median'] / rtt_us:.1f}x the round trip")
 
 
 def _print_profile(path: Path, top: int = 12) -> None:

@@ -149,7 +149,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
                                "runs/bench-hosts", config=a.config, markdown=a.markdown)
 
     return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
-                     config=a.config)
+                     config=a.config, scale=a.scale)
 
 
 def cmd_radio_survey(a: argparse.Namespace) -> int:
@@ -193,6 +193,7 @@ def _cell_choice(text: str) -> tuple[str, list[str]]:
 
 
 def cmd_experiment(a: argparse.Namespace) -> int:
+    from bridge.experiments.cluster import ClusterError
     from bridge.experiments.runner import UnknownExperimentError, execute_experiment, experiments
 
     if a.list:
@@ -210,8 +211,9 @@ def cmd_experiment(a: argparse.Namespace) -> int:
         chosen += [v for v in values if v not in chosen]
     try:
         run = execute_experiment(a.name, trials=a.trials, jobs=a.jobs, out=a.out, smoke=a.smoke, seed=a.seed,
-                                 progress=not a.quiet, only=only or None, resume=a.resume)
-    except (UnknownExperimentError, ValueError) as e:
+                                 progress=not a.quiet, only=only or None, resume=a.resume, cluster=a.cluster,
+                                 cluster_timeout_s=a.cluster_timeout)
+    except (UnknownExperimentError, ValueError, ClusterError) as e:
         print(f"swarm-sitl experiment: {e}", file=sys.stderr)
         return 2
     for t, ours, ok, _note in run.verdicts:
@@ -311,6 +313,9 @@ def _parser_bench(sub: Any) -> None:
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
     p.add_argument("--config", help="session config to benchmark (default: the demo)")
+    p.add_argument("--scale", action="store_true", help="the scale goals' cases: the radio demo at 10 to 50 robots, "
+                                                        "10 robots without radios, the 60-scout pavilion packed, 200 "
+                                                        "robots packed; each with its goal")
     p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time and the 12-robot "
                                    "arena's real-time factor; zebro: 20 Zebros' real-time factor by packing and body "
                                    "model, and the numerical 360-run table's wall time; roy: 100 numerical runs of "
@@ -369,6 +374,11 @@ def _parser_experiment(sub: Any) -> None:
     p.add_argument("--resume", action="store_true",
                    help="take the trials an earlier run into the same --out finished (same cell, index and seed) "
                         "instead of running them again: an interrupted run goes on, added cells run alone")
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the trials on the Dask cluster whose scheduler is at ADDRESS (tcp://HOST:PORT; its "
+                        "workers run this swarm-sitl) instead of local worker processes; the same outputs")
+    p.add_argument("--cluster-timeout", type=_positive, default=30.0, metavar="SECONDS",
+                   help="how long to wait for the cluster's scheduler and a first worker (default 30)")
     p.set_defaults(fn=cmd_experiment)
 
 

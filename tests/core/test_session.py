@@ -339,6 +339,21 @@ def test_two_sessions_at_once_do_not_see_each_other(tmp_path: Path) -> None:
         assert (s["digest"], s["messages"]) == (solo["digest"], solo["messages"])
 
 
+def test_a_session_runs_from_a_thread_other_than_the_main_one(tmp_path: Path) -> None:
+    """As an experiment's trial does on a Dask worker (whose tasks run in its threads): the same recording."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from bridge.core.launcher import run_session
+
+    cfg = config(tmp_path)
+    code, main = run(cfg, tmp_path / "main")
+    assert code == 0
+    with ThreadPoolExecutor(1) as pool:
+        res = pool.submit(run_session, str(cfg), None, str(tmp_path / "thread"), None).result()
+    assert res.code == 0, res.summary.get("error")
+    assert (res.summary["digest"], res.summary["messages"]) == (main["digest"], main["messages"])
+
+
 def test_config_errors_exit_2_naming_file_and_field(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text("[session]\nduration_s = 'long'\n[[robots]]\ncount = 2\n")

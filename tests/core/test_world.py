@@ -239,8 +239,11 @@ def test_wall_counts_from_the_walls_scene_are_those_of_the_full_scene() -> None:
             w.step_quantum(k * q, q)
             if k % 50 == 49:
                 for src in range(w.n):
+                    every = _walls_by_every_ray(w, src).tolist()
+                    pair = [(src + 7) % w.n, (src + 3) % w.n]  # one exchange's pair first, then a whole broadcast
+                    assert w.walls(src, np.array(pair)).tolist() == [every[d] for d in pair]
                     got = w.walls(src, np.arange(w.n))
-                    assert got.tolist() == _walls_by_every_ray(w, src).tolist()
+                    assert got.tolist() == every
                     crossed += int((got > 0).sum())
         assert crossed > 0
     finally:

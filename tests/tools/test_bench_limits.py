@@ -24,8 +24,26 @@ def test_the_bare_barrier_over_n_processes_as_a_real_time_factor() -> None:
 def test_the_table_sets_the_limits_and_the_share_beside_the_rtf(capsys: pytest.CaptureFixture[str]) -> None:
     s = {"processes": 21, "rtf": 2.5, "barrier_us_median": 2400.0, "barrier_us_p99": 6000.0,
          "cpu_s_per_robot_per_sim_s": 0.1, "rss_mb_per_robot": 250.0, "startup_s": 9.0}
-    bench._print_table([(10, 1, s, (5.0, 40.0)), (10, 5, {**s, "rtf": None}, (None, None))], 30.0, markdown=True)
+    rows = [(bench.Case("radio demo", 10, 1, goal=5.0), s, (5.0, 40.0)),
+            (bench.Case("radio demo", 10, 5), {**s, "rtf": None}, (None, None))]
+    bench._print_table(rows, 30.0, markdown=True)
     out = capsys.readouterr().out
-    assert "| bare barrier | bare physics | of the limit |" in out
-    assert "| 10 | 1 | 21 | 2.50x | >= 5x | 5.0x | 40.0x | 50 % |" in out  # 2.5 of the barrier's 5
-    assert "| 10 | 5 | 21 | - |  | - | - | - |" in out
+    assert "| goal | bare barrier | bare physics | of the limit |" in out
+    assert "| radio demo | 10 | 1 | 21 | 2.50x | >= 5x | 5.0x | 40.0x | 50 % |" in out  # 2.5 of the barrier's 5
+    assert "| radio demo | 10 | 5 | 21 | - |  | - | - | - |" in out
+
+
+def test_the_scale_cases_are_the_goals_configs() -> None:
+    """Each scale case names a config that exists and loads with the case's robot count and packing."""
+    for case in bench.SCALE:
+        assert case.config.exists() and case.goal
+        bench.quantum_s(str(case.config), {"session.robots_per_process": case.per_process})
+
+
+def test_the_barrier_at_ten_robots_is_set_beside_the_bare_round_trip(capsys: pytest.CaptureFixture[str]) -> None:
+    s = {"barrier_us_median": 2400.0}
+    bench._print_round_trip([(bench.Case("radio demo", 10, 1), s, (None, None)),
+                             (bench.Case("radio demo", 25, 5), s, (None, None))])
+    out = capsys.readouterr().out
+    assert "bare zenoh round trip (world and one participant process): median" in out
+    assert "radio demo, 10 robots, 1 per process: barrier median 2400 us = " in out and "25 robots" not in out

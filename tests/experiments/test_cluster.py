@@ -1,0 +1,336 @@
+"""Trials on a Dask cluster (``swarm-sitl experiment --cluster``): the outputs of a local run, workers lost under a
+trial, results stored as they arrive, clusters that cannot run the trials, and workers on other hosts."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import dask
+import numpy as np
+import pytest
+from distributed import Client, LocalCluster
+
+from bridge.experiments.cluster import ClusterError, _run_checked, installed_version
+from bridge.experiments.runner import Experiment, Trial, TrialResult, _ref, register
+from bridge.tools.cli import main
+from bridge.tools.netns import Lab
+from tests.experiments.test_experiment import ROOT, Flaky, MonteCarloPi, _rows, wait_until
+
+assert MonteCarloPi.name == "test-pi"  # registered by importing it, here and in the workers
+
+
+def _out_of(trial: Trial) -> Path:
+    """The run's output directory (a trial's workdir is OUT/work/CELL/INDEX): where these tests' trials leave marks."""
+    return Path(trial.workdir).parents[2]
+
+
+@register
+class Crashing(Flaky):
+    name = "test-crashing"
+    title = "A trial that raises, and one that kills its worker on its first attempt"
+    description = "Each attempt of a trial is noted in OUT/attempts/INDEX (the worker's process id)."
+
+    def run(self, trial: Trial) -> TrialResult:
+        attempts = _out_of(trial) / "attempts"
+        attempts.mkdir(exist_ok=True)
+        mark = attempts / str(trial.index)
+        first = not mark.exists()
+        with open(mark, "a") as f:
+            f.write(f"{os.getpid()}\n")
+        if trial.index == 1:
+            raise ValueError("trial 1 raises on purpose")
+        if trial.index == 2 and first:
+            os._exit(1)  # the worker process dies under the trial
+        return TrialResult(metrics={"value": float(np.random.default_rng(trial.seed).random())})
+
+
+FINISHING = 3  # the gated runs' trials that finish at once; the others wait for OUT/open
+
+
+@register
+class Gated(Experiment):
+    name = "test-gated"
+    title = "Trials that wait for a file"
+    description = f"The first {FINISHING} finish at once, the others when OUT/open exists."
+    trials = 8
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"g": 1}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        if trial.index >= FINISHING:
+            gate = _out_of(trial) / "open"
+            wait_until(gate.exists, f"{gate} did not appear", within_s=600)
+        return TrialResult(metrics={"value": float(np.random.default_rng(trial.seed).random())})
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Any:
+    """Two single-threaded worker processes (with nannies, which restart a worker that died) on this machine."""
+    with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 2}),
+        LocalCluster(
+            processes=True,
+            n_workers=2,
+            threads_per_worker=1,
+            host="127.0.0.1",
+            scheduler_port=0,
+            dashboard_address=None,
+            # no dashboard; the scheduler's HTTP endpoints (health, metrics) would take port 8787 by default
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+        ) as c,
+    ):
+        yield c
+
+
+def _experiment(*args: str) -> int:
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", *args, "--quiet"])
+    return int(e.value.code)
+
+
+def test_a_cluster_run_writes_what_a_local_run_writes(tmp_path: Path, cluster: LocalCluster) -> None:
+    out = tmp_path / "pi"
+    assert _experiment("test-pi", "--trials", "3", "--jobs", "1", "--out", str(out)) == 0
+    local = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.suffix != ".png"}
+    assert _experiment("test-pi", "--trials", "3", "--cluster", cluster.scheduler_address, "--out", str(out)) == 0
+    remote = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.suffix != ".png"}
+    assert set(remote) == set(local)
+    for name in ("trials.csv", "curves/n-100.csv", "curves/n-1000.csv"):
+        assert remote[Path(name)] == local[Path(name)], name
+    # the report too, but for its last line: the wall time, and where the trials ran
+    report, local_report = (r[Path("report.md")].decode().splitlines() for r in (remote, local))
+    assert report[:-1] == local_report[:-1]
+    assert f"on the Dask cluster at {cluster.scheduler_address} (2 workers when it started)" in report[-1]
+    assert "with 1 job (in-process)" in local_report[-1]
+    for p in remote:  # each trial's stored result, as --resume takes it (its wall time aside)
+        if p.parts[0] == "results":
+            a, b = json.loads(remote[p]), json.loads(local[p])
+            assert {**a, "wall_s": 0, "timings": {}} == {**b, "wall_s": 0, "timings": {}}
+
+
+def test_a_lost_worker_s_trial_runs_on_another_and_a_raising_trial_fails_once(
+    tmp_path: Path, cluster: LocalCluster
+) -> None:
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    (local / "attempts").mkdir(parents=True)
+    (local / "attempts" / "2").write_text("a worker died here before\n")  # so that this process does not exit
+    assert _experiment("test-crashing", "--jobs", "1", "--out", str(local)) == 1
+    assert _experiment("test-crashing", "--cluster", cluster.scheduler_address, "--out", str(remote)) == 1
+    assert (remote / "trials.csv").read_bytes() == (local / "trials.csv").read_bytes()
+    rows = _rows(remote / "trials.csv")
+    assert [r["error"] for r in rows] == ["", "ValueError: trial 1 raises on purpose", "", "", "", ""]
+    pids = {i: (remote / "attempts" / str(i)).read_text().split() for i in range(6)}
+    assert len(pids[1]) == 1  # a trial that raises is a failed trial, not retried
+    assert len(pids[2]) == 2 and pids[2][0] != pids[2][1]  # its first worker died: it ran again, elsewhere
+    # (a trial whose result the dead worker held, not yet fetched, may have run again too: the scheduler recomputes
+    # it, to the same result)
+
+
+def _start_gated(address: str, out: Path, *extra: str) -> subprocess.Popen:
+    """``swarm-sitl experiment test-gated --cluster ADDRESS`` in a process of its own, as a user runs it."""
+    code = (
+        f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_cluster; "
+        f"from bridge.tools.cli import main; main(['experiment', 'test-gated', '--cluster', {address!r}, '--out', "
+        f"{str(out)!r}, *{list(extra)!r}])"
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        start_new_session=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _stored(out: Path) -> list[str]:
+    return sorted(f.name for f in out.glob("results/*/*.json"))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_results_are_stored_as_they_arrive_and_resume_goes_on(tmp_path: Path, cluster: LocalCluster, sig: int) -> None:
+    out, whole = tmp_path / "gated", tmp_path / "whole"
+    p = _start_gated(cluster.scheduler_address, out)
+    try:
+        # the finishing trials' results are in results/ while the run goes on (the others wait for the gate)
+        wait_until(lambda: len(_stored(out)) == FINISHING, "the first results were not stored")
+        p.send_signal(sig)  # Ctrl-C, or a kill
+        stdout, stderr = p.communicate(timeout=120)
+    finally:
+        (out / "open").touch()  # the trials the interrupt left running on the workers end
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, stderr
+    assert "Traceback" not in stderr and "interrupted: 3/8 trials ran" in stdout
+    assert _stored(out) == [f"{i}.json" for i in range(FINISHING)]
+    assert len(_rows(out / "trials.csv")) == FINISHING and "**Interrupted**" in (out / "report.md").read_text()
+    assert _experiment("test-gated", "--resume", "--cluster", cluster.scheduler_address, "--out", str(out)) == 0
+    whole.mkdir()
+    (whole / "open").touch()
+    assert _experiment("test-gated", "--jobs", "2", "--out", str(whole)) == 0
+    assert (out / "trials.csv").read_bytes() == (whole / "trials.csv").read_bytes()
+    assert "(3 taken from an earlier run into this directory: --resume)" in (out / "report.md").read_text()
+
+
+def test_a_cluster_that_cannot_be_reached_is_a_usage_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.socket() as mute:  # listens, never answers: the client's handshake times out
+        mute.bind(("127.0.0.1", 0))
+        mute.listen()
+        address = f"tcp://127.0.0.1:{mute.getsockname()[1]}"
+        out = tmp_path / "never"
+        assert _experiment("test-pi", "--cluster", address, "--cluster-timeout", "1", "--out", str(out)) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"swarm-sitl experiment: cannot reach the Dask scheduler at {address}: no answer within 1 s"
+    assert len(err.splitlines()) == 1 and not out.exists()  # nothing written
+    assert _experiment("test-pi", "--cluster", address, "--jobs", "2") == 2
+    assert "--jobs and --cluster exclude each other" in capsys.readouterr().err
+    with LocalCluster(
+        n_workers=0,
+        host="127.0.0.1",
+        scheduler_port=0,
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+    ) as idle:
+        assert (
+            _experiment("test-pi", "--cluster", idle.scheduler_address, "--cluster-timeout", "5", "--out", str(out))
+            == 2
+        )
+    assert capsys.readouterr().err == (
+        f"swarm-sitl experiment: the Dask scheduler at {idle.scheduler_address} has no "
+        f"worker (waited 5 s): start some with `dask worker {idle.scheduler_address}`\n"
+    )
+    assert not out.exists()
+
+
+def _search_first(path: str, on: bool = True) -> None:
+    """On a worker: look for packages in ``path`` before anywhere else (or no longer)."""
+    if on:
+        sys.path.insert(0, path)
+    else:
+        sys.path.remove(path)
+
+
+def test_a_cluster_with_another_swarm_sitl_is_refused(
+    tmp_path: Path, cluster: LocalCluster, capsys: pytest.CaptureFixture[str]
+) -> None:
+    other = tmp_path / "site"
+    (other / "swarm_sitl-9.9.9.dist-info").mkdir(parents=True)
+    (other / "swarm_sitl-9.9.9.dist-info" / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: swarm-sitl\nVersion: 9.9.9\n"
+    )
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        worker = sorted(client.scheduler_info()["workers"])[0]
+        client.run(_search_first, str(other), workers=[worker])  # that worker now finds swarm-sitl 9.9.9 first
+        try:
+            assert _experiment("test-pi", "--cluster", cluster.scheduler_address, "--out", str(tmp_path / "x")) == 2
+        finally:
+            client.run(_search_first, str(other), False, workers=[worker])
+    err = capsys.readouterr().err
+    assert f"runs another swarm-sitl than this one ({installed_version()}): {worker} has 9.9.9" in err
+    assert not (tmp_path / "x").exists()
+    # each task checks again, for a worker that joins once the run is going
+    trial = Trial("test-pi", {"n": 100}, 0, 1, False, str(tmp_path / "w"))
+    with pytest.raises(ClusterError, match=f"this worker runs swarm-sitl {installed_version()}, the client 9.9.9"):
+        _run_checked("9.9.9", _ref(MonteCarloPi), [trial])
+    assert _run_checked(installed_version(), _ref(MonteCarloPi), [trial])[0][1] is None
+
+
+def _start_cluster(popen: Any, scheduler: tuple[Any, str], workers: list[tuple[Any, str]], tmp_path: Path) -> str:
+    """A scheduler and single-threaded workers, each started as a user does (``dask scheduler``, ``dask worker``;
+    ``popen(host, argv, **kwargs)``, each given (host, its address)); the scheduler's address once every worker
+    joined."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "2"}
+    dask_cmd = [sys.executable, "-m", "dask"]
+    host, at = scheduler
+    info = tmp_path / "scheduler.json"
+    no_dashboard = ["--no-dashboard", "--dashboard-address"]  # and the HTTP endpoints on a port of the system's
+    popen(
+        host,
+        [*dask_cmd, "scheduler", "--host", at, "--port", "0", *no_dashboard, f"{at}:0", "--scheduler-file", str(info)],
+        cwd=ROOT,
+        env=env,
+        stderr=subprocess.DEVNULL,
+    )
+    wait_until(lambda: info.exists() and info.stat().st_size > 0, "the scheduler did not start")
+    address = json.loads(info.read_text())["address"]
+    assert address.startswith(f"tcp://{at}:")
+    logs = []
+    for n, (host, at) in enumerate(workers):
+        logs.append(tmp_path / f"worker-{n}.log")
+        with open(logs[-1], "w") as f:
+            popen(
+                host,
+                [*dask_cmd, "worker", address, "--host", at, "--nthreads", "1", *no_dashboard, f"{at}:0"],
+                cwd=ROOT,
+                env=env,
+                stderr=f,
+            )
+    for log in logs:  # until each says it joined
+        wait_until(lambda log=log: "Registered to:" in log.read_text(), f"the worker of {log.name} did not join")
+    return address
+
+
+def test_a_lost_scheduler_ends_the_run_and_keeps_what_finished(tmp_path: Path) -> None:
+    started: list[subprocess.Popen] = []
+
+    def popen(host: Any, argv: list[str], **kwargs: Any) -> subprocess.Popen:
+        started.append(subprocess.Popen(argv, start_new_session=True, **kwargs))
+        return started[-1]
+
+    out = tmp_path / "gated"
+    p = None
+    try:
+        address = _start_cluster(popen, (None, "127.0.0.1"), [(None, "127.0.0.1")], tmp_path)
+        p = _start_gated(address, out, "--quiet", "--cluster-timeout", "10")
+        wait_until(lambda: len(_stored(out)) == FINISHING, "the first results were not stored")
+        started[0].kill()  # the scheduler
+        _, stderr = p.communicate(timeout=120)
+    finally:
+        (out / "open").touch()
+        for q in [*started, *([p] if p else [])]:
+            if q.poll() is None:
+                os.killpg(q.pid, signal.SIGKILL)
+                q.wait()
+    assert p.returncode == 2
+    assert stderr == (
+        f"swarm-sitl experiment: lost the Dask scheduler at {address} (the trials that finished are kept in the "
+        "output's results/: run again with --resume to go on)\n"
+    )
+    assert _stored(out) == [f"{i}.json" for i in range(FINISHING)]
+    assert _experiment("test-gated", "--resume", "--jobs", "2", "--out", str(out)) == 0
+    assert "(3 taken from an earlier run" in (out / "report.md").read_text()
+
+
+@pytest.mark.skipif(Lab.unavailable() is not None, reason=str(Lab.unavailable()))
+def test_workers_on_other_hosts(tmp_path: Path) -> None:
+    """The scheduler and the client on one host (the lab's hub), a worker on each of two others."""
+    out, local = tmp_path / "pi", tmp_path / "local"
+    assert _experiment("test-pi", "--trials", "3", "--jobs", "1", "--out", str(local)) == 0
+    with Lab() as lab:
+        hosts = [lab.add_host("w1"), lab.add_host("w2")]
+        address = _start_cluster(lab.popen, (lab.hub, lab.hub.address), [(h, h.address) for h in hosts], tmp_path)
+        code = (
+            f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_experiment; "
+            f"from bridge.tools.cli import main; main(['experiment', 'test-pi', '--trials', '3', '--quiet', "
+            f"'--cluster', {address!r}, '--out', {str(out)!r}])"
+        )
+        client = lab.popen(
+            lab.hub,
+            [sys.executable, "-c", code],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        _, stderr = client.communicate(timeout=600)
+    assert client.returncode == 0, stderr
+    assert (out / "trials.csv").read_bytes() == (local / "trials.csv").read_bytes()
+    assert f"on the Dask cluster at {address} (2 workers when it started)" in (out / "report.md").read_text()
