@@ -435,6 +435,30 @@ class RobotGroup(_Model):
                                                            "board (e.g. on a conveyor): they start on "
                                                            "board, filled carrier by carrier in robot order, and go "
                                                            "down when the carrier's part releases them")
+    host: str | GroupHostsCfg | None = Field(
+        None, description="the host of [[hosts]] the robots' firmware and logic processes run on, or by kind, e.g. "
+                          "{ logic = \"pi1\" } (the firmware stays on the world's computer); none: the world's")
+
+    @field_validator("host", mode="before")
+    @classmethod
+    def _host_or_kinds(cls, v: Any) -> Any:
+        """A host's name, or a table of hosts by process kind; anything else refused in one clear message."""
+        if isinstance(v, dict):
+            stray = sorted(set(v) - set(GroupHostsCfg.model_fields))
+            if stray or not all(isinstance(h, str | None) for h in v.values()):
+                raise ValueError(f"{v!r}: a table of hosts by process kind takes firmware and logic, each a host's "
+                                 "name")
+            return GroupHostsCfg(**v)
+        if v is not None and not isinstance(v, str | GroupHostsCfg):
+            raise ValueError(f"{v!r}: a host's name (all the group's processes there), or {{ firmware = ..., "
+                             "logic = ... }")
+        return v
+
+    def hosts(self) -> tuple[str | None, str | None]:
+        """The hosts of the group's firmware and logic processes (None: the world's computer)."""
+        if isinstance(self.host, GroupHostsCfg):
+            return self.host.firmware, self.host.logic
+        return self.host, self.host
 
     # fields beyond these are the robot model's own options (RobotSpec.options)
     model_config = ConfigDict(extra="allow", frozen=False)
@@ -655,6 +679,57 @@ class MavlinkCfg(_Model):
         return v
 
 
+LAUNCH_PLACEHOLDERS = {"name": "the host's name", "endpoint": "the world's endpoint for other computers "
+                       "(session.listen, a wildcard address replaced by one of this machine's)",
+                       "session": "the session's name", "join": "the whole swarm-sitl join command for the host"}
+
+
+class HostCfg(_Model):
+    """A computer other than the world's that runs some of the session's processes (``[[hosts]]``): the robot groups
+    and services that name it (``host``) have their processes there, started by one ``swarm-sitl join ENDPOINT
+    --session NAME --host NAME`` on it, still in the session's simulated lock-step."""
+
+    name: str = Field(description="the host's name, which robot groups and services give as their host")
+    launch: str | None = Field(None, description="a shell command the launcher runs to start the host's join, e.g. "
+                                                 "\"ssh {name}.lan {join}\" (placeholders: "
+                                                 + ", ".join(f"{{{k}}} {v}" for k, v in LAUNCH_PLACEHOLDERS.items())
+                                                 + ", each shell-quoted); none: the launcher prints the join command "
+                                                   "and waits for it (session.startup_timeout_s)")
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        import re
+
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_-]{0,62}", v):
+            raise ValueError(f"{v!r}: a host name is letters, digits, '-' and '_' (at most 63, the first a letter or "
+                             "digit)")
+        return v
+
+    @field_validator("launch")
+    @classmethod
+    def _placeholders(cls, v: str | None) -> str | None:
+        import string
+
+        if v is not None:
+            try:
+                fields = [f for _, f, _, _ in string.Formatter().parse(v) if f is not None]
+            except ValueError as e:
+                raise ValueError(f"{v!r}: {e} (a literal brace is written {{{{ or }}}})") from None
+            for f in fields:
+                if f not in LAUNCH_PLACEHOLDERS:
+                    raise ValueError(f"{{{f}}} is not a placeholder (placeholders: "
+                                     + ", ".join(f"{{{k}}}" for k in LAUNCH_PLACEHOLDERS) + ")")
+        return v
+
+
+class GroupHostsCfg(_Model):
+    """Where a robot group's processes run, by kind (a host of ``[[hosts]]``; none: the world's computer)."""
+
+    firmware: str | None = Field(None, description="the host of the robots' firmware processes")
+    logic: str | None = Field(None, description="the host of the robots' logic processes")
+
+
 RESERVED_SERVICE_NAMES = ("world", "radio", "session", "wifi", "mavlink", "svc")
 
 
@@ -666,6 +741,7 @@ class ServiceCfg(_Model):
     name: str = Field(description="its name: its address on the Wi-Fi network, its process svc-NAME, its records "
                                   "/svc/NAME/...")
     options: dict[str, Any] = Field({}, description="the kind's own options")
+    host: str | None = Field(None, description="the host of [[hosts]] its process runs on (none: the world's computer)")
 
     @field_validator("name")
     @classmethod
@@ -714,6 +790,8 @@ class Config(_Model):
     xbee_gateways: list[XBeeGatewayCfg] = Field([], description="real XBees joined to the simulated radio channel")
     wifi: WifiCfg = Field(WifiCfg(), description="the Wi-Fi network between the robots and the services")
     services: list[ServiceCfg] = Field([], description="centralised programs, each in a process of its own")
+    hosts: list[HostCfg] = Field([], description="other computers that run some of the session's processes "
+                                                 "(swarm-sitl join --host)")
 
     @model_validator(mode="after")
     def _quantum_fits_physics(self) -> Config:
@@ -776,6 +854,55 @@ class Config(_Model):
                     spec.check(spec.options.model_validate(sc.options), self)
                 except ValueError as e:
                     raise ValueError(f"services[{i}].options.{e}") from None
+        return self
+
+    @model_validator(mode="after")
+    def _hosts(self) -> Config:
+        """Each host is named once, joins over session.listen and runs some process; each place names a host; what
+        a remote host cannot reach (this computer's devices and pseudo-terminals) stays here."""
+        names = [h.name for h in self.hosts]
+        for i, n in enumerate(names):
+            if n in names[:i]:
+                raise ValueError(f"hosts[{i}].name: {n!r} names another host already")
+        if self.hosts and self.session.listen is None:
+            raise ValueError("session.listen: [[hosts]] join over zenoh from other computers: give the world an "
+                             "endpoint to listen on, e.g. listen = \"tcp/192.168.1.10:7447\"")
+        have = ", ".join(names) or "none"
+        used: set[str] = set()
+        for i, g in enumerate(self.robots):
+            fw, lg = g.hosts()
+            where = "host" if isinstance(g.host, str) else None
+            for kind, h in (("firmware", fw), ("logic", lg)):
+                if h is None:
+                    continue
+                field = f"robots[{i}].{where or 'host.' + kind}"
+                if h not in names:
+                    raise ValueError(f"{field}: {h!r} is not a host of [[hosts]] (hosts: {have})")
+                if kind == "logic" and g.logic != "session":
+                    if where is None:
+                        raise ValueError(f"{field}: logic = {g.logic!r}: the session runs no logic process for "
+                                         "these robots to place on a host")
+                    continue  # the group's firmware only
+                if kind == "firmware":
+                    here = [f for f in g.real_ports() if f not in ("logic", "wifi_udp", "vehicle")]
+                    if here:
+                        raise ValueError(f"{field}: {', '.join(here)} is a device or port of the world's computer: "
+                                         "keep these robots' firmware there")
+                else:
+                    for what, on in (("xbee.device", bool(g.xbee and g.xbee.device)), ("vehicle", g.vehicle)):
+                        if on:
+                            raise ValueError(f"{field}: {what}: a logic on another host would open it there, where "
+                                             "the session cannot check it before the start; keep the logic here")
+                used.add(h)
+        for i, sc in enumerate(self.services):
+            if sc.host is not None:
+                if sc.host not in names:
+                    raise ValueError(f"services[{i}].host: {sc.host!r} is not a host of [[hosts]] (hosts: {have})")
+                used.add(sc.host)
+        for i, h in enumerate(self.hosts):
+            if h.name not in used:
+                raise ValueError(f"hosts[{i}]: host {h.name!r} runs no process: give a robot group host = "
+                                 f"\"{h.name}\" (or a service) or drop it")
         return self
 
     @model_validator(mode="after")

@@ -213,6 +213,15 @@ class Hub:
 
             self._subs.append(s.declare_queryable(transport.PLAN_KEY, offer))
             self._world_token = s.liveliness().declare_token(transport.WORLD_KEY)  # a joiner sees the world go
+            self._subs.append(transport.on_gone(s, transport.JOINED_KEY, self._remote_gone))
+
+    def _remote_gone(self, p: str) -> None:
+        """A zenoh thread: the computer running remote process ``p`` went away (its joiner's token is gone): a death,
+        told as the launcher tells one, so its robots fail at once rather than after hang_timeout_s."""
+        if p in self.procs and self.procs[p].remote:
+            where = f"host {self.procs[p].host}" if self.procs[p].host else "the other computer"
+            self.q.put(("control", transport.pack({"op": "dead", "proc": p, "lost": True, "detail": f"lost {where}: "
+                                                   "its swarm-sitl join ended or its network failed"})))
 
     def status(self, **msg: Any) -> None:
         """Tell the launcher (nothing to tell before ``open``, e.g. a hub driven directly by tests)."""
@@ -229,8 +238,8 @@ class Hub:
             while missing:
                 left = timeout - (time.monotonic() - t0)
                 if left <= 0:
-                    hint = (" (remote logic: run the swarm-sitl join command the launcher printed on the other "
-                            "computer, or raise session.startup_timeout_s)" if missing & remote else "")
+                    hint = (" (remote processes: run the swarm-sitl join commands the launcher printed on the other "
+                            "computers, or raise session.startup_timeout_s)" if missing & remote else "")
                     raise TimeoutError(f"processes did not join within {timeout:.0f} s: {', '.join(sorted(missing))}"
                                        + hint)
                 if self.abort or os.getppid() != self.parent_pid:
@@ -248,8 +257,9 @@ class Hub:
                     if p in missing and isinstance(msg.get("pid"), int):
                         if p in remote:  # its pid is on another computer: never ours to kill
                             self.joinable = frozenset((missing & remote) - {p})
-                            self.status(op="notice", joined=p, text=f"robot {self.procs[p].robots[0]}'s logic joined "
-                                                                    f"from another computer ({p})")
+                            pp = self.procs[p]
+                            who = f"host {pp.host}'s {p}" if pp.host else f"robot {pp.robots[0]}'s logic"
+                            self.status(op="notice", joined=p, text=f"{who} joined from another computer ({p})")
                         else:
                             self.pids[p] = msg["pid"]
                         transport.wait_matched(self.tick_pub[p], timeout, f"tick/{p}")
@@ -257,6 +267,8 @@ class Hub:
                 elif key == "control":
                     if msg.get("op") == "dead" and msg.get("proc") in remote:  # a joiner left: it may join again
                         p = msg["proc"]
+                        if msg.get("lost") and p in missing:  # its token went after it left, or before it joined
+                            continue
                         missing.add(p)
                         self.joinable = frozenset(missing & remote)
                         self.status(op="notice", left=p, text=f"{p} left before the start ({msg.get('detail')}); "

@@ -5,8 +5,10 @@ finish the recording; a second Ctrl-C kills everything at once (the world gets S
 recording, as when the launcher dies) and skips the plot. A closed stdout or stderr never stops it. A child that
 dies is reported to the world, which applies the failure policy. Children are in their own process groups and die
 with the launcher (PR_SET_PDEATHSIG), so no process of a session outlives it. A remote logic process
-(``logic = "remote"``) is not its child: it joins from another computer (``swarm-sitl join``, whose command the
-launcher prints), and the world's timeouts (``startup_timeout_s``, ``hang_timeout_s``) watch it.
+(``logic = "remote"``) or a host's (``[[hosts]]``) is not its child: it joins from another computer (``swarm-sitl
+join``, whose command the launcher prints, or for a host with a ``launch`` command runs it: that command is its
+child, ended with the session, and its failure fails the host's processes), and the world watches it (its
+timeouts, ``startup_timeout_s`` and ``hang_timeout_s``, and the joiner's liveliness).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ class Child:
     kind: str
     popen: subprocess.Popen
     robots: tuple[int, ...] = ()
+    procs: tuple[str, ...] = ()  # a host's launch command ("host"): the session's processes it runs there
     exit_code: int | None = None
     cpu_s: float = 0.0
     maxrss_kb: int = 0
@@ -201,10 +204,8 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         log = open(logs / f"{name}.log", "wb")  # noqa: SIM115 - owned by the child
         cmd = [sys.executable, "-m", "bridge.hosts.proc", role, "--plan", str(plan_path), "--session-dir", session_dir,
                "--namespace", namespace, "--out", str(out), "--proc", name, "--parent-pid", str(os.getpid())]
-        env = {k: v for k, v in os.environ.items() if not k.startswith("CAN_")}  # python-can config
-        env = {"ZENOH_RUNTIME": ZENOH_RUNTIME, **env, "PYTHONUNBUFFERED": "1", "MAVLINK20": "1"}
         p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                             start_new_session=True, env=env)
+                             start_new_session=True, env=child_env())
         log.close()
         return p
 
@@ -251,10 +252,13 @@ def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, end
         session = transport.open_session(endpoint, namespace, listen=False)
         _sub = transport.queue_subscriber(session, "status", status_q)
         control = transport.publisher(session, "control")
-        for line in join_commands(cfg.session.name, cfg.session.listen, plan):  # the world listens there now
+        for line in join_commands(cfg.session.name, cfg.session.listen, plan, cfg.hosts):  # the world listens now
             prog.note(f"[{cfg.session.name}] {line}")
+        for h in cfg.hosts:
+            if h.launch is not None:  # started by its command; otherwise by the user, as printed
+                w.children.append(_launch_host(cfg, h, plan, logs))
         for p in plan.procs:
-            if not p.remote:  # a remote logic is started on its own computer; the world's timeouts watch it
+            if not p.remote:  # a remote process is started on its own computer; the world watches it
                 w.children.append(Child(p.name, p.kind, spawn(p.kind, p.name), p.robots))
         _watch(cfg, w, status_q, control, logs, stops, prog, ports, remote)
     except _Abort:
@@ -293,6 +297,12 @@ def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, sto
                 break
             _on_status(cfg, w, transport.unpack(data), prog, ports, remote)
         _reap_running(w.children, world, control, logs)
+        if w.t_started is None and not w.startup_error and (
+                gone := [c for c in w.children if c.kind == "host" and c.exit_code not in (None, 0)]):
+            w.startup_error = (f"host {gone[0].name.removeprefix('host-')}'s launch command exited (code "
+                               f"{gone[0].exit_code}) before the session started; see {logs / gone[0].name}.log")
+            prog.note(f"[{cfg.session.name}] {w.startup_error}")
+            control.put(transport.pack({"op": "stop", "reason": w.startup_error}))
         if world.exit_code is not None:
             w.world_code = world.exit_code
             return
@@ -311,8 +321,8 @@ def _on_status(cfg, w: _Watch, msg: dict[str, Any], prog: _Progress, ports: list
     op = msg.get("op")
     if op == "started":
         w.t_started = time.monotonic()
-        prog.note(f"[{cfg.session.name}] started: {len(w.children) + remote} processes joined in "
-                  f"{w.t_started - w.t_launch:.1f} s")
+        procs = sum(c.kind != "host" for c in w.children) + remote  # a host's launch command is none of them
+        prog.note(f"[{cfg.session.name}] started: {procs} processes joined in {w.t_started - w.t_launch:.1f} s")
         for line in ports:
             prog.note(f"[{cfg.session.name}] port: {line}")
         if msg.get("mavlink"):
@@ -337,9 +347,18 @@ def _reap_running(children: list[Child], world: Child, control, logs: Path) -> N
         if c.exit_code is None:
             _reap(c)
             unexpected = c.kind != "world" and not c.expected_exit and world.exit_code is None
+            if c.kind == "host" and c.exit_code == 0:
+                unexpected = False  # its join ended when the world said stop to all its processes
             if c.exit_code is not None and unexpected:
-                control.put(transport.pack({"op": "dead", "proc": c.name,
-                                            "detail": f"exit code {c.exit_code}; see {logs / c.name}.log"}))
+                for proc in c.procs or (c.name,):  # a host's: every process it ran there
+                    control.put(transport.pack({"op": "dead", "proc": proc,
+                                                "detail": _ended(c, logs)}))
+
+
+def _ended(c: Child, logs: Path) -> str:
+    """Why the processes of a child that ended failed: its exit code (a host's: its launch command's), its log."""
+    why = f"exit code {c.exit_code}; see {logs / c.name}.log"
+    return f"host {c.name.removeprefix('host-')}'s launch command ended ({why})" if c.kind == "host" else why
 
 
 def _teardown(w: _Watch, stops: _Stops, session, session_dir: str) -> None:
@@ -382,12 +401,26 @@ def _cannot_listen(listen: str) -> str | None:
     return None
 
 
-def join_commands(name: str, listen: str | None, plan: Plan) -> list[str]:
-    """For each robot whose logic joins from another computer, the line telling the user how: ``swarm-sitl join``
-    with an address of this machine (a wildcard listen address is not one another computer can connect to)."""
-    remote = [p for p in plan.procs if p.remote]
-    if not remote or listen is None:
+def join_commands(name: str, listen: str | None, plan: Plan, hosts: list | None = None) -> list[str]:
+    """For each robot whose logic joins from another computer, and each host without a ``launch`` command, the line
+    telling the user how: ``swarm-sitl join`` with an address of this machine (a wildcard listen address is not one
+    another computer can connect to)."""
+    remote = [p for p in plan.procs if p.remote and p.host is None]
+    manual = [h.name for h in hosts or () if h.launch is None]
+    if not (remote or manual) or listen is None:
         return []
+    endpoint, lines = public_endpoint(listen)
+    for p in remote:
+        lines.append(f"robot {p.robots[0]}'s logic: swarm-sitl join {endpoint} --session {shlex.quote(name)} "
+                     f"--robot {p.robots[0]}")
+    for h in manual:
+        lines.append(f"host {h} ({host_share(plan, h)}): {host_join(endpoint, name, h)}")
+    return lines
+
+
+def public_endpoint(listen: str) -> tuple[str, list[str]]:
+    """The world's endpoint as another computer reaches it: ``listen``, a wildcard address replaced by one of this
+    machine's (with a line saying which others there are, if several)."""
     host, _, port = listen.removeprefix("tcp/").rpartition(":")
     lines = []
     if host in ("0.0.0.0", "[::]"):
@@ -399,10 +432,69 @@ def join_commands(name: str, listen: str | None, plan: Plan) -> list[str]:
         if len(mine) > 1:
             lines.append(f"listening on {listen}: this machine's addresses are {', '.join(mine)}; use one the other "
                          "computer reaches")
-    for p in remote:
-        lines.append(f"robot {p.robots[0]}'s logic: swarm-sitl join tcp/{host}:{port} --session {shlex.quote(name)} "
-                     f"--robot {p.robots[0]}")
-    return lines
+    return f"tcp/{host}:{port}", lines
+
+
+def host_join(endpoint: str, session: str, host: str) -> str:
+    """The command that runs host ``host``'s processes on it."""
+    return f"swarm-sitl join {endpoint} --session {shlex.quote(session)} --host {shlex.quote(host)}"
+
+
+def host_share(plan: Plan, host: str) -> str:
+    """What host ``host`` runs: its processes and their robots, e.g. "fw2, lg2: robots 5-9"."""
+    procs = [p for p in plan.procs if p.host == host]
+    robots = sorted({r for p in procs for r in p.robots})
+    return ", ".join(p.name for p in procs) + (f": robots {id_ranges(robots)}" if robots else "")
+
+
+def id_ranges(ids: Any) -> str:
+    """Robot ids as a short list: "0-4, 7"."""
+    ids = sorted(ids)
+    runs: list[str] = []
+    i = 0
+    while i < len(ids):
+        j = i
+        while j + 1 < len(ids) and ids[j + 1] == ids[j] + 1:
+            j += 1
+        runs.append(str(ids[i]) if i == j else f"{ids[i]}-{ids[j]}")
+        i = j + 1
+    return ", ".join(runs)
+
+
+def launch_command(template: str, endpoint: str, session: str, host: str) -> str:
+    """A host's ``launch`` template with its placeholders filled in, each shell-quoted (``HostCfg.launch``)."""
+    q = shlex.quote
+    return template.format(name=q(host), endpoint=q(endpoint), session=q(session),
+                           join=host_join(endpoint, session, host))
+
+
+def _launch_host(cfg, h, plan: Plan, logs: Path) -> Child:
+    """Run host ``h``'s launch command (a shell command line, in a process group of its own, its output in
+    logs/host-NAME.log): a child of the launcher like the session's own processes."""
+    endpoint, _ = public_endpoint(str(cfg.session.listen))
+    cmd = launch_command(h.launch, endpoint, cfg.session.name, h.name)
+    name = f"host-{h.name}"
+    with open(logs / f"{name}.log", "wb") as log:
+        p = subprocess.Popen(["/bin/sh", "-c", cmd], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                             start_new_session=True, env=child_env())
+    procs = tuple(p.name for p in plan.procs if p.host == h.name)
+    robots = tuple(sorted({r for pp in plan.procs if pp.host == h.name for r in pp.robots}))
+    return Child(name, "host", p, robots, procs)
+
+
+def child_env() -> dict[str, str]:
+    """The environment of a session's process: this one's, without python-can's config (``CAN_*``), with one zenoh
+    worker thread per runtime (unless set), unbuffered output and MAVLink 2."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("CAN_")}
+    return {"ZENOH_RUNTIME": ZENOH_RUNTIME, **env, "PYTHONUNBUFFERED": "1", "MAVLINK20": "1"}
+
+
+def end_group(p: subprocess.Popen) -> int:
+    """End ``p`` and its process group (SIGKILL) if it still runs; its exit code."""
+    if p.poll() is None:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+    return p.wait()
 
 
 def _reap(c: Child) -> None:
@@ -501,6 +593,8 @@ def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interr
              t_started: float | None, t_launch: float) -> dict[str, Any]:
     """summary.json's content from the plan, the world's result and the processes' exits (no files, no exit code)."""
     n = len(plan.robots)
+    hosts = [c for c in children if c.kind == "host"]  # launch commands: their processes run elsewhere
+    children = [c for c in children if c.kind != "host"]
     cpu_total = sum(c.cpu_s for c in children)
     sim_t = world_res.get("sim_time_s", 0.0)
     loop_wall = world_res.get("world_wall_s") or 0.0
@@ -510,6 +604,7 @@ def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interr
         "robots": n,
         "processes": len(children) + sum(p.remote for p in plan.procs),
         "remote_processes": [p.name for p in plan.procs if p.remote],  # joined from other computers
+        "hosts": _hosts_summary(cfg, plan, hosts, world_res),
         "robots_per_process": cfg.session.robots_per_process,
         "speed": cfg.session.speed,
         "sim_time_s": sim_t,
@@ -550,6 +645,22 @@ def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interr
     return summary
 
 
+def _hosts_summary(cfg, plan, launched: list[Child], world_res: dict[str, Any]) -> dict[str, Any] | None:
+    """Per host of ``[[hosts]]``: its processes and robots, the robots that failed, its launch command's exit code
+    (null: no launch command)."""
+    if not cfg.hosts:
+        return None
+    failed = {f["robot"] for f in world_res.get("failures", []) if "robot" in f}
+    exits = {c.name.removeprefix("host-"): c.exit_code for c in launched}
+    out = {}
+    for h in cfg.hosts:
+        procs = [p for p in plan.procs if p.host == h.name]
+        robots = sorted({r for p in procs for r in p.robots})
+        out[h.name] = {"processes": [p.name for p in procs], "robots": robots,
+                       "failed_robots": [r for r in robots if r in failed], "launch_exit": exits.get(h.name)}
+    return out
+
+
 def _merge_radio(summary: dict[str, Any], world_res: dict[str, Any]) -> None:
     """Add the radio medium's statistics, per robot and for the session, when it has any."""
     radio = world_res.get("radio") or {}
@@ -570,7 +681,10 @@ def _judge(summary: dict[str, Any], world_res: dict[str, Any], world_code: int |
             f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}")
     code = world_code if world_code is not None else 1
     robots_alive = [r["alive"] for r in summary["per_robot"]]
-    if interrupted:
+    if startup_error and world_res and not interrupted:  # the launcher stopped the start (a host's launch failed)
+        summary["error"] = startup_error
+        code = 1
+    elif interrupted:
         code = 130
     elif not world_res or world_res.get("error"):
         code = code or 1

@@ -105,6 +105,7 @@ class ProcPlan:
     robots: tuple[int, ...]
     remote: bool = False  # it joins from another computer (swarm-sitl join); the launcher does not start it
     service: str | None = None  # a service's process: the service's name (its one entity, svc/NAME)
+    host: str | None = None  # the host of [[hosts]] it runs on (remote; joined by swarm-sitl join --host)
 
     def entities(self, robots: list[RobotPlan]) -> list[str]:
         if self.kind == "service":
@@ -128,8 +129,8 @@ class Plan:
     def from_json(cls, d: dict) -> Plan:
         robots = [RobotPlan(**{**r, "pose": tuple(r["pose"]), "payload": tuple(r.get("payload", ()))})
                   for r in d["robots"]]
-        procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"]), p.get("remote", False), p.get("service"))
-                 for p in d["procs"]]
+        procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"]), p.get("remote", False), p.get("service"),
+                          p.get("host")) for p in d["procs"]]
         return cls(d["config"], robots, procs)
 
 
@@ -176,17 +177,30 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
         robots.append(RobotPlan(rid, f"gateway{gi}", cfg.robots[0].profile, "", {}, (gw.pose[0], gw.pose[1], 0.0),
                                 twin, logic="none", gateway=gw.model_dump(),
                                 motion={"kind": "scripted" if waypoints else "fixed", "waypoints": waypoints}))
-    k = cfg.session.robots_per_process
-    ids = [r.id for r in robots]
-    chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
-    procs = [ProcPlan(f"fw{j}", "firmware", c) for j, c in enumerate(chunks)]
-    ids = [r.id for r in robots if r.logic == "session"]  # an external logic is nobody's process here
-    chunks = [tuple(ids[i:i + k]) for i in range(0, len(ids), k)]
-    procs += [ProcPlan(f"lg{j}", "logic", c) for j, c in enumerate(chunks)]
+    # each robot's hosts (firmware, logic) by its group; an XBee gateway's firmware is the world computer's
+    group_hosts = [g.hosts() for g in cfg.robots for _ in range(g.count)]
+    group_hosts += [(None, None)] * (len(robots) - len(group_hosts))
+    procs = _packed(cfg, "fw", "firmware", [(r.id, group_hosts[r.id][0]) for r in robots])
+    # an external logic is nobody's process here
+    procs += _packed(cfg, "lg", "logic", [(r.id, group_hosts[r.id][1]) for r in robots if r.logic == "session"])
     # a remote logic is its robot's own process, started by swarm-sitl join on the other computer
     procs += [ProcPlan(f"remote{r.id}", "logic", (r.id,), remote=True) for r in robots if r.logic == "remote"]
-    procs += [ProcPlan(service_proc(s.name), "service", (), service=s.name) for s in cfg.services]
+    procs += [ProcPlan(service_proc(s.name), "service", (), service=s.name, remote=s.host is not None, host=s.host)
+              for s in cfg.services]
     return Plan(cfg.model_dump(mode="json"), robots, procs)
+
+
+def _packed(cfg: Config, prefix: str, kind: str, placed: list[tuple[int, str | None]]) -> list[ProcPlan]:
+    """Robots (id, host) packed ``robots_per_process`` to a process of ``kind``, in id order, never two hosts in one
+    process: the world computer's first (``prefix`` 0, 1, ...), then each host's in the order of ``[[hosts]]``."""
+    k = cfg.session.robots_per_process
+    procs: list[ProcPlan] = []
+    for host in [None, *(h.name for h in cfg.hosts)]:
+        ids = [r for r, h in placed if h == host]
+        for i in range(0, len(ids), k):
+            procs.append(ProcPlan(f"{prefix}{len(procs)}", kind, tuple(ids[i:i + k]), remote=host is not None,
+                                  host=host))
+    return procs
 
 
 def _blocked(cfg: Config, x: float, y: float, clearance: float, occ: np.ndarray | None = None) -> bool:
@@ -267,7 +281,7 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
 
 # between a world and a joiner (swarm-sitl join): the tick/done/plan exchange; bump on any incompatible change (the
 # version check catches the rest)
-PROTOCOL = 1
+PROTOCOL = 2
 
 
 def version() -> str:
@@ -280,6 +294,7 @@ def version() -> str:
 
 def plan_offer(plan: Plan, joinable: frozenset[str] | None) -> bytes:
     """The world's answer to a joiner's ``plan`` query (JSON): the session's name, the software version and protocol,
-    the plan, and which remote logic processes may still join (``None``: the session has started)."""
+    the plan, and which remote processes (a remote logic's, a host's) may still join (``None``: the session has
+    started)."""
     return json.dumps({"session": plan.config["session"]["name"], "version": version(), "protocol": PROTOCOL,
                        "joinable": None if joinable is None else sorted(joinable), "plan": plan.to_json()}).encode()

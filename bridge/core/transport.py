@@ -1,8 +1,9 @@
 """zenoh, configured explicitly: peer mode, no multicast or gossip scouting, a unix socket endpoint in
 the session's private directory, and a namespace per session, so two sessions on one machine never see
 each other and nothing leaves the machine. A session whose config sets ``session.listen`` also listens on
-that TCP endpoint, so that a robot's swarm logic on another computer can join it (``swarm-sitl join``); its
-namespace then follows from the session's name, which the joiner gives.
+that TCP endpoint, so that a robot's swarm logic or a host's processes on another computer can join it (``swarm-sitl
+join``), each process with a connection of its own; its namespace then follows from the session's name, which the
+joiner gives.
 
 Key space (relative to the session namespace ``swarm-sitl/<session id>``, or ``swarm-sitl/<session name>``
 for a session that listens on TCP):
@@ -20,6 +21,8 @@ key                 direction            payload (msgpack)
 ``plan``            joiner -> world       queryable, TCP sessions only: the reply (JSON, not msgpack) is
                                           the plan, the swarm-sitl version and which remote procs may join
 ``world``           world                 liveliness token, TCP sessions only: a joiner sees the world go
+``joined/<proc>``   joiner                liveliness token per process a joiner runs: the world sees its
+                                          computer go (the connection closed or its lease ran out)
 ==================  ===================  =====================================================
 
 Every publisher that carries something that must arrive uses ``CongestionControl.BLOCK`` (``DROP``
@@ -41,6 +44,7 @@ import zenoh
 
 PLAN_KEY = "plan"  # the world's queryable in a session that listens on TCP (see the key table)
 WORLD_KEY = "world"  # the world's liveliness token in such a session
+JOINED_KEY = "joined"  # a joiner's liveliness tokens, joined/<proc>: the world sees a remote computer go
 
 
 def endpoint_for(session_dir: str) -> str:
@@ -119,3 +123,13 @@ def wait_matched(pub: zenoh.Publisher, timeout_s: float, what: str) -> None:
             raise TimeoutError(f"nobody subscribed to {what} within {timeout_s:.0f} s")
         time.sleep(0.005)
 
+
+def on_gone(session: zenoh.Session, prefix: str, fn: Any) -> Any:
+    """Call ``fn(name)`` from a zenoh thread when the liveliness token ``prefix/<name>`` goes away (its session
+    closed, its connection broke or its lease ran out); the subscriber, to keep."""
+
+    def cb(sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            fn(str(sample.key_expr).rsplit("/", 1)[-1])
+
+    return session.liveliness().declare_subscriber(f"{prefix}/*", cb)

@@ -1,7 +1,7 @@
 """Entry point of every child process of a session: ``python -m bridge.hosts.proc ROLE ...``.
 
 Roles: ``world`` (the hub: clock, physics, router, recorder), ``firmware``, ``logic`` and ``service``
-(participants).
+(participants, started by the launcher, or on another computer by ``swarm-sitl join --host``, with ``--endpoint``).
 Children never read the terminal's signals (the launcher owns Ctrl-C); they die with the launcher.
 """
 
@@ -88,14 +88,18 @@ def _participant(args: argparse.Namespace, plan) -> int:
         from bridge.hosts.logic import LogicHost
 
         host = LogicHost(plan, proc.robots)
-    return serve(args.proc, endpoint_for(args.session_dir), args.namespace, host, args.parent_pid)
+    endpoint = args.endpoint or endpoint_for(args.session_dir)  # a host's process: the world's TCP endpoint
+    return serve(args.proc, endpoint, args.namespace, host, args.parent_pid)
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="bridge.hosts.proc")
     ap.add_argument("role", choices=["world", "firmware", "logic", "service"])
     ap.add_argument("--plan", required=True)
-    ap.add_argument("--session-dir", required=True)
+    where = ap.add_mutually_exclusive_group(required=True)
+    where.add_argument("--session-dir")
+    where.add_argument("--endpoint", help="a participant on another computer (swarm-sitl join --host): the world's "
+                                          "endpoint")
     ap.add_argument("--namespace", required=True)
     ap.add_argument("--out", required=True)
     ap.add_argument("--proc", default="world")

@@ -165,11 +165,20 @@ class _EchoHost:
         pass
 
 
-def _echo_main(proc: str, endpoint: str, namespace: str, parent_pid: int) -> None:
+def _echo_main(proc: str, endpoint: str, namespace: str, parent_pid: int, mode: str = "peer") -> None:
     from bridge.hosts.participant import die_with_parent, serve
 
     die_with_parent()
-    code = serve(proc, endpoint, namespace, _EchoHost(), parent_pid)
+    session = None
+    if mode != "peer":  # a client of a router (the yardstick's routed variant)
+        import json
+
+        import zenoh
+
+        c = transport.make_config(endpoint, namespace, listen=False)
+        c.insert_json5("mode", json.dumps(mode))
+        session = zenoh.open(c)
+    code = serve(proc, endpoint, namespace, _EchoHost(), parent_pid, session=session)
     os._exit(code)
 
 
@@ -204,19 +213,37 @@ def physics_limit(config: str, overrides: dict[str, Any], quanta: int = 1000) ->
     return quanta * q / 1e9 / wall
 
 
-def barrier_yardstick(procs: int = 6, quanta: int = 3000) -> tuple[float, float]:
-    """Quanta per second and median barrier of the bare tick/done protocol, with our participant loop."""
+def barrier_yardstick(procs: int = 6, quanta: int = 3000, link_delay_ms: float | None = None,
+                      router: bool = False) -> tuple[float, float]:
+    """Quanta per second and median barrier of the bare tick/done protocol, with our participant loop. With
+    ``link_delay_ms`` the participants reach the world over TCP through a delay relay (``bridge.tools.delay_relay``;
+    a negative delay: directly, no relay), each on its own connection, or with ``router`` through one zenoh router (a
+    host's single connection; the participants its clients over a unix socket)."""
     d = tempfile.mkdtemp(prefix="swarm-sitl-bench-")
     ns = f"swarm-sitl-bench/{uuid.uuid4().hex[:12]}"
     ep = transport.endpoint_for(d)
-    s = transport.open_session(ep, ns, listen=True)
+    tcp = [f"tcp/127.0.0.1:{_free_port()}"] if link_delay_ms is not None else None
+    s = transport.open_session(ep, ns, listen=True, extra_listen=tcp)
     q: queue.SimpleQueue = queue.SimpleQueue()
     subs = [transport.queue_subscriber(s, "done/*", q), transport.queue_subscriber(s, "hello/*", q)]
     names = [f"e{i}" for i in range(procs)]
     pubs = {n: transport.publisher(s, f"tick/{n}") for n in names}
     env = {"ZENOH_RUNTIME": ZENOH_RUNTIME, **os.environ}
+    helpers: list[subprocess.Popen] = []
+    mode = "peer"
+    if tcp:
+        from bridge.tools.delay_relay import start_relay
+
+        port = int(tcp[0].rpartition(":")[2])
+        if link_delay_ms is not None and link_delay_ms >= 0:
+            helpers.append(start_relay(("127.0.0.1", port), link_delay_ms))
+            port = helpers[-1].port  # type: ignore[attr-defined]
+        ep = f"tcp/127.0.0.1:{port}"
+        if router:
+            helpers.append(_router(ep, f"unixsock-stream/{d}/router.sock", env))
+            ep, mode = f"unixsock-stream/{d}/router.sock", "client"
     children = [subprocess.Popen([sys.executable, "-c", f"from bridge.tools.bench import _echo_main; "
-                                  f"_echo_main({n!r}, {ep!r}, {ns!r}, {os.getpid()})"], env=env,
+                                  f"_echo_main({n!r}, {ep!r}, {ns!r}, {os.getpid()}, {mode!r})"], env=env,
                                  start_new_session=True) for n in names]
     try:
         for _ in names:
@@ -238,7 +265,7 @@ def barrier_yardstick(procs: int = 6, quanta: int = 3000) -> tuple[float, float]
         for c in children:
             c.wait(timeout=10)
     finally:
-        for c in children:
+        for c in [*children, *helpers]:
             if c.poll() is None:
                 os.killpg(c.pid, signal.SIGKILL)
                 c.wait()
@@ -247,6 +274,38 @@ def barrier_yardstick(procs: int = 6, quanta: int = 3000) -> tuple[float, float]
         shutil.rmtree(d, ignore_errors=True)
     lat.sort()
     return rate, lat[len(lat) // 2] * 1e6
+
+
+_ROUTER = """
+import json, sys, zenoh
+from bridge.core import transport
+c = transport.make_config(sys.argv[1], None, listen=False)
+c.insert_json5("mode", '"router"')
+c.insert_json5("listen/endpoints", json.dumps([sys.argv[2]]))
+z = zenoh.open(c)
+print("up", flush=True)
+sys.stdin.read()
+"""
+
+
+def _router(world: str, listen: str, env: dict[str, str]) -> subprocess.Popen:
+    """A zenoh router connected to ``world``, listening on ``listen`` (scouting off, as every session)."""
+    p = subprocess.Popen([sys.executable, "-c", _ROUTER, world, listen], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         text=True, env=env, start_new_session=True)
+    if p.stdout is None or p.stdout.readline().strip() != "up":
+        p.kill()
+        p.wait()
+        raise RuntimeError("the zenoh router did not start")
+    return p
+
+
+def _free_port() -> int:
+    """A TCP port free on loopback now."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
 
 
 def _fmt(v: float | None, spec: str, unit: str = "") -> str:
@@ -270,6 +329,16 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
             _fmt(s["rss_mb_per_robot"], ".0f", " MB"), _fmt(s["startup_s"], ".1f", " s"),
         ])
     print(f"\nswarm-sitl bench: {dur:g} s simulated per case, {os.cpu_count()} cores")
+    print_table(head, lines, markdown)
+    configs = sorted({(case.label, str(case.config.relative_to(ROOT)) if case.config.is_relative_to(ROOT)
+                       else str(case.config)) for case, _, _ in rows})
+    print("cases: " + "; ".join(f"{label}: {cfg}" for label, cfg in configs))
+    print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
+          "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
+
+
+def print_table(head: list[str], lines: list[list[str]], markdown: bool) -> None:
+    """A table of figures: Markdown, or columns aligned right."""
     if markdown:
         print("| " + " | ".join(head) + " |")
         print("|" + "|".join("---" for _ in head) + "|")
@@ -280,11 +349,6 @@ def _print_table(rows: list, dur: float, markdown: bool) -> None:
         print("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
         for line in lines:
             print("  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)))
-    configs = sorted({(case.label, str(case.config.relative_to(ROOT)) if case.config.is_relative_to(ROOT)
-                       else str(case.config)) for case, _, _ in rows})
-    print("cases: " + "; ".join(f"{label}: {cfg}" for label, cfg in configs))
-    print("bare barrier: the lock-step barrier alone over as many participant processes; bare physics: the same world "
-          "stepped alone; both as the RTF they allow. of the limit: RTF / the lower of the two.")
 
 
 def _print_round_trip(rows: list) -> None:

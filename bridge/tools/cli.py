@@ -60,7 +60,8 @@ def cmd_join(a: argparse.Namespace) -> int:
     from bridge.hil.join import JoinError, join
 
     try:
-        code = join(a.endpoint, a.session, a.robot, timeout_s=a.timeout, world_timeout_s=a.world_timeout)
+        code = join(a.endpoint, a.session, a.robot, timeout_s=a.timeout, world_timeout_s=a.world_timeout,
+                    host=a.host)
     except JoinError as e:
         print(f"swarm-sitl join: {e}", file=sys.stderr)
         code = 2
@@ -70,6 +71,21 @@ def cmd_join(a: argparse.Namespace) -> int:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)  # zenoh-python can hang in interpreter teardown
+
+
+def _numbers(cast: type, least: float, example: str) -> Any:
+    """An argparse type: comma-separated numbers, each at least ``least`` (e.g. ``1,2``)."""
+
+    def parse(v: str) -> list:
+        try:
+            out = [cast(x) for x in v.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected numbers such as {example}, got {v!r}") from None
+        if not all(x >= least for x in out):
+            raise argparse.ArgumentTypeError(f"each must be >= {least}, got {v}")
+        return out
+
+    return parse
 
 
 def _positive(v: str) -> float:
@@ -125,6 +141,12 @@ def cmd_bench(a: argparse.Namespace) -> int:
     study = "rdpso" if a.rdpso else a.study
     if study:
         return run_study_bench(study, quick=a.quick, duration=a.duration, out_dir=a.out)
+    if a.hosts:
+        from bridge.tools.bench_hosts import run_hosts_bench
+
+        return run_hosts_bench(a.hosts, a.link_delay_ms, robots=a.robots or 10, per_process=a.robots_per_process or 5,
+                               duration=a.duration or 10.0, out_dir=a.out if a.out != "runs/bench" else
+                               "runs/bench-hosts", config=a.config, markdown=a.markdown)
 
     return run_bench(quick=a.quick, duration=a.duration, out_dir=a.out, markdown=a.markdown, profile=a.profile,
                      config=a.config, scale=a.scale, cases_file=a.cases)
@@ -260,12 +282,16 @@ def _parser_run(sub: Any) -> None:
 
 
 def _parser_join(sub: Any) -> None:
-    p = sub.add_parser("join", help="run a remote robot's swarm logic on this computer for a session on another one "
-                                    "(its config: session.listen, the robot's logic = \"remote\")")
+    p = sub.add_parser("join", help="run a remote robot's swarm logic, or a host's processes, on this computer for a "
+                                    "session on another one (its config: session.listen, the robot's logic = "
+                                    "\"remote\" or [[hosts]])")
     p.add_argument("endpoint", help="where the session's world listens: its session.listen with that computer's "
                                     "address, e.g. tcp/192.168.1.10:7447")
     p.add_argument("--session", required=True, help="the session's name (session.name in its config)")
-    p.add_argument("--robot", type=int, help="the robot whose logic to run (default: the session's only remote robot)")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--robot", type=int, help="the robot whose logic to run (default: the session's only remote "
+                                                 "robot)")
+    which.add_argument("--host", help="run all the processes the session places on this host (its [[hosts]] name)")
     p.add_argument("--timeout", type=_positive, default=10.0,
                    help="wall seconds to wait for the session to answer (default 10)")
     p.add_argument("--world-timeout", type=_positive, default=10.0,
@@ -297,6 +323,14 @@ def _parser_bench(sub: Any) -> None:
                                    "chapter 3's scenario with BAT, wall time and runs/s, the SonPI camera sessions, "
                                    "chapter 6 with 1000 agents and the SonPIs under chapter 6's region planner)")
     p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
+    p.add_argument("--hosts", type=_numbers(int, 1, "1,2"), metavar="N[,N...]",
+                   help="the robots' processes on N other hosts (joins on this machine over TCP), against all here: "
+                        "RTF and barrier per case")
+    p.add_argument("--link-delay-ms", type=_numbers(float, 0, "0.2,1"), default=[0.2, 1.0], metavar="D[,D...]",
+                   help="with --hosts: one-way delays of the hosts' links (a delay relay each way; default 0.2,1), "
+                        "besides loopback without a relay")
+    p.add_argument("--robots", type=_at_least_one, help="with --hosts: robot count (default 10)")
+    p.add_argument("--robots-per-process", type=_at_least_one, help="with --hosts: packing (default 5)")
     p.set_defaults(fn=cmd_bench)
 
 

@@ -121,7 +121,14 @@ class Lab:
         return p
 
     def _enter(self, host: Host) -> list[str]:
-        return ["nsenter", "--target", str(self.hub.pid), "--user", f"--net=/proc/{host.pid}/ns/net"]
+        return self.enter_argv(host)
+
+    def enter_argv(self, host: Host, inside: bool = False) -> list[str]:
+        """The argv prefix that runs a command in ``host``'s network namespace: from outside the lab (the default,
+        entering its user namespace too), or from a process already inside it (``inside``: one started in the hub or
+        another host, which is in the lab's user namespace already and may not enter it again)."""
+        net = f"--net=/proc/{host.pid}/ns/net"
+        return ["nsenter", net] if inside else ["nsenter", "--target", str(self.hub.pid), "--user", net]
 
     def _sh(self, host: Host, script: str, what: str) -> None:
         r = subprocess.run([*self._enter(host), "sh", "-ec", script], capture_output=True, text=True)

@@ -74,3 +74,12 @@ def test_closing_the_lab_ends_its_processes():
     for pid in holders:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_a_process_inside_the_lab_enters_a_host_with_the_inside_prefix():
+    with Lab() as lab:
+        a = lab.add_host("a")
+        argv = [*lab.enter_argv(a, inside=True), "ip", "-4", "-o", "addr", "show", "eth0"]
+        p = lab.popen(lab.hub, argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        out, err = p.communicate(timeout=60)
+        assert p.returncode == 0 and f"inet {a.address}/24" in out, err
