@@ -91,10 +91,9 @@ def _run_checked(fingerprint: str, stop_event: str, ref: _Ref, trials: list[Tria
 
 def _cancelled(name: str) -> Callable[[], bool]:
     """Whether the client set the Dask event ``name``, asked at most every ``STOP_POLL_S`` (the launcher polls often);
-    a scheduler that does not answer is no cancel (the task runs on, as it would without the event)."""
-    from distributed import Event
+    a scheduler that does not answer (or no worker around: the call did not come from the cluster) is no cancel."""
+    from distributed import Event, get_worker
 
-    event = Event(name)
     state = {"next": 0.0, "set": False}
 
     def check() -> bool:
@@ -102,7 +101,7 @@ def _cancelled(name: str) -> Callable[[], bool]:
         if not state["set"] and now >= state["next"]:
             state["next"] = now + STOP_POLL_S
             with contextlib.suppress(Exception):
-                state["set"] = bool(event.is_set())
+                state["set"] = bool(Event(name, client=get_worker().client).is_set())
         return state["set"]
 
     return check

@@ -4,6 +4,7 @@ on other hosts."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import re
@@ -22,7 +23,7 @@ import pytest
 from distributed import Client, LocalCluster
 
 from bridge.experiments.cluster import CODE_PACKAGES, ClusterError, _run_checked, _why, code_fingerprint
-from bridge.experiments.runner import Experiment, Trial, TrialResult, _error_text, _ref, register
+from bridge.experiments.runner import Experiment, Trial, TrialResult, _error_text, _ref, register, run_experiment
 from bridge.experiments.sessions import run_config
 from bridge.tools.cli import main
 from bridge.tools.netns import Lab
@@ -76,15 +77,20 @@ class Gated(Experiment):
         return TrialResult(metrics={"value": float(np.random.default_rng(trial.seed).random())})
 
 
-@register
-class Killing(Experiment):
-    name = "test-killing"
-    title = "A trial that kills its worker, wherever it runs"
-    description = "Each attempt ends the worker process under it."
+class _OneTrial(Experiment):
+    """One trial, in one cell: the experiments below differ by what it does."""
+
     trials = 1
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
         return [{"k": 1}]
+
+
+@register
+class Killing(_OneTrial):
+    name = "test-killing"
+    title = "A trial that kills its worker, wherever it runs"
+    description = "Each attempt ends the worker process under it."
 
     def run(self, trial: Trial) -> TrialResult:
         os._exit(1)
@@ -99,14 +105,10 @@ ENDLESS = {
 
 
 @register
-class Endless(Experiment):
+class Endless(_OneTrial):
     name = "test-endless"
     title = "A session that runs until it is stopped"
     description = "One trial: a session of hours of simulated time."
-    trials = 1
-
-    def cells(self, smoke: bool) -> list[dict[str, Any]]:
-        return [{"e": 1}]
 
     def run(self, trial: Trial) -> TrialResult:
         summary, _ = run_config(ENDLESS, Path(trial.workdir))
@@ -341,7 +343,7 @@ def test_a_trial_that_kills_every_worker_fails_in_the_same_words_each_run(
 def test_cancelling_a_run_stops_the_session_a_worker_runs(tmp_path: Path, cluster: LocalCluster) -> None:
     out = tmp_path / "endless"
     p = _start_gated(cluster.scheduler_address, out, "--quiet", name="test-endless")
-    session = out / "work" / "e-1" / "0" / "session"
+    session = out / "work" / "k-1" / "0" / "session"
     try:
         wait_until((session / "plan.json").exists, "the trial's session did not start", within_s=600)
         p.send_signal(signal.SIGINT)  # Ctrl-C on the client
@@ -465,3 +467,10 @@ def test_workers_on_other_hosts(tmp_path: Path) -> None:
     assert client.returncode == 0, stderr
     assert (out / "trials.csv").read_bytes() == (local / "trials.csv").read_bytes()
     assert f"on the Dask cluster at {address} (2 workers when it started)" in (out / "report.md").read_text()
+
+
+def test_a_cluster_run_from_code_that_runs_an_event_loop(tmp_path: Path, cluster: LocalCluster) -> None:
+    async def in_a_notebook() -> Path:  # as a Jupyter cell runs: inside the kernel's event loop
+        return run_experiment("test-pi", trials=1, cluster=cluster.scheduler_address, out=tmp_path, progress=False)
+
+    assert len(_rows(asyncio.run(in_a_notebook()) / "trials.csv")) == 2
