@@ -176,9 +176,15 @@ class ClusterWorkers:
         that does not answer within ``timeout_s``."""
         try:
             found = self.client.sync(self.client._run, code_fingerprint, on_error="return", callback_timeout=timeout_s)
+        except TimeoutError:
+            raise ClusterError(
+                f"the workers of the Dask cluster at {self.address} did not answer the code check within "
+                f"{self.timeout_s:g} s"
+            ) from None
         except Exception as e:
-            why = f"no answer within {self.timeout_s:g} s" if isinstance(e, TimeoutError) else _error_line(e)
-            raise ClusterError(f"the workers of the Dask cluster at {self.address} did not answer: {why}") from None
+            raise ClusterError(
+                f"the workers of the Dask cluster at {self.address} could not be asked for their code: {_error_line(e)}"
+            ) from None
         wrong = {w: _why(v) for w, v in sorted(found.items()) if v != self.fingerprint}
         if wrong:
             listed = ", ".join(f"{w} {v}" for w, v in wrong.items())

@@ -324,6 +324,30 @@ def test_a_cluster_with_other_code_is_refused(tmp_path: Path, capsys: pytest.Cap
     assert _run_checked(code_fingerprint(), "unused", _ref(MonteCarloPi), [trial])[0][1] is None
 
 
+def test_a_worker_that_does_not_answer_the_code_check_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with dask.config.set({"temporary-directory": str(tmp_path)}), _local_cluster(tmp_path, 0) as c:
+        worker = _start_worker(c.scheduler_address, "stopped", ROOT, tmp_path)
+        try:
+            with Client(c.scheduler_address, set_as_default=False) as client:
+                client.wait_for_workers(1, timeout=600)  # bounds a hang only
+            worker.send_signal(signal.SIGSTOP)  # registered, then answers nothing
+            out = tmp_path / "x"
+            assert (
+                _experiment("test-pi", "--cluster", c.scheduler_address, "--cluster-timeout", "10", "--out", str(out))
+                == 2
+            )
+        finally:
+            worker.kill()
+            worker.wait()
+    assert capsys.readouterr().err == (
+        f"swarm-sitl experiment: the workers of the Dask cluster at {c.scheduler_address} did not answer the code "
+        "check within 10 s\n"
+    )
+    assert not out.exists()
+
+
 def test_a_worker_that_fails_the_code_check_did_not_answer() -> None:
     assert _why(ModuleNotFoundError("No module named 'bridge.experiments'")) == "does not have swarm-sitl installed"
     assert _why(OSError("connection reset")) == "did not answer: OSError: connection reset"
