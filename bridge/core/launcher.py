@@ -27,6 +27,8 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -140,11 +142,18 @@ class _Stops:
     The first asks the world to stop (``used`` = 1 once asked); any further one ("Ctrl-C again") means be done at
     once: stop the session's processes now, skip the plot, or abandon it (``raising``: while it is drawn)."""
 
-    def __init__(self) -> None:
+    def __init__(self, stop: Callable[[], bool] | None = None) -> None:
         self.count = 0
         self.used = 0
         self.last: int | None = None
         self.raising = False
+        self.stop = stop
+
+    def asked(self) -> bool:
+        """Whether a stop was asked: a Ctrl-C, or the ``stop`` hook saying so (taken as a first Ctrl-C)."""
+        if not self.count and self.stop is not None and self.stop():
+            self.count = 1
+        return bool(self.count)
 
     def __call__(self, signum: int, frame: Any) -> None:
         self.count += 1
@@ -157,8 +166,32 @@ class _Stops:
         return self.count > self.used
 
 
+# the stop hook of the sessions run in this context that are given none (``stopping_when``)
+_STOP_WHEN: ContextVar[Callable[[], bool] | None] = ContextVar("session_stop", default=None)
+
+
+@contextlib.contextmanager
+def stopping_when(stop: Callable[[], bool]) -> Iterator[None]:
+    """Give ``stop`` to the sessions run in this context (thread) that are not given one: code that runs a session
+    for someone else (an experiment's trial on a cluster's worker) stops it without reaching into that code."""
+    token = _STOP_WHEN.set(stop)
+    try:
+        yield
+    finally:
+        _STOP_WHEN.reset(token)
+
+
+def on_main_thread() -> bool:
+    """Whether this is the main thread: the only one that can take Ctrl-C and SIGTERM (install signal handlers)."""
+    return threading.current_thread() is threading.main_thread()
+
+
 def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_dir: str = "runs/latest",
-                progress: TextIO | None = sys.stderr, plot: bool = True) -> SessionResult:
+                progress: TextIO | None = sys.stderr, plot: bool = True,
+                stop: Callable[[], bool] | None = None) -> SessionResult:
+    """Run the session of ``config_path`` into ``out_dir``. ``stop`` (default: the one ``stopping_when`` set, if
+    any), polled while the session runs, acts as a first Ctrl-C once it returns true: the session stops cleanly and
+    writes its summary (interrupted)."""
     cfg = load_config(config_path, overrides)
     plan = make_plan(cfg, config_path)
     try:  # random, or for a session that remote logic joins, its name's (the joiner knows only that)
@@ -209,11 +242,10 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         log.close()
         return p
 
-    stops = _Stops()
+    stops = _Stops(stop if stop is not None else _STOP_WHEN.get())
     # Ctrl-C and SIGTERM stop the session; a session run from another thread (an experiment's trial on a Dask worker)
-    # cannot take them: it ends with the process it runs in
-    main = threading.current_thread() is threading.main_thread()
-    old = {s: signal.signal(s, stops) for s in (signal.SIGINT, signal.SIGTERM)} if main else {}
+    # cannot take them: it ends with the process it runs in, or when its stop hook says so
+    old = {s: signal.signal(s, stops) for s in (signal.SIGINT, signal.SIGTERM)} if on_main_thread() else {}
     try:
         res = _supervise(cfg, plan, out, logs, spawn, stops, endpoint, namespace, session_dir, prog, ports, remote,
                          plot)
@@ -247,7 +279,7 @@ def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, end
         world = Child("world", "world", spawn("world", "world"))
         w.children.append(world)
         w.startup_error = _await_endpoint(cfg, world, Path(session_dir) / "zenoh.sock", w.t_launch, logs, stops)
-        if w.startup_error or stops.count:
+        if w.startup_error or stops.asked():
             raise _Abort
         session = transport.open_session(endpoint, namespace, listen=False)
         _sub = transport.queue_subscriber(session, "status", status_q)
@@ -278,7 +310,7 @@ def _await_endpoint(cfg, world: Child, sock: Path, t_launch: float, logs: Path, 
     while not sock.exists():
         if world.popen.poll() is not None or time.monotonic() - t_launch > cfg.session.startup_timeout_s:
             return f"the world process did not open its endpoint; see {logs / 'world.log'}"
-        if stops.count:
+        if stops.asked():
             break
         time.sleep(0.01)
     return None
@@ -306,7 +338,7 @@ def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, sto
         if world.exit_code is not None:
             w.world_code = world.exit_code
             return
-        if stops.count and not sent_stop:
+        if stops.asked() and not sent_stop:
             sent_stop = w.interrupted = True
             stops.used = 1
             prog.note(f"stopping at sim t={w.last_sim:.1f} s (Ctrl-C again to kill at once)")

@@ -4,46 +4,113 @@ The runner hands the cluster the same tasks it would give its local workers (bat
 stores each result as it arrives, so which worker ran a trial changes none of its bytes. The scheduler gives the
 task of a worker that died to another worker (until the task has seen more than its ``allowed-failures`` workers die
 under it: then those trials fail); a trial that raises is a failed trial, as on this machine, and is not retried.
-Workers must run the same swarm-sitl: the client checks every worker's version on connecting, and each task again
-(a worker may join later).
+Workers must run the same code: the client compares every worker's code fingerprint with its own on connecting, and
+each task again (a worker may join later). Cancelling the run stops the sessions its running tasks run.
 """
 
 from __future__ import annotations
 
 import contextlib
-import importlib.metadata
+import functools
+import hashlib
+import importlib.util
 import logging
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bridge.experiments.runner import Trial, _Done, _no_interrupts, _Ref, _run_trials, _task_results
+from bridge.core.plan import version
+from bridge.experiments.runner import (
+    Trial,
+    WorkersLost,
+    _Done,
+    _error_line,
+    _failed,
+    _no_interrupts,
+    _Ref,
+    _run_trials,
+    _task_results,
+)
 
 if TYPE_CHECKING:
     from distributed import Client
 
-PACKAGE = "swarm-sitl"
+CODE_PACKAGES = ("bridge", "firmware_sim", "swarm_logic")  # the code a trial runs; a worker must have it byte for byte
+CODE_SUFFIXES = frozenset({".py", ".dbc", ".toml", ".json", ".yaml", ".yml", ".csv", ".urdf", ".xml"})  # and data
+STOP_POLL_S = 0.25  # how often a running task asks whether the run was cancelled
 
 
 class ClusterError(Exception):
-    """The cluster cannot run the trials: it cannot be reached, has no worker, or runs another swarm-sitl."""
+    """The cluster cannot run the trials: it cannot be reached, has no worker, or runs other code."""
 
 
-def _first_line(e: BaseException) -> str:
-    text = str(e).strip()
-    return text.splitlines()[0] if text else type(e).__name__
+class SchedulerLost(ClusterError, WorkersLost):
+    """The scheduler went away during the run (the runner writes what finished, then says this)."""
 
 
-def installed_version() -> str:
-    return importlib.metadata.version(PACKAGE)
+@functools.cache
+def code_fingerprint() -> str:
+    """This process's swarm-sitl version and a hash of its code: the sorted paths (relative to each package) and
+    bytes of the source and data files of ``CODE_PACKAGES``, as imported here. Computed once per process."""
+    h = hashlib.sha256()
+    for package in CODE_PACKAGES:
+        spec = importlib.util.find_spec(package)
+        roots = list(spec.submodule_search_locations or []) if spec else []
+        if not roots:
+            h.update(f"{package}: missing\0".encode())
+            continue
+        root = Path(roots[0])
+        files = sorted(
+            (p.relative_to(root).as_posix(), p)
+            for p in root.rglob("*")
+            if p.suffix in CODE_SUFFIXES and "__pycache__" not in p.parts and p.is_file()
+        )
+        for rel, p in files:
+            data = p.read_bytes()
+            h.update(f"{package}/{rel}\0{len(data)}\0".encode())
+            h.update(data)
+    return f"{version()}+{h.hexdigest()[:16]}"
 
 
-def _run_checked(version: str, ref: _Ref, trials: list[Trial]) -> list[_Done]:
-    """``_run_trials`` on a worker, after checking that it runs the client's swarm-sitl (a worker that joined after
-    the check on connecting); a mismatch fails the task's trials with the reason."""
-    mine = installed_version()
-    if mine != version:
-        raise ClusterError(f"this worker runs swarm-sitl {mine}, the client {version}")
-    return _run_trials(ref, trials)
+def _run_checked(fingerprint: str, stop_event: str, ref: _Ref, trials: list[Trial]) -> list[_Done]:
+    """``_run_trials`` on a worker, after checking that it runs the client's code (a worker that joined after the
+    check on connecting; a mismatch fails the task's trials with the reason). The sessions the trials run stop once
+    the client sets the Dask event ``stop_event`` (the run was cancelled)."""
+    mine = code_fingerprint()
+    if mine != fingerprint:
+        raise ClusterError(
+            f"this worker's swarm-sitl code differs from the client's ({mine}, the client {fingerprint})"
+        )
+    from bridge.core.launcher import stopping_when
+
+    with stopping_when(_cancelled(stop_event)):
+        return _run_trials(ref, trials)
+
+
+def _cancelled(name: str) -> Callable[[], bool]:
+    """Whether the client set the Dask event ``name``, asked at most every ``STOP_POLL_S`` (the launcher polls often);
+    a scheduler that does not answer (or no worker around: the call did not come from the cluster) is no cancel."""
+    from distributed import Event, get_worker
+
+    state = {"next": 0.0, "set": False}
+
+    def check() -> bool:
+        now = time.monotonic()
+        if not state["set"] and now >= state["next"]:
+            state["next"] = now + STOP_POLL_S
+            with contextlib.suppress(Exception):
+                state["set"] = bool(Event(name, client=get_worker().client).is_set())
+        return state["set"]
+
+    return check
+
+
+def _off_loop(fn: Callable[[], Any]) -> Any:
+    """``fn()`` on a helper thread: it may run an event loop of its own even when the caller runs one (Jupyter)."""
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(fn).result()
 
 
 def _reach(address: str, timeout_s: float) -> None:
@@ -58,7 +125,7 @@ def _reach(address: str, timeout_s: float) -> None:
         comm = await asyncio.wait_for(connect(address, timeout=timeout_s), timeout_s)
         await comm.close()
 
-    asyncio.run(probe())
+    _off_loop(lambda: asyncio.run(probe()))
 
 
 class ClusterWorkers:
@@ -68,75 +135,94 @@ class ClusterWorkers:
         from distributed import Client
 
         self.address, self.timeout_s = address, timeout_s
+        deadline = time.monotonic() + timeout_s  # one for reaching the scheduler, a worker and their answers
+
+        def left() -> float:
+            return max(0.001, deadline - time.monotonic())
+
         # what goes wrong is said once, by ClusterError: not also as the client's logged tracebacks (a lost
         # scheduler), written by the handlers distributed gives its loggers
         names = [n for n in list(logging.root.manager.loggerDict) if n.split(".")[0] == "distributed"]
         self.quieted = list({id(h): (h, h.level) for n in names for h in logging.getLogger(n).handlers}.values())
         for h, _ in self.quieted:
             h.setLevel(logging.CRITICAL)
-        self.version = installed_version()
+        self.fingerprint = code_fingerprint()
         self.pending: dict[Any, int] = {}
         self.client: Client | None = None
         try:
             try:
-                _reach(address, timeout_s)
-                self.client = Client(address, timeout=timeout_s, set_as_default=False)
+                _reach(address, left())
+                self.client = _off_loop(lambda: Client(address, timeout=left(), set_as_default=False))
             except Exception as e:  # refused, timed out, not an address
-                why = f"no answer within {timeout_s:g} s" if isinstance(e, TimeoutError) else _first_line(e)
+                why = f"no answer within {timeout_s:g} s" if isinstance(e, TimeoutError) else _error_line(e)
                 raise ClusterError(f"cannot reach the Dask scheduler at {address}: {why}") from None
             try:
-                self.client.wait_for_workers(1, timeout=timeout_s)
+                self.client.wait_for_workers(1, timeout=left())
             except TimeoutError:
                 raise ClusterError(
                     f"the Dask scheduler at {address} has no worker (waited {timeout_s:g} s): "
                     f"start some with `dask worker {address}`"
                 ) from None
-            self._check_versions()
+            self._check_code(left())
         except BaseException:
             self.close()
             raise
+        self.stop_event = f"swarm-sitl-stop-{self.client.id}"  # set by abort(): the running tasks' sessions stop
         n = len(self.client.scheduler_info().get("workers", {}))
         self.what = f"on the Dask cluster at {address} ({n} worker{'s' if n != 1 else ''} when it started)"
 
-    def _check_versions(self) -> None:
-        """Refuse a cluster with a worker that does not run this swarm-sitl (or none at all)."""
-        found = self.client.run(importlib.metadata.version, PACKAGE, on_error="return")
-        wrong = {
-            w: (v if isinstance(v, str) else "not installed") for w, v in sorted(found.items()) if v != self.version
-        }
-        if wrong:
-            listed = ", ".join(f"{w} has {v}" for w, v in wrong.items())
+    def _check_code(self, timeout_s: float) -> None:
+        """Refuse a cluster with a worker whose code differs from this process's, that does not have swarm-sitl, or
+        that does not answer within ``timeout_s``."""
+        try:
+            found = self.client.sync(self.client._run, code_fingerprint, on_error="return", callback_timeout=timeout_s)
+        except TimeoutError:
             raise ClusterError(
-                f"the Dask cluster at {self.address} runs another swarm-sitl than this one "
-                f"({self.version}): {listed}; install this version on every worker"
+                f"the workers of the Dask cluster at {self.address} did not answer the code check within "
+                f"{self.timeout_s:g} s"
+            ) from None
+        except Exception as e:
+            raise ClusterError(
+                f"the workers of the Dask cluster at {self.address} could not be asked for their code: {_error_line(e)}"
+            ) from None
+        wrong = {w: _why(v) for w, v in sorted(found.items()) if v != self.fingerprint}
+        if wrong:
+            listed = ", ".join(f"{w} {v}" for w, v in wrong.items())
+            raise ClusterError(
+                f"the Dask cluster at {self.address} runs other swarm-sitl code than this one "
+                f"({self.fingerprint}): {listed}; install this checkout on every worker"
             )
 
     def run(self, ref: _Ref, tasks: list[list[Trial]]) -> Iterator[tuple[int, list[_Done]]]:
         from distributed import as_completed
 
         self.pending = {
-            self.client.submit(_run_checked, self.version, ref, t, pure=False): j for j, t in enumerate(tasks)
+            self.client.submit(_run_checked, self.fingerprint, self.stop_event, ref, t, pure=False): j
+            for j, t in enumerate(tasks)
         }
         for f in as_completed(list(self.pending), loop=self.client.loop):
             j = self.pending.pop(f)
             if f.status == "cancelled":  # not by us: the scheduler went away, or dropped this client
-                raise ClusterError(
-                    f"lost the Dask scheduler at {self.address} (the trials that finished are kept "
-                    "in the output's results/: run again with --resume to go on)"
+                raise SchedulerLost(
+                    f"lost the Dask scheduler at {self.address} (what finished is written, and kept in "
+                    "the output's results/: run again with --resume to go on)"
                 )
-            res = _task_results(f, len(tasks[j]))
+            res = _cluster_results(f, len(tasks[j]))
             f.release()
             yield j, res
 
     def abort(self) -> list[tuple[int, list[_Done]]]:
-        """Fetch what had finished, cancel the rest (a trial already running on a worker runs on there: Dask cannot
-        stop a running task; its result is dropped) and disconnect."""
+        """Fetch what had finished, stop the sessions of the running tasks (their results are dropped; a trial that
+        runs no session runs on to its end: Dask cannot stop a running task), cancel the rest and disconnect."""
         with _no_interrupts():
             late = []
             for f, j in self.pending.items():
                 if f.status == "finished":
                     with contextlib.suppress(Exception):
                         late.append((j, f.result(timeout=self.timeout_s)))
+            with contextlib.suppress(Exception):
+                s = self.client.scheduler
+                self.client.sync(s.event_set, name=self.stop_event, callback_timeout=self.timeout_s)
             with contextlib.suppress(Exception):
                 self.client.cancel(list(self.pending), force=True)
             self.pending = {}
@@ -149,3 +235,25 @@ class ClusterWorkers:
                 self.client.close(timeout=self.timeout_s)
         for h, level in self.quieted:
             h.setLevel(level)
+
+
+def _why(answer: Any) -> str:
+    """What a worker's answer to the code check says, for the refusal."""
+    if isinstance(answer, str):
+        return f"has other code ({answer})"
+    if isinstance(answer, ImportError):  # it could not even load the check
+        return "does not have swarm-sitl installed"
+    return f"did not answer: {_error_line(answer) if isinstance(answer, BaseException) else repr(answer)}"
+
+
+def _cluster_results(f: Any, n: int) -> list[_Done]:
+    """``_task_results``, with a task the cluster gave up on (its workers died) failed in words that do not depend on
+    the run (Dask's own name the task's random key and the last worker's address)."""
+    from distributed import KilledWorker
+
+    try:
+        return f.result()
+    except KilledWorker as e:
+        return _failed(n, f"worker: KilledWorker: its worker died {e.allowed_failures + 1} times")
+    except Exception:
+        return _task_results(f, n)

@@ -232,14 +232,24 @@ def _worker_init() -> None:
     die_with_parent(signal.SIGTERM)
 
 
+# the directory holding the packages (the checkout): error texts name files relative to it, so that they do not
+# depend on where a worker was started
+_CODE_ROOT = str(Path(__file__).resolve().parents[2]) + os.sep
+
+
 def _error_text(e: BaseException, frames: int = 3, skip: int = 0) -> str:
     """The exception on one line, then the traceback's last frames (after the first `skip`), with paths relative to
-    the working directory."""
+    the directory holding the packages."""
     what = " ".join("".join(traceback.format_exception_only(type(e), e)).split())
     tb = traceback.extract_tb(e.__traceback__)[skip:]
     lines = "".join(traceback.format_list(tb[-frames:] if frames else [])).splitlines()
     where = [s for s in lines if s.strip(" ^~")]  # without 3.11's column markers
-    return "\n".join([what, *where]).replace(os.getcwd() + os.sep, "")
+    return "\n".join([what, *where]).replace(_CODE_ROOT, "")
+
+
+def _error_line(e: BaseException) -> str:
+    """The exception on one line (``_error_text``'s first)."""
+    return _error_text(e, frames=0)
 
 
 def _scalar(k: str, v: Any) -> Scalar | None:
@@ -398,7 +408,9 @@ def _start_method() -> str:
 @contextlib.contextmanager
 def _no_interrupts():
     """Ignore Ctrl-C while shutting down, so a second one cannot leave workers behind."""
-    if threading.current_thread() is not threading.main_thread():
+    from bridge.core.launcher import on_main_thread
+
+    if not on_main_thread():
         yield
         return
     old = signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -453,7 +465,12 @@ def _task_results(f: Any, n: int) -> list[_Done]:
     try:
         return f.result()
     except Exception as e:
-        return [(None, f"worker: {_error_text(e, frames=0)}", 0.0)] * n
+        return _failed(n, f"worker: {_error_line(e)}")
+
+
+def _failed(n: int, why: str) -> list[_Done]:
+    """A task's ``n`` trials, failed with ``why``."""
+    return [(None, why, 0.0)] * n
 
 
 class Workers(Protocol):
@@ -535,11 +552,18 @@ def _workers(jobs: int, cluster: str | None = None, cluster_timeout_s: float = 3
     return _InProcess() if jobs == 1 else _LocalPool(jobs)
 
 
+class WorkersLost(Exception):
+    """The workers went away during the run (a cluster's scheduler): the run ends as Ctrl-C ends it, its outputs
+    written with what finished, then this is raised."""
+
+
 def _execute(ref: _Ref, trials: list[Trial], workers: Workers, bar: _Progress,
              batch: int | Callable[[dict[str, Any]], int] = 1,
-             on_done: Callable[[int, _Done], None] = lambda k, d: None) -> tuple[dict[int, _Done], bool]:
+             on_done: Callable[[int, _Done], None] = lambda k, d: None
+             ) -> tuple[dict[int, _Done], KeyboardInterrupt | WorkersLost | None]:
     """Run the trials (``batch`` of one cell per task) on ``workers``; returns what finished by position in
-    `trials`, and whether Ctrl-C cut the run short. ``on_done`` sees each finished trial as it comes."""
+    `trials`, and what cut the run short (Ctrl-C, lost workers) if anything did. ``on_done`` sees each finished
+    trial as it comes."""
     done: dict[int, _Done] = {}
     groups = _chunks(trials, batch if callable(batch) else max(1, batch))
     try:
@@ -550,15 +574,15 @@ def _execute(ref: _Ref, trials: list[Trial], workers: Workers, bar: _Progress,
                 bar.advance(r[1] is not None)
     except BaseException as e:
         late = workers.abort()
-        if not isinstance(e, KeyboardInterrupt):
+        if not isinstance(e, KeyboardInterrupt | WorkersLost):
             raise
         for j, res in late:  # finished as the interrupt came; a trial the interrupt cut short is not kept
             for k, r in zip(groups[j], res, strict=True):
                 if r[1] is None:
                     done[k] = r
                     on_done(k, r)
-        return done, True
-    return done, False
+        return done, e
+    return done, None
 
 
 # --- outputs ---
@@ -680,7 +704,7 @@ def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outc
             lines.append(f"![{curve}](plots/{path.name})")
         except Exception as e:
             plt.close("all")
-            lines.append(f"- plot of curve `{curve}` failed: {_md(_error_text(e).splitlines()[0])}")
+            lines.append(f"- plot of curve `{curve}` failed: {_md(_error_line(e))}")
     for metric, ylabel in exp.boxes:
         path = plots / f"box-{_file_name(metric)}.png"
         try:
@@ -706,12 +730,12 @@ def _plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list[Outc
             lines.append(f"![{metric}](plots/{path.name})")
         except Exception as e:
             plt.close("all")
-            lines.append(f"- box plot of `{metric}` failed: {_md(_error_text(e).splitlines()[0])}")
+            lines.append(f"- box plot of `{metric}` failed: {_md(_error_line(e))}")
     lines += _mean_plots(exp, cells, by_cell, plots, plt)
     try:
         lines += exp.figures(outcomes if outcomes is not None else [o for outs in by_cell for o in outs], plots)
     except Exception as e:
-        lines.append(f"- figures() raised {_md(_error_text(e).splitlines()[0])}")
+        lines.append(f"- figures() raised {_md(_error_line(e))}")
     finally:
         plt.close("all")
     return lines
@@ -761,7 +785,7 @@ def _mean_plots(exp: Experiment, cells: list[dict[str, Any]], by_cell: list[list
             lines.append(f"![{'/'.join(metrics)} by {factor}](plots/{path.name})")
         except Exception as e:
             plt.close("all")
-            lines.append(f"- plot of `{'/'.join(metrics)}` by `{factor}` failed: {_md(_error_text(e).splitlines()[0])}")
+            lines.append(f"- plot of `{'/'.join(metrics)}` by `{factor}` failed: {_md(_error_line(e))}")
     return lines
 
 
@@ -889,9 +913,10 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
         def store(j: int, d: _Done) -> None:
             _store(_result_path(out_dir, plan[todo[j]]), plan[todo[j]], d)
 
-        ran, interrupted = (_execute_interruptible(ref, [plan[k] for k in todo], workers, bar,
-                                                   lambda c: int(exp.cell_batch(c)), store)
-                            if todo else ({}, False))
+        ran, cut = (_execute_interruptible(ref, [plan[k] for k in todo], workers, bar,
+                                           lambda c: int(exp.cell_batch(c)), store)
+                    if todo else ({}, None))
+    interrupted = cut is not None
     done = {**kept, **{todo[j]: d for j, d in ran.items()}}
     for d in [*work.glob("*"), work]:  # cell directories no trial wrote in
         with contextlib.suppress(OSError):
@@ -922,13 +947,14 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
              f"- trials: {len(outcomes)} of {len(plan)} ran, {failed} failed"
              + (f" ({len(kept)} taken from an earlier run into this directory: --resume)" if kept else "")]
     if interrupted:
-        lines += ["", f"**Interrupted** (Ctrl-C) after {len(outcomes)} of {len(plan)} trials: the figures below "
+        why = f"({_md(cut)})" if isinstance(cut, WorkersLost) else "(Ctrl-C)"
+        lines += ["", f"**Interrupted** {why} after {len(outcomes)} of {len(plan)} trials: the figures below "
                       "cover only the trials that finished."]
     lines += _target_lines(verdicts, target_error)
     try:
         lines += exp.sections(outcomes)
     except Exception as e:
-        lines += ["", f"sections() raised {_md(_error_text(e).splitlines()[0])}"]
+        lines += ["", f"sections() raised {_md(_error_line(e))}"]
     if plot_lines:
         lines += ["", "## Plots", "", *plot_lines]
     lines += _cell_lines(cells, by_cell, metric_keys) + _failure_lines(outcomes, failed)
@@ -938,6 +964,8 @@ def execute_experiment(name: str, trials: int | None = None, jobs: int | None = 
               f"{float(np.median(walls)) if walls else 0:.3g} s median, {sum(walls):.1f} s in all "
               f"(per trial: timings.csv).{' Curves per trial: curves/.' if (out_dir / 'curves').exists() else ''}"]
     (out_dir / "report.md").write_text(re.sub(r"\n{3,}", "\n\n", "\n".join(lines)).rstrip() + "\n")
+    if isinstance(cut, WorkersLost):
+        raise cut
     return ExperimentRun(out_dir, outcomes, len(plan), failed, interrupted, wall, verdicts)
 
 
@@ -952,11 +980,14 @@ def _clear_outputs(out_dir: Path) -> None:
 
 def _execute_interruptible(ref: tuple[str, str, str], plan: list[Trial], workers: Workers, bar: _Progress,
                            batch: int | Callable[[dict[str, Any]], int] = 1,
-                           on_done: Callable[[int, _Done], None] = lambda k, d: None) -> tuple[dict[int, tuple], bool]:
+                           on_done: Callable[[int, _Done], None] = lambda k, d: None
+                           ) -> tuple[dict[int, tuple], KeyboardInterrupt | WorkersLost | None]:
     """``_execute`` with SIGTERM ending the run as Ctrl-C does (no orphans), the handlers restored after."""
     old_term = old_int = None
+    from bridge.core.launcher import on_main_thread
+
     _STOP.clear()
-    if threading.current_thread() is threading.main_thread():
+    if on_main_thread():
         old_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
         old_int = signal.signal(signal.SIGINT, _terminate_as_interrupt)
     try:
@@ -999,12 +1030,12 @@ def _judge(exp: Experiment, outcomes: list[Outcome]) -> tuple[list[tuple[Target,
     try:
         targets = exp.targets()
     except Exception as e:
-        targets, target_error = [], _error_text(e).splitlines()[0]
+        targets, target_error = [], _error_line(e)
     for t in targets:
         try:
             ours, ok, note = t.evaluate(outcomes)
         except Exception as e:
-            ours, ok, note = "error", None, f"evaluate() raised {_error_text(e).splitlines()[0]}"
+            ours, ok, note = "error", None, f"evaluate() raised {_error_line(e)}"
         verdicts.append((t, str(ours), ok, str(note)))
     return verdicts, target_error
 
