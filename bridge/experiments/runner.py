@@ -36,6 +36,7 @@ import numpy as np
 
 from bridge.core.rng import stream_seed
 from bridge.experiments.stats import finite_values, quartiles
+from swarm_logic.plugins import Registry
 
 RESERVED_COLUMNS = ("index", "seed", "error")
 _RESULT_FILES = ("trials.csv", "timings.csv", "report.md")
@@ -541,14 +542,17 @@ class _LocalPool:
             self.pool.shutdown(wait=True)
 
 
-def _workers(jobs: int, cluster: str | None = None, cluster_timeout_s: float = 30.0) -> Workers:
-    """This process (``jobs`` 1), ``jobs`` local worker processes, or the Dask cluster whose scheduler is at
-    ``cluster`` (connected now, so that a cluster that cannot run the trials is refused before anything is
-    written)."""
-    if cluster is not None:
-        from bridge.experiments.cluster import ClusterWorkers
+# distributed engines that run a run's tasks on a cluster, by name: a callable (address, timeout_s) -> Workers, found
+# by entry point (``swarm_sitl.clusters``: swarm-sitl's own ``dask``, ``bridge.experiments.cluster``)
+CLUSTERS: Registry[Callable[[str, float], Workers]] = Registry("swarm_sitl.clusters", "cluster engine", callable)
+CLUSTER_ENGINE = "dask"
 
-        return ClusterWorkers(cluster, cluster_timeout_s)
+
+def _workers(jobs: int, cluster: str | None = None, cluster_timeout_s: float = 30.0) -> Workers:
+    """This process (``jobs`` 1), ``jobs`` local worker processes, or the cluster whose scheduler is at ``cluster``
+    (connected now, so that a cluster that cannot run the trials is refused before anything is written)."""
+    if cluster is not None:
+        return CLUSTERS.get(CLUSTER_ENGINE)(cluster, cluster_timeout_s)
     return _InProcess() if jobs == 1 else _LocalPool(jobs)
 
 
