@@ -30,6 +30,7 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/swarm-sitl bench
+	$(BIN)/swarm-sitl bench --scale
 	$(BIN)/swarm-sitl bench --study rdpso
 	$(BIN)/swarm-sitl bench --study zebro
 	$(BIN)/swarm-sitl bench --study pfsm
