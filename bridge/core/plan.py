@@ -6,10 +6,14 @@ Everything in it follows from the config and the seed alone.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import importlib.metadata
+import importlib.util
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -284,6 +288,10 @@ def _place(cfg: Config, gi: int, radius: float, path: str) -> list[tuple[float, 
 PROTOCOL = 2
 
 
+CODE_PACKAGES = ("bridge", "firmware_sim", "swarm_logic")  # the code a session or a trial runs
+CODE_SUFFIXES = frozenset({".py", ".dbc", ".toml", ".json", ".yaml", ".yml", ".csv", ".urdf", ".xml"})  # and data
+
+
 def version() -> str:
     """This computer's swarm-sitl version (the installed package's)."""
     try:
@@ -292,9 +300,35 @@ def version() -> str:
         return "unknown"
 
 
+@functools.cache
+def code_fingerprint() -> str:
+    """This process's swarm-sitl version and a hash of its code: the sorted paths (relative to each package) and
+    bytes of the source and data files of ``CODE_PACKAGES``, as imported here. Computers that join one session, or
+    run one experiment's trials, must show the same (the same code gives the same digest). Computed once per
+    process."""
+    h = hashlib.sha256()
+    for package in CODE_PACKAGES:
+        spec = importlib.util.find_spec(package)
+        roots = list(spec.submodule_search_locations or []) if spec else []
+        if not roots:
+            h.update(f"{package}: missing\0".encode())
+            continue
+        root = Path(roots[0])
+        files = sorted(
+            (p.relative_to(root).as_posix(), p)
+            for p in root.rglob("*")
+            if p.suffix in CODE_SUFFIXES and "__pycache__" not in p.parts and p.is_file()
+        )
+        for rel, p in files:
+            data = p.read_bytes()
+            h.update(f"{package}/{rel}\0{len(data)}\0".encode())
+            h.update(data)
+    return f"{version()}+{h.hexdigest()[:16]}"
+
+
 def plan_offer(plan: Plan, joinable: frozenset[str] | None) -> bytes:
-    """The world's answer to a joiner's ``plan`` query (JSON): the session's name, the software version and protocol,
-    the plan, and which remote processes (a remote logic's, a host's) may still join (``None``: the session has
-    started)."""
-    return json.dumps({"session": plan.config["session"]["name"], "version": version(), "protocol": PROTOCOL,
+    """The world's answer to a joiner's ``plan`` query (JSON): the session's name, the software version with its code's
+    fingerprint and the protocol, the plan, and which remote processes (a remote logic's, a host's) may still join
+    (``None``: the session has started)."""
+    return json.dumps({"session": plan.config["session"]["name"], "version": code_fingerprint(), "protocol": PROTOCOL,
                        "joinable": None if joinable is None else sorted(joinable), "plan": plan.to_json()}).encode()

@@ -11,17 +11,13 @@ each task again (a worker may join later). Cancelling the run stops the sessions
 from __future__ import annotations
 
 import contextlib
-import functools
-import hashlib
-import importlib.util
 import logging
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bridge.core.plan import version
+from bridge.core.plan import code_fingerprint
 from bridge.experiments.runner import (
     Trial,
     WorkersLost,
@@ -37,8 +33,6 @@ from bridge.experiments.runner import (
 if TYPE_CHECKING:
     from distributed import Client
 
-CODE_PACKAGES = ("bridge", "firmware_sim", "swarm_logic")  # the code a trial runs; a worker must have it byte for byte
-CODE_SUFFIXES = frozenset({".py", ".dbc", ".toml", ".json", ".yaml", ".yml", ".csv", ".urdf", ".xml"})  # and data
 STOP_POLL_S = 0.25  # how often a running task asks whether the run was cancelled
 
 
@@ -48,30 +42,6 @@ class ClusterError(Exception):
 
 class SchedulerLost(ClusterError, WorkersLost):
     """The scheduler went away during the run (the runner writes what finished, then says this)."""
-
-
-@functools.cache
-def code_fingerprint() -> str:
-    """This process's swarm-sitl version and a hash of its code: the sorted paths (relative to each package) and
-    bytes of the source and data files of ``CODE_PACKAGES``, as imported here. Computed once per process."""
-    h = hashlib.sha256()
-    for package in CODE_PACKAGES:
-        spec = importlib.util.find_spec(package)
-        roots = list(spec.submodule_search_locations or []) if spec else []
-        if not roots:
-            h.update(f"{package}: missing\0".encode())
-            continue
-        root = Path(roots[0])
-        files = sorted(
-            (p.relative_to(root).as_posix(), p)
-            for p in root.rglob("*")
-            if p.suffix in CODE_SUFFIXES and "__pycache__" not in p.parts and p.is_file()
-        )
-        for rel, p in files:
-            data = p.read_bytes()
-            h.update(f"{package}/{rel}\0{len(data)}\0".encode())
-            h.update(data)
-    return f"{version()}+{h.hexdigest()[:16]}"
 
 
 def _run_checked(fingerprint: str, stop_event: str, ref: _Ref, trials: list[Trial]) -> list[_Done]:

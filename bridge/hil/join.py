@@ -32,7 +32,7 @@ from pydantic import ValidationError
 from bridge.core import transport
 from bridge.core.config import SessionCfg
 from bridge.core.launcher import child_env, end_group, id_ranges
-from bridge.core.plan import PROTOCOL, Plan, ProcPlan, version
+from bridge.core.plan import PROTOCOL, Plan, ProcPlan, code_fingerprint
 
 
 class JoinError(Exception):
@@ -84,9 +84,10 @@ def choose_host(offer: dict[str, Any], endpoint: str, session: str, host: str) -
 def _offered_plan(offer: dict[str, Any], endpoint: str, session: str) -> tuple[Plan, str]:
     """The plan of a world's offer from this version and session (a ``JoinError`` otherwise), and how to name it."""
     where = f"session {session!r} at {endpoint}"
-    if offer.get("version") != version() or offer.get("protocol") != PROTOCOL:
+    if offer.get("version") != code_fingerprint() or offer.get("protocol") != PROTOCOL:
         raise JoinError(f"{where} runs swarm-sitl {offer.get('version')} (protocol {offer.get('protocol')}), this "
-                        f"computer has {version()} (protocol {PROTOCOL}): install the same version on both")
+                        f"computer has {code_fingerprint()} (protocol {PROTOCOL}): install the same version, the "
+                        "same code, on both (the part after + is a hash of the code)")
     if offer.get("session") != session:
         raise JoinError(f"the session at {endpoint} is {offer.get('session')!r}, not {session!r}")
     try:

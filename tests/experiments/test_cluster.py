@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 from distributed import Client, LocalCluster
 
-from bridge.experiments.cluster import CODE_PACKAGES, ClusterError, _run_checked, _why, code_fingerprint
+from bridge.core.plan import CODE_PACKAGES, code_fingerprint
+from bridge.experiments.cluster import ClusterError, _run_checked, _why
 from bridge.experiments.runner import Experiment, Trial, TrialResult, _error_text, _ref, register, run_experiment
 from bridge.experiments.sessions import run_config
 from bridge.tools.cli import main
@@ -281,7 +282,7 @@ def _start_worker(address: str, name: str, path: Path, scratch: Path) -> subproc
 
 def _fingerprint_of(path: Path) -> str:
     """``code_fingerprint()`` in a process that imports the packages from ``path``."""
-    code = "from bridge.experiments.cluster import code_fingerprint; print(code_fingerprint())"
+    code = "from bridge.core.plan import code_fingerprint; print(code_fingerprint())"
     run = subprocess.run(
         [sys.executable, "-c", code], cwd=path, env={**os.environ, "PYTHONPATH": str(path)}, capture_output=True
     )

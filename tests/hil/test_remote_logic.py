@@ -280,6 +280,10 @@ def test_namespace_join_commands_and_the_offer_checks(tmp_path: Path, monkeypatc
         choose(json.loads(plan_offer(plan, frozenset({"remote2"}))), "tcp/h:1", "two", 3)
     with pytest.raises(JoinError, match="has already started"):
         choose(json.loads(plan_offer(plan, None)), "tcp/h:1", "two", 3)
-    monkeypatch.setattr("bridge.hil.join.version", lambda: "0.0.1")
-    with pytest.raises(JoinError, match=r"runs swarm-sitl \S+ \(protocol 2\), this computer has 0.0.1"):
+    monkeypatch.setattr("bridge.hil.join.code_fingerprint", lambda: "0.0.1+0123456789abcdef")
+    with pytest.raises(JoinError, match=r"runs swarm-sitl \S+\+\S+ \(protocol 2\), this computer has 0.0.1\+0123"):
         choose(offer, "tcp/h:1", "two", 3)
+    other = {**offer, "version": offer["version"].split("+")[0] + "+ffffffffffffffff"}  # same release, other code
+    monkeypatch.undo()
+    with pytest.raises(JoinError, match="the same code, on both"):
+        choose(other, "tcp/h:1", "two", 3)
