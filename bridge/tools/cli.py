@@ -287,11 +287,12 @@ def _parser_bench(sub: Any) -> None:
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--profile", action="store_true", help="profile every process; print the world's hot spots")
     p.add_argument("--config", help="session config to benchmark (default: the demo)")
-    p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time and the 12-robot "
-                                   "arena's real-time factor; zebro: 20 Zebros' real-time factor by packing and body "
-                                   "model, and the numerical 360-run table's wall time; roy: 100 numerical runs of "
-                                   "chapter 3's scenario with BAT, wall time and runs/s, the SonPI camera sessions, "
-                                   "chapter 6 with 1000 agents and the SonPIs under chapter 6's region planner)")
+    p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time with 100 and "
+                                   "1000 robots and the 12-robot arena's real-time factor; zebro: 20 Zebros' "
+                                   "real-time factor by packing and body model, and the numerical 360-run table's "
+                                   "wall time; roy: 100 numerical runs of chapter 3's scenario with BAT, wall time "
+                                   "and runs/s, the SonPI camera sessions, chapter 6 with 1000 agents and the "
+                                   "SonPIs under chapter 6's region planner)")
     p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
     p.set_defaults(fn=cmd_bench)
 
