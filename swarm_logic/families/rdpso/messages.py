@@ -28,9 +28,6 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 from functools import lru_cache
-from itertools import pairwise, repeat
-
-import numpy as np
 
 MAGIC = 0x52  # "R", RDPSO hello, version 1
 HEADER = struct.Struct("<BBHHffffffBBBHB")
@@ -39,8 +36,6 @@ MAGIC_WIDE = 0x57  # "W", the wide hello: 16-bit robot ids, 32-bit subgroup ids
 HEADER_WIDE = struct.Struct("<BHIHffffffBBBIB")
 MEMBER_WIDE = struct.Struct("<HBBe")
 MAX_ID = {1: 0xFF, 2: 0xFFFF}  # the largest robot id each id width carries
-MEMBER_DTYPE = {width: np.dtype([("id", f"<u{width}"), ("o8", "u1"), ("hops", "u1"), ("best", "<f2")])
-                for width in (1, 2)}  # a member entry of each hello, as numpy reads the wire
 ZIGBEE_BROADCAST_MAX = 92
 
 F_IMPROVED, F_CALL, F_SPAWN, F_FOUNDER, F_CANDIDATE = 1, 2, 4, 8, 16
@@ -66,8 +61,6 @@ class Hello:
     # ``member_index``'s result, computed once per hello (a decoded hello is shared by every robot that heard it)
     index: dict[tuple[int, int], dict[int, tuple[int, int, float]]] | None = field(default=None, compare=False,
                                                                                    repr=False)
-    wire: bytes = field(default=b"", compare=False, repr=False)  # the member list's bytes, as decoded
-    id_width: int = field(default=1, compare=False, repr=False)
 
 
 def member_index(h: Hello) -> dict[tuple[int, int], dict[int, tuple[int, int, float]]]:
@@ -79,21 +72,10 @@ def member_index(h: Hello) -> dict[tuple[int, int], dict[int, tuple[int, int, fl
     comparing entry by entry."""
     if h.index is None:
         index: dict[tuple[int, int], dict[int, tuple[int, int, float]]] = {}
-        if h.members and not h.wire:  # a hello built here, not received: its members as they are
-            for m, o8, hops, best in h.members:
-                age = (h.k - o8) & 0xFF
-                index.setdefault((age, hops + 1), {})[m] = (h.k - age, hops + 1, best)
-        elif h.members:
-            a = np.frombuffer(h.wire, MEMBER_DTYPE[h.id_width])
-            key = ((h.k - a["o8"].astype(np.int64)) & 0xFF) * 512 + a["hops"] + 1  # (age, relays) as one number
-            order = np.argsort(key, kind="stable")  # members keep their order within a group
-            key = key[order]
-            ids, bests = a["id"][order].tolist(), a["best"][order].astype(float).tolist()
-            starts = [*np.flatnonzero(np.diff(key, prepend=-1)).tolist(), len(key)]
-            for lo, hi in pairwise(starts):
-                age, relays = divmod(int(key[lo]), 512)
-                entries = zip(repeat(h.k - age), repeat(relays), bests[lo:hi], strict=False)
-                index[(age, relays)] = dict(zip(ids[lo:hi], entries, strict=True))
+        k = h.k
+        for m, o8, hops, best in h.members:
+            age = (k - o8) & 0xFF
+            index.setdefault((age, hops + 1), {})[m] = (k - age, hops + 1, best)
         h.index = index
     return h.index
 
@@ -144,5 +126,4 @@ def decode(data: bytes) -> Hello | None:
         return None
     chosen = tuple(data[header.size:end]) if width == 1 else struct.unpack_from(f"<{n_chosen}H", data, header.size)
     members = tuple(member.iter_unpack(data[end:])) if end < n else ()
-    return Hello(robot, sid, k, x, y, hbest, lh, lx, ly, sc, n_kill, flags, target, chosen, members,
-                 wire=data[end:], id_width=width)
+    return Hello(robot, sid, k, x, y, hbest, lh, lx, ly, sc, n_kill, flags, target, chosen, members)
