@@ -45,7 +45,6 @@ from swarm_logic.families.rdpso.messages import (
     Hello,
     decode,
     encode,
-    member_index,
 )
 from swarm_logic.iteration import IterationSchedule
 from swarm_logic.robot import Robot
@@ -74,47 +73,6 @@ def new_subgroup_id(decider: int, k: int) -> int:
     spawning subgroup, which every member agrees on) at iteration ``k``: unique while no robot founds two within
     256 iterations, and never one of the initial ids 1..15."""
     return ((decider + 1) << 8) | (k & 0xFF)
-
-
-def merge_relayed(table: dict[int, tuple[int, int, float]], mates: list[Hello], heard: dict[int, Hello],
-                  departed: dict[int, int], k: int, me: int) -> None:
-    """Take into the member ``table`` (member -> (iteration, relays, best)) the members the ``mates``' hellos of
-    iteration ``k`` carry, one relay further: a member's entry replaces the table's when it is fresher (a newer
-    iteration, or as new over fewer relays) and newer than the news that it left (``departed``); members heard
-    directly and this robot itself are not taken. Among equally fresh entries the first mate's (arrival order) wins.
-
-    Each member is compared once, not once per hello that carries it: ``relayed`` picks the freshest entry per
-    member with ``dict.update`` over the hellos' freshness groups, and an entry the table already holds is skipped
-    by a set difference (both in C), which is what makes a group of hundreds of robots affordable."""
-    merged = relayed(mates)
-    if k > 0xFFFF:  # the hellos' iteration numbers are mod 65536: unwrap them
-        merged = {m: (v[0] + (k & ~0xFFFF), v[1], v[2]) for m, v in merged.items()}
-    # an entry equal to the table's changes nothing (not fresher): only the others are compared
-    for m, (origin, relays, best) in merged.items() - table.items() if merged else ():
-        if m in heard or m == me:
-            continue
-        old = table.get(m)
-        if old is not None and (origin < old[0] or (origin == old[0] and relays >= old[1])):
-            continue
-        if origin <= departed.get(m, -1):
-            continue  # older than the news that it left
-        table[m] = (origin, relays, best)
-
-
-def relayed(mates: list[Hello]) -> dict[int, tuple[int, int, float]]:
-    """Per member the ``mates``' hellos carry: the freshest entry (smallest age, then fewest relays), the first mate's
-    (in arrival order) among equals. Freshness groups are applied worst first and, within a group, mates last to
-    first, so the last write is that entry."""
-    if not mates:
-        return {}
-    indexes = [member_index(h) for h in reversed(mates)]
-    merged: dict[int, tuple[int, int, float]] = {}
-    for key in sorted(set().union(*indexes), reverse=True):
-        for index in indexes:
-            group = index.get(key)
-            if group is not None:
-                merged.update(group)
-    return merged
 
 
 def half(v: float) -> float:
@@ -486,7 +444,21 @@ class Rdpso(IterationSchedule, Controller):
                 continue
             table[rid] = (k, 0, half(msg.hbest))
             self.departed.pop(rid, None)
-        merge_relayed(table, [msg for msg in heard.values() if msg.sid == self.sid], heard, self.departed, k, r.id)
+        departed = self.departed
+        me = r.id
+        for msg in heard.values():
+            if msg.sid != self.sid:
+                continue
+            for m, o8, hops, best in msg.members:
+                if m in heard or m == me:
+                    continue
+                origin = k - ((k - o8) & 0xFF)  # unwrap the iteration number (mod 256)
+                old = table.get(m)
+                if old is not None and (origin < old[0] or (origin == old[0] and hops + 1 >= old[1])):
+                    continue
+                if origin <= departed.get(m, -1):
+                    continue  # older than the news that it left
+                table[m] = (origin, hops + 1, best)
         limit = k - self.p["miss_limit"]
         for m in [m for m, v in table.items() if v[0] + v[1] <= limit]:
             del table[m]

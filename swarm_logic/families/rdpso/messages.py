@@ -58,26 +58,6 @@ class Hello:
     target: int  # SPAWN: the new subgroup's id; CANDIDATE: the subgroup applied for
     chosen: tuple[int, ...] = ()
     members: tuple[tuple[int, int, int, float], ...] = field(default=())  # (id, iteration mod 256, relays, best)
-    # ``member_index``'s result, computed once per hello (a decoded hello is shared by every robot that heard it)
-    index: dict[tuple[int, int], dict[int, tuple[int, int, float]]] | None = field(default=None, compare=False,
-                                                                                   repr=False)
-
-
-def member_index(h: Hello) -> dict[tuple[int, int], dict[int, tuple[int, int, float]]]:
-    """The members ``h`` carries as a receiver takes them, grouped by freshness: (age, relays) -> {member: (origin,
-    relays, best)}, where age is how many iterations before ``h``'s own the member's newest hello was sent (the
-    iteration number unwrapped mod 256), origin is that iteration (``h.k - age``, so mod 65536 as ``h.k``) and
-    relays counts the hop to the receiver. A receiver keeps, per member, the
-    entry of the smallest (age, relays); grouping lets it merge whole groups with ``dict.update`` (in C) instead of
-    comparing entry by entry."""
-    if h.index is None:
-        index: dict[tuple[int, int], dict[int, tuple[int, int, float]]] = {}
-        k = h.k
-        for m, o8, hops, best in h.members:
-            age = (k - o8) & 0xFF
-            index.setdefault((age, hops + 1), {})[m] = (k - age, hops + 1, best)
-        h.index = index
-    return h.index
 
 
 def encode(h: Hello, limit: int = ZIGBEE_BROADCAST_MAX, id_width: int = 1) -> bytes:
