@@ -17,11 +17,26 @@ def test_a_1000_robot_rdpso_cell_runs_a_few_iterations_with_the_wide_hello() -> 
     rng = np.random.default_rng(7)
     field = make_field("peaks", 300.0, seed=int(rng.integers(1 << 31)))
     obs = random_obstacles(300.0, rng=rng, keep_clear=[(*field.optimum(), 15.0)])
-    params = {"alpha": 0.632, "rho1": 0.1, "rho2": 0.3, "rho3": 0.79, "rho4": 0.79, "d_max_m": 30.0,
-              "dx_max_m": 0.5, "subgroups_min": 0, "subgroups_init": 5, "subgroups_max": 8, "sc_max": 30,
-              "r_w_m": 5.0, "payload_max": 4096, "log_every": 1, "send_jitter_s": 0.0}
-    res = numerical.run(Rdpso, params, n, iterations, field, (300.0, 300.0), obs, numerical.LinkModel(range_m=30.0),
-                        seed=3)
+    params = {
+        "alpha": 0.632,
+        "rho1": 0.1,
+        "rho2": 0.3,
+        "rho3": 0.79,
+        "rho4": 0.79,
+        "d_max_m": 30.0,
+        "dx_max_m": 0.5,
+        "subgroups_min": 0,
+        "subgroups_init": 5,
+        "subgroups_max": 8,
+        "sc_max": 30,
+        "r_w_m": 5.0,
+        "payload_max": 4096,
+        "log_every": 1,
+        "send_jitter_s": 0.0,
+    }
+    res = numerical.run(
+        Rdpso, params, n, iterations, field, (300.0, 300.0), obs, numerical.LinkModel(range_m=30.0), seed=3
+    )
     assert res.robot_iterations == n * iterations  # every robot logged every iteration
     assert res.subgroups[-1] == 5 and res.excluded[-1] == 0  # five initial subgroups of 200 (ids beyond 255)
     assert res.packets == n * iterations and res.deliveries > n * iterations
@@ -42,9 +57,23 @@ def test_beyond_255_robots_needs_the_wide_hello_and_gossip() -> None:
 
 def test_the_wide_hello_carries_16_bit_robot_ids_and_32_bit_subgroup_ids() -> None:
     sid = new_subgroup_id(999, 300)
-    h = Hello(robot=999, sid=sid, k=70000, x=1.5, y=-2.0, hbest=0.5, ledger_h=0.75, ledger_x=3.0, ledger_y=4.0, sc=3,
-              n_kill=1, flags=1, target=new_subgroup_id(998, 12), chosen=(300, 65535),
-              members=((256, 9, 0, 0.25), (1000, 7, 2, -1.0)))
+    h = Hello(
+        robot=999,
+        sid=sid,
+        k=70000,
+        x=1.5,
+        y=-2.0,
+        hbest=0.5,
+        ledger_h=0.75,
+        ledger_x=3.0,
+        ledger_y=4.0,
+        sc=3,
+        n_kill=1,
+        flags=1,
+        target=new_subgroup_id(998, 12),
+        chosen=(300, 65535),
+        members=((256, 9, 0, 0.25), (1000, 7, 2, -1.0)),
+    )
     back = decode(encode(h, 4096, id_width=2))
     assert (back.robot, back.sid, back.k, back.target) == (999, sid, 70000 & 0xFFFF, h.target)
     assert back.chosen == (300, 65535)
