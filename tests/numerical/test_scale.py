@@ -3,13 +3,17 @@ the dense distance matrix it replaces for large swarms."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from bridge.core.config import ConfigError, load_config
 from bridge.numerical import runner as numerical
 from bridge.numerical.objectives import make_field, random_obstacles
 from swarm_logic.families.rdpso.controller import Rdpso, colour, new_subgroup_id
 from swarm_logic.families.rdpso.messages import Hello, decode, encode
+from tests.conftest import ROOT
 
 
 def test_a_1000_robot_rdpso_cell_runs_a_few_iterations_with_the_wide_hello() -> None:
@@ -53,6 +57,14 @@ def test_beyond_255_robots_needs_the_wide_hello_and_gossip() -> None:
         Rdpso.resolve({"n_total": 300, "id_width": 2, "comm": "regular"})
     with pytest.raises(ValueError, match="id_width"):
         Rdpso.resolve({"id_width": 3})
+
+
+def test_a_session_config_beyond_255_robots_is_still_refused(tmp_path: Path) -> None:
+    text = (ROOT / "hil_configs" / "rdpso" / "rdpso_arena.toml").read_text().replace("n_total = 12", "n_total = 300")
+    cfg = tmp_path / "big.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError, match=r"big\.toml: .*n_total: must lie in \[1, 255\], got 300"):
+        load_config(cfg)
 
 
 def test_the_wide_hello_carries_16_bit_robot_ids_and_32_bit_subgroup_ids() -> None:

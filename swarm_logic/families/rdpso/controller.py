@@ -226,8 +226,8 @@ class Rdpso(IterationSchedule, Controller):
         for name in ("n_total", "first_id", "n_init", "n_min", "n_max"):
             low = 1 if name == "n_total" else 0
             if not low <= p[name] <= top:
-                why = "robot ids travel as one byte (id_width = 2 carries up to 65535)" if top == 0xFF else ""
-                raise ValueError(f"{name}: must lie in [{low}, {top}]{f' ({why})' if why else ''}, got {p[name]!r}")
+                why = " (robot ids travel as one byte; id_width = 2 carries up to 65535)" if top == 0xFF else ""
+                raise ValueError(f"{name}: must lie in [{low}, {top}], got {p[name]!r}{why}")
         if p["id_width"] != 1 and p["comm"] != "gossip":
             raise ValueError(f"id_width: {p['id_width']} needs comm = gossip (the routing layer's frames carry "
                              f"one-byte ids), got comm = {p['comm']!r}")
