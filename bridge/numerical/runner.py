@@ -13,6 +13,7 @@ packets sent in that round and applies the moves commanded, then senses at the n
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Callable
@@ -230,6 +231,8 @@ def run(behaviour: str | type[Controller], params: dict[str, Any], n: int, itera
     obstacles = np.zeros((0, 4)) if obstacles is None else np.asarray(obstacles, float)
     link = link or LinkModel()
     p = {**params, "n_total": n}
+    if n > 255 and "id_width" in getattr(cls, "defaults", {}):
+        p.setdefault("id_width", 2)  # no radio frames here: a swarm beyond one-byte ids takes the wide message format
     it_s = float(p.get("iteration_s", 1.0))
     if start is None:
         g_init = int(p.get("subgroups_init", 1)) or 1
@@ -340,30 +343,73 @@ def _sense(world: NumericalWorld, robots: list[Robot]) -> np.ndarray:
 
 
 def _deliver(world: NumericalWorld, robots: list[Robot], deaths: dict[int, float] | None, t: float) -> None:
+    """The round's packets to every robot in reach, in the order they were sent; each sender gets its report."""
     if not world.outbox:
         return
     pos = world.pos
     link = world.link
     senders = np.array([s for s, _, _, _ in world.outbox])
-    d = np.hypot(pos[senders, None, 0] - pos[None, :, 0], pos[senders, None, 1] - pos[None, :, 1])
-    if link.mode == "distance":
-        reach = d <= link.range_m
-        rssi = None
-    else:
-        rssi = link.rssi(d)
-        reach = rssi >= link.sensitivity_dbm
+    rows, cols, rssi = _reach(pos, senders, link)
+    starts = np.searchsorted(rows, np.arange(len(senders) + 1)).tolist()
+    cols = cols.tolist()
+    rssi = None if rssi is None else rssi.tolist()
+    dead = None if not deaths else {j for j, t_dead in deaths.items() if t >= t_dead}
+    inboxes: dict[int, list[Packet]] = {}  # receiver -> its packets of this round, in sending order
     for row, (s, dest, data, fid) in enumerate(world.outbox):
         world.packets += 1
-        targets = np.flatnonzero(reach[row]) if dest is None else [dest] if reach[row, dest] else []
-        # the sender's report: a broadcast always goes out; a unicast is acknowledged by a live destination in range
-        ok = dest is None or (bool(len(targets)) and not (deaths and t >= deaths.get(int(dest), math.inf)))
+        lo, hi = starts[row], starts[row + 1]
+        if dest is None:
+            span = range(lo, hi)
+            ok = True  # a broadcast always goes out
+        else:  # a unicast is acknowledged by a live destination in range
+            at = bisect.bisect_left(cols, dest, lo, hi)
+            span = range(at, at + 1) if at < hi and cols[at] == dest else range(0)
+            ok = bool(span) and not (dead and dest in dead)
         robots[s].xbee.done[fid] = PointTxStatus(ok)
-        for j in targets:
-            if j == s or (deaths and t >= deaths.get(int(j), math.inf)):
+        shared = Packet(s, data, None) if rssi is None else None  # one object for every receiver: they only read it
+        for q in span:
+            j = cols[q]
+            if j == s or (dead and j in dead):
                 continue
-            robots[j].xbee.inbox.append(Packet(s, data, None if rssi is None else float(rssi[row, j])))
-            world.deliveries += 1
+            pkt = shared if rssi is None else Packet(s, data, rssi[q])
+            if (box := inboxes.get(j)) is None:
+                inboxes[j] = [pkt]
+            else:
+                box.append(pkt)
+    for j, pkts in inboxes.items():
+        robots[j].xbee.inbox.extend(pkts)
+        world.deliveries += len(pkts)
     world.outbox.clear()
+
+
+def _reach(pos: np.ndarray, senders: np.ndarray, link: LinkModel) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Who hears whom: (row, robot) pairs, sorted, of the senders' rows (indices into ``senders``) and the robots in
+    their reach, and the received power of each pair (None in distance mode).
+
+    Distance and power are ``np.hypot`` of the coordinate differences, the same numbers as a dense sender x robot
+    matrix; a k-d tree only picks the candidate pairs (within the reach plus a margin far above rounding), so a large
+    swarm costs its neighbours, not its square."""
+    if link.mode == "distance":
+        reach = link.range_m
+    else:
+        reach = 10 ** ((link.tx_dbm - link.pl0_db - link.sensitivity_dbm) / (10 * link.exponent))
+    n = len(pos)
+    if not math.isfinite(reach) or len(senders) * n <= 250_000:  # small swarms (and no range): the dense matrix
+        d = np.hypot(pos[senders, None, 0] - pos[None, :, 0], pos[senders, None, 1] - pos[None, :, 1])
+        rows, cols = np.nonzero(d <= reach if link.mode == "distance" else link.rssi(d) >= link.sensitivity_dbm)
+        dist = d[rows, cols]
+    else:
+        from scipy.spatial import cKDTree
+
+        pairs = cKDTree(pos).query_ball_point(pos[senders], reach * (1 + 1e-9) + 1e-9)
+        rows = np.repeat(np.arange(len(senders)), [len(p) for p in pairs])
+        cols = np.fromiter((j for p in pairs for j in p), int, len(rows))
+        order = np.lexsort((cols, rows))
+        rows, cols = rows[order], cols[order]
+        dist = np.hypot(pos[senders[rows], 0] - pos[cols, 0], pos[senders[rows], 1] - pos[cols, 1])
+        keep = dist <= reach if link.mode == "distance" else link.rssi(dist) >= link.sensitivity_dbm
+        rows, cols, dist = rows[keep], cols[keep], dist[keep]
+    return rows, cols, None if link.mode == "distance" else link.rssi(dist)
 
 
 def _apply_moves(world: NumericalWorld) -> None:

@@ -317,11 +317,12 @@ def _parser_bench(sub: Any) -> None:
                    help="the scale goals' cases (hil_configs/bench/scale.toml): the radio demo at 10 to 50 robots, 10 "
                         "robots without radios, the 60-scout pavilion packed, 200 robots packed; each with its goal")
     p.add_argument("--cases", help="a TOML file of cases ([[cases]]: label, config, robots, per_process, goal)")
-    p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time and the 12-robot "
-                                   "arena's real-time factor; zebro: 20 Zebros' real-time factor by packing and body "
-                                   "model, and the numerical 360-run table's wall time; roy: 100 numerical runs of "
-                                   "chapter 3's scenario with BAT, wall time and runs/s, the SonPI camera sessions, "
-                                   "chapter 6 with 1000 agents and the SonPIs under chapter 6's region planner)")
+    p.add_argument("--study", help="a study's own figures (rdpso: a numerical E9 cell's wall time with 100 and "
+                                   "1000 robots and the 12-robot arena's real-time factor; zebro: 20 Zebros' "
+                                   "real-time factor by packing and body model, and the numerical 360-run table's "
+                                   "wall time; roy: 100 numerical runs of chapter 3's scenario with BAT, wall time "
+                                   "and runs/s, the SonPI camera sessions, chapter 6 with 1000 agents and the "
+                                   "SonPIs under chapter 6's region planner)")
     p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
     p.add_argument("--hosts", type=_numbers(int, 1, "1,2"), metavar="N[,N...]",
                    help="the robots' processes on N other hosts (joins on this machine over TCP), against all here: "

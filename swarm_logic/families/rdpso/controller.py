@@ -41,6 +41,7 @@ from swarm_logic.families.rdpso.messages import (
     F_FOUNDER,
     F_IMPROVED,
     F_SPAWN,
+    MAX_ID,
     Hello,
     decode,
     encode,
@@ -57,7 +58,9 @@ def colour(sid: int) -> tuple[int, int, int]:
     """The LED colour of a subgroup (white: socially excluded), as on the real robots (Fig. 4.12)."""
     if sid == 0:
         return WHITE
-    return PALETTE[(sid - 1) % len(PALETTE)] if sid <= len(PALETTE) else PALETTE[zlib.crc32(sid.to_bytes(2)) % 8]
+    if sid <= len(PALETTE):
+        return PALETTE[(sid - 1) % len(PALETTE)]
+    return PALETTE[zlib.crc32(sid.to_bytes(2 if sid < 1 << 16 else 4)) % 8]  # 4 bytes: the wide hello's ids
 
 
 def chance(rng: random.Random, p: float) -> bool:
@@ -122,6 +125,7 @@ class Rdpso(IterationSchedule, Controller):
         "swarm_seed": 0,  # shared by every robot: seeds the subgroups' common draws
         "log_every": 1,  # iterations between "rdpso" log records (0: none)
         "payload_max": 92,  # bytes per hello: a ZigBee broadcast's limit (more members than fit: nearest sent)
+        "id_width": 1,  # bytes per robot id in the hello: 1 (ZigBee, ids < 256) | 2 (wide, beyond 255 robots)
         "first_id": 0,  # the robot id of the swarm's first scout (rangers or other robots may come before)
         "deployed": False,  # dropped by a ranger (swarm_logic.families.rdpso.est): start at its START, from its pose
         # information sharing (chapter 6): gossip (one hello per iteration, subgroup state spreads hop by hop),
@@ -152,13 +156,13 @@ class Rdpso(IterationSchedule, Controller):
         "q_min_dbm": DBM_RANGE,
         "k_q": "(0, inf)",
         "k_conn": "[1, inf)",
-        "n_total": "[1, 255]",  # robot ids travel as one byte
+        "n_total": "[1, 65535]",  # robot ids travel as one byte: at most 255 unless id_width = 2 (resolve)
         "subgroups_init": "[0, 15]",  # and subgroups_min <= subgroups_init <= subgroups_max
         "subgroups_min": "[0, 255]",
         "subgroups_max": "[0, 255]",
-        "n_init": "[0, 255]",  # 0: derived
-        "n_min": "[0, 255]",
-        "n_max": "[0, 255]",
+        "n_init": "[0, 65535]",  # 0: derived; like n_total, at most 255 unless id_width = 2
+        "n_min": "[0, 65535]",
+        "n_max": "[0, 65535]",
         "miss_limit": "[1, inf)",
         "speed_mps": f"(0, {MAX_SPEED_MPS:g}]",
         "min_move_m": "[0, inf)",
@@ -166,7 +170,8 @@ class Rdpso(IterationSchedule, Controller):
         "swarm_seed": "[0, inf)",
         "log_every": "[0, inf)",
         "payload_max": "[42, 65535]",
-        "first_id": "[0, 255]",
+        "first_id": "[0, 65535]",  # at most 255 unless id_width = 2
+        "id_width": "[1, 2]",
         "route_buffer": "[1, inf)",
         "route_ttl": "[1, 255]",  # one byte in the routing layer's frames
         "discovery_timeout_s": "(0, inf)",
@@ -181,6 +186,7 @@ class Rdpso(IterationSchedule, Controller):
     def resolve(cls, params: dict[str, Any]) -> dict[str, Any]:
         """Defaults merged with ``params``, checked; ValueError names the parameter and the reason."""
         p = cls.with_defaults(params)  # each value of its kind and in its range
+        cls._check_ids(p)
         if p["fractional_form"] not in ("thesis", "exact_gl"):
             raise ValueError(f"fractional_form: {p['fractional_form']!r} is not one of thesis, exact_gl")
         if p["link_mode"] not in ("distance", "rssi"):
@@ -211,6 +217,20 @@ class Rdpso(IterationSchedule, Controller):
         if not 1 <= p["n_min"] <= p["n_max"]:
             raise ValueError(f"n_min/n_max: need 1 <= n_min <= n_max, got {p['n_min']}/{p['n_max']}")
         return p
+
+    @classmethod
+    def _check_ids(cls, p: dict[str, Any]) -> None:
+        """Robot counts and ids within what the hello's id width carries: one byte (the ZigBee hello, what real
+        robots and the co-simulation run) unless ``id_width`` is 2; the routing layer's frames carry one byte."""
+        top = MAX_ID[int(p["id_width"])]
+        for name in ("n_total", "first_id", "n_init", "n_min", "n_max"):
+            low = 1 if name == "n_total" else 0
+            if not low <= p[name] <= top:
+                why = " (robot ids travel as one byte; id_width = 2 carries up to 65535)" if top == 0xFF else ""
+                raise ValueError(f"{name}: must lie in [{low}, {top}], got {p[name]!r}{why}")
+        if p["id_width"] != 1 and p["comm"] != "gossip":
+            raise ValueError(f"id_width: {p['id_width']} needs comm = gossip (the routing layer's frames carry "
+                             f"one-byte ids), got comm = {p['comm']!r}")
 
     @classmethod
     def warnings(cls, params: dict[str, Any]) -> list[str]:
@@ -365,7 +385,7 @@ class Rdpso(IterationSchedule, Controller):
         members = tuple((m, *v) for m, v in self.table.items())  # pruned to the fresh ones in the last phase B
         hello = Hello(r.id, self.sid, self.k, self.x, self.y, _f(self.hbest), _f(self.ledger_h), self.chi2[0],
                       self.chi2[1], self.sc, self.n_kill, flags, target, self.chosen, members)
-        self.outgoing = encode(hello, int(self.p["payload_max"]))
+        self.outgoing = encode(hello, int(self.p["payload_max"]), int(self.p["id_width"]))
         self.offer_flags = 0
         self.offer_target = 0
 

@@ -17,6 +17,10 @@ Layout (little-endian): ``<BBHHffffffBBBHB`` header (36 bytes), ``k`` chosen ids
 ``<BBBe`` (id, iteration mod 256, relays, personal best as a half float). A ZigBee broadcast carries at most 92
 bytes: 36 + k + 5 m, so 11 members with k = 1; when more are known, those over the fewest relays are sent (``encode``'s
 ``limit``; the numerical runner, with no radio payload limit, raises it). Robot ids must be below 256.
+
+The wide hello (``id_width`` 2, magic ``W``) is the same record with 16-bit robot ids and 32-bit subgroup ids:
+``<BHIHffffffBBBIB`` header (42 bytes), ``k`` chosen ids (2 bytes each), per member ``<HBBe`` (6 bytes). It is for
+swarms beyond 255 robots (the numerical runner's large cells); a ZigBee broadcast carries fewer members with it.
 """
 
 from __future__ import annotations
@@ -28,6 +32,10 @@ from functools import lru_cache
 MAGIC = 0x52  # "R", RDPSO hello, version 1
 HEADER = struct.Struct("<BBHHffffffBBBHB")
 MEMBER = struct.Struct("<BBBe")
+MAGIC_WIDE = 0x57  # "W", the wide hello: 16-bit robot ids, 32-bit subgroup ids
+HEADER_WIDE = struct.Struct("<BHIHffffffBBBIB")
+MEMBER_WIDE = struct.Struct("<HBBe")
+MAX_ID = {1: 0xFF, 2: 0xFFFF}  # the largest robot id each id width carries
 ZIGBEE_BROADCAST_MAX = 92
 
 F_IMPROVED, F_CALL, F_SPAWN, F_FOUNDER, F_CANDIDATE = 1, 2, 4, 8, 16
@@ -52,23 +60,27 @@ class Hello:
     members: tuple[tuple[int, int, int, float], ...] = field(default=())  # (id, iteration mod 256, relays, best)
 
 
-def encode(h: Hello, limit: int = ZIGBEE_BROADCAST_MAX) -> bytes:
-    """Bytes of ``h``; when the member list does not fit in ``limit`` bytes, the nearest members are kept."""
+def encode(h: Hello, limit: int = ZIGBEE_BROADCAST_MAX, id_width: int = 1) -> bytes:
+    """Bytes of ``h``; when the member list does not fit in ``limit`` bytes, the nearest members are kept.
+    ``id_width`` 1: the ZigBee hello (ids below 256); 2: the wide hello."""
+    wide = id_width == 2
+    header, member = (HEADER_WIDE, MEMBER_WIDE) if wide else (HEADER, MEMBER)
     members = h.members
-    room = (limit - HEADER.size - len(h.chosen)) // MEMBER.size
+    room = (limit - header.size - id_width * len(h.chosen)) // member.size
     if len(members) > room:
         members = tuple(sorted(members, key=lambda m: (m[2], m[0]))[:max(0, room)])
-    head = HEADER.pack(MAGIC, h.robot, h.sid, h.k & 0xFFFF, h.x, h.y, h.hbest, h.ledger_h, h.ledger_x, h.ledger_y,
-                       min(h.sc, 255), min(h.n_kill, 255), h.flags, h.target, len(h.chosen))
+    head = header.pack(MAGIC_WIDE if wide else MAGIC, h.robot, h.sid, h.k & 0xFFFF, h.x, h.y, h.hbest, h.ledger_h,
+                       h.ledger_x, h.ledger_y, min(h.sc, 255), min(h.n_kill, 255), h.flags, h.target, len(h.chosen))
     flat = []
     for i, kk, hops, best in members:
         flat += (i, kk & 0xFF, hops if hops < 255 else 255, best if -65504.0 <= best <= 65504.0 else _half(best))
-    return head + bytes(h.chosen) + _members_struct(len(members)).pack(*flat)
+    chosen = struct.pack(f"<{len(h.chosen)}H", *h.chosen) if wide else bytes(h.chosen)
+    return head + chosen + _members_struct(len(members), wide).pack(*flat)
 
 
-@lru_cache(maxsize=256)
-def _members_struct(m: int) -> struct.Struct:
-    return struct.Struct("<" + "BBBe" * m)
+@lru_cache(maxsize=512)
+def _members_struct(m: int, wide: bool = False) -> struct.Struct:
+    return struct.Struct("<" + ("HBBe" if wide else "BBBe") * m)
 
 
 def _half(v: float) -> float:
@@ -82,12 +94,16 @@ def decode(data: bytes) -> Hello | None:
     Cached: a broadcast reaches many robots with the same bytes (in one process, the numerical runner), so each
     is unpacked once. The result is shared: treat it as read-only."""
     n = len(data)
-    if n < HEADER.size or data[0] != MAGIC:
+    if n and data[0] == MAGIC_WIDE:
+        header, member, width = HEADER_WIDE, MEMBER_WIDE, 2
+    else:
+        header, member, width = HEADER, MEMBER, 1
+    if n < header.size or data[0] not in (MAGIC, MAGIC_WIDE):
         return None
-    _, robot, sid, k, x, y, hbest, lh, lx, ly, sc, n_kill, flags, target, n_chosen = HEADER.unpack_from(data)
-    end = HEADER.size + n_chosen
-    if end > n or (n - end) % MEMBER.size:
+    _, robot, sid, k, x, y, hbest, lh, lx, ly, sc, n_kill, flags, target, n_chosen = header.unpack_from(data)
+    end = header.size + width * n_chosen
+    if end > n or (n - end) % member.size:
         return None
-    chosen = tuple(data[HEADER.size:end])
-    members = tuple(MEMBER.iter_unpack(data[end:])) if end < n else ()
+    chosen = tuple(data[header.size:end]) if width == 1 else struct.unpack_from(f"<{n_chosen}H", data, header.size)
+    members = tuple(member.iter_unpack(data[end:])) if end < n else ()
     return Hello(robot, sid, k, x, y, hbest, lh, lx, ly, sc, n_kill, flags, target, chosen, members)
