@@ -7,7 +7,8 @@ dies is reported to the world, which applies the failure policy. Children are in
 with the launcher (PR_SET_PDEATHSIG), so no process of a session outlives it. A remote logic process
 (``logic = "remote"``) or a host's (``[[hosts]]``) is not its child: it joins from another computer (``swarm-sitl
 join``, whose command the launcher prints, or for a host with a ``launch`` command runs it: that command is its
-child, ended with the session, and its failure fails the host's processes), and the world watches it (its
+child, ended with the session or with the launcher (``bridge.hosts.tethered``), and its failure fails the host's
+processes), and the world watches it (its
 timeouts, ``startup_timeout_s`` and ``hang_timeout_s``, and the joiner's liveliness).
 """
 
@@ -507,7 +508,9 @@ def _launch_host(cfg, h, plan: Plan, logs: Path) -> Child:
     cmd = launch_command(h.launch, endpoint, cfg.session.name, h.name)
     name = f"host-{h.name}"
     with open(logs / f"{name}.log", "wb") as log:
-        p = subprocess.Popen(["/bin/sh", "-c", cmd], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        # tethered: the command and what it starts end with this launcher, even should it be killed
+        p = subprocess.Popen([sys.executable, "-m", "bridge.hosts.tethered", str(os.getpid()), "--", "/bin/sh", "-c",
+                              cmd], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                              start_new_session=True, env=child_env())
     procs = tuple(p.name for p in plan.procs if p.host == h.name)
     robots = tuple(sorted({r for pp in plan.procs if pp.host == h.name for r in pp.robots}))
