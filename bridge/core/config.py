@@ -997,6 +997,27 @@ def read_toml(p: Path, what: str = "config") -> dict[str, Any]:
         raise ConfigError(f"{p}: not valid TOML: {e}") from None
 
 
+def _override(raw: dict[str, Any], p: Path, dotted: str, value: Any) -> None:
+    """Set one override in the raw config: ``session.seed``, a list's entry by index (``robots.0.params.speed``), or
+    a whole top-level table or list (``services``). Missing tables on the way are created."""
+    keys = dotted.split(".")
+    node: Any = raw
+    for i, key in enumerate(keys):
+        last = i == len(keys) - 1
+        if isinstance(node, list):
+            if not key.isdigit() or int(key) >= len(node):
+                raise ConfigError(f"{p}: override {dotted}: {'.'.join(keys[:i]) or key} has no entry {key!r}")
+            key = int(key)  # type: ignore[assignment]
+        elif not isinstance(node, dict):
+            raise ConfigError(f"{p}: override {dotted}: {'.'.join(keys[:i])} is a value, not a table")
+        if last:
+            node[key] = value
+        else:
+            if isinstance(node, dict) and key not in node:
+                node[key] = {}
+            node = node[key]
+
+
 def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
     """Read and validate ``path``; ``overrides`` are command-line values (``session.seed`` etc.)."""
     p = Path(path)
@@ -1011,8 +1032,7 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
                 raise ConfigError(f"{p}: robots: --robots needs exactly one [[robots]] group, found {len(groups)}")
             groups[0]["count"] = value
             continue
-        section, key = dotted.split(".")
-        raw.setdefault(section, {})[key] = value
+        _override(raw, p, dotted, value)
     try:
         cfg = Config.model_validate(raw)
     except ValidationError as e:

@@ -20,6 +20,7 @@ order, so the recording does not depend on process packing, speed or machine loa
 from __future__ import annotations
 
 import contextlib
+import fnmatch
 import json
 import os
 import queue
@@ -161,6 +162,8 @@ class Hub:
         self.routes = route_table(self._media)
         self.routes[("log", "logic")] = self._log
         self.routes[("log", SERVICE_ROLE)] = self._service_log
+        self.routes[("stop", SERVICE_ROLE)] = self._service_stop
+        self._taps(cfg)
         self._log_hooks = self._media + self.loop_functions
 
     def robot_spec(self, r: int) -> Any:
@@ -255,7 +258,9 @@ class Hub:
                 if key.startswith("hello/"):
                     p = key.split("/", 1)[1]
                     if p in missing and isinstance(msg.get("pid"), int):
-                        if p in remote:  # its pid is on another computer: never ours to kill
+                        if self.procs[p].inproc:  # served by the launcher itself: never ours to kill
+                            pass
+                        elif p in remote:  # its pid is on another computer: never ours to kill
                             self.joinable = frozenset((missing & remote) - {p})
                             pp = self.procs[p]
                             who = f"host {pp.host}'s {p}" if pp.host else f"robot {pp.robots[0]}'s logic"
@@ -381,14 +386,21 @@ class Hub:
         results: dict[str, dict] = {}
         hang = self.cfg.session.hang_timeout_s
         deadline = time.monotonic() + hang
+        procs = self.procs
         while waiting:
             if self.abort or os.getppid() != self.parent_pid:
                 self.abort = True
                 break
-            left = deadline - time.monotonic()
+            # a process the launcher serves itself (a test driving the session) is waited for as long as it takes
+            left = deadline - time.monotonic() if any(not procs[p].inproc for p in waiting) else 0.2
             if left <= 0:
                 for p in sorted(waiting):
-                    self.proc_failed(p, t, "hung", f"no answer for the quantum at t={t / 1e9:.3f} s within {hang} s")
+                    if not procs[p].inproc:
+                        self.proc_failed(p, t, "hung", f"no answer for the quantum at t={t / 1e9:.3f} s within "
+                                                       f"{hang} s")
+                        waiting.discard(p)
+                if waiting:
+                    continue
                 break
             try:
                 key, data = self.q.get(timeout=min(0.2, left))
@@ -525,6 +537,40 @@ class Hub:
         service = e.removeprefix("svc/")
         for lf in self.loop_functions:
             lf.on_service_log(service, topic, values, t)
+
+    def _service_stop(self, e: str, r: int, t: int, item: list) -> None:
+        """``["stop", reason]`` from a service (``Service.stop_session``): the session ends after this quantum, as
+        at its duration's end (a mission that is over, a test that has seen what it waited for)."""
+        _, reason = item
+        if not isinstance(reason, str):
+            raise ValueError
+        service = e.removeprefix("svc/")
+        self.rec.write(t, "/session/events", "swarm_sitl.Event", {"kind": "stopped", "service": service,
+                                                                   "detail": reason[:2000]})
+        self.stop_reason = self.stop_reason or f"service {service}: {reason[:200]}"
+
+    def _taps(self, cfg: Config) -> None:
+        """Services that hear records (``ServiceSpec.hears``): every record whose topic matches one of their
+        patterns also goes into their inbox, ``["rec", t, topic, values]``, for their next run."""
+        kinds = {s.name: s.kind for s in cfg.services}
+        self._tapping = [(e, SERVICES.get(kinds[name]).hears) for name, e in self.service_entities.items()
+                         if SERVICES.get(kinds[name]).hears]
+        if not self._tapping:
+            return
+        write = self.rec.write
+        heard: dict[str, list[str]] = {}  # topic -> the services that hear it
+
+        def tapped(t: int, topic: str, schema: str, payload: Any) -> None:
+            write(t, topic, schema, payload)
+            ents = heard.get(topic)
+            if ents is None:
+                ents = heard[topic] = [e for e, pats in self._tapping if any(fnmatch.fnmatchcase(topic, p)
+                                                                           for p in pats)]
+            for e in ents:
+                if e not in self.dead_services:
+                    self.inbox[e].append(["rec", t, topic, payload])
+
+        self.rec.write = tapped  # type: ignore[method-assign]
 
     def run(self) -> dict[str, Any]:
         q = self.q_ns

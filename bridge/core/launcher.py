@@ -189,12 +189,23 @@ def on_main_thread() -> bool:
 
 def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_dir: str = "runs/latest",
                 progress: TextIO | None = sys.stderr, plot: bool = True,
-                stop: Callable[[], bool] | None = None) -> SessionResult:
+                stop: Callable[[], bool] | None = None, hosted: dict[str, Any] | None = None) -> SessionResult:
     """Run the session of ``config_path`` into ``out_dir``. ``stop`` (default: the one ``stopping_when`` set, if
     any), polled while the session runs, acts as a first Ctrl-C once it returns true: the session stops cleanly and
-    writes its summary (interrupted)."""
+    writes its summary (interrupted).
+
+    ``hosted`` (process name -> a participant host, ``bridge.hosts.participant.Host``) serves those processes of the
+    plan in this process, each in a thread of its own, instead of starting them: a test that drives a session (the
+    pytest plugin's probe). The world waits for their answers without a hang timeout; a host with an ``ended()``
+    method is told when its process stops serving."""
     cfg = load_config(config_path, overrides)
     plan = make_plan(cfg, config_path)
+    hosted = dict(hosted or {})
+    if hosted:
+        names = {p.name for p in plan.procs if not p.remote}
+        if unknown := sorted(set(hosted) - names):
+            raise ValueError(f"hosted: the plan has no local process {', '.join(unknown)}")
+        plan.procs = [dataclasses.replace(p, inproc=True) if p.name in hosted else p for p in plan.procs]
     try:  # random, or for a session that remote logic joins, its name's (the joiner knows only that)
         namespace = transport.namespace_for(cfg.session.name if cfg.session.listen else None)
     except ValueError as e:
@@ -232,7 +243,7 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     session_dir = tempfile.mkdtemp(prefix="swarm-sitl-")
     endpoint = transport.endpoint_for(session_dir)
     prog = _Progress(progress, cfg.session.name, cfg.session.duration_s, len(plan.robots))
-    remote = sum(p.remote for p in plan.procs)
+    remote = sum(p.remote or p.inproc for p in plan.procs)  # processes that are not the launcher's children
 
     def spawn(role: str, name: str) -> subprocess.Popen:
         log = open(logs / f"{name}.log", "wb")  # noqa: SIM115 - owned by the child
@@ -249,7 +260,7 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
     old = {s: signal.signal(s, stops) for s in (signal.SIGINT, signal.SIGTERM)} if on_main_thread() else {}
     try:
         res = _supervise(cfg, plan, out, logs, spawn, stops, endpoint, namespace, session_dir, prog, ports, remote,
-                         plot)
+                         plot, hosted)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
@@ -263,6 +274,7 @@ class _Watch:
 
     t_launch: float
     children: list[Child] = field(default_factory=list)  # the world first
+    served: _Served | None = None  # the processes the launcher serves itself
     t_started: float | None = None  # when the world said every process had joined
     last_sim: float = 0.0  # the simulated time of the last progress report
     world_code: int | None = None
@@ -271,11 +283,13 @@ class _Watch:
 
 
 def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, endpoint: str, namespace: str,
-               session_dir: str, prog: _Progress, ports: list[str], remote: int, plot: bool) -> SessionResult:
+               session_dir: str, prog: _Progress, ports: list[str], remote: int, plot: bool,
+               hosted: dict[str, Any]) -> SessionResult:
     """Start the session's processes, supervise them until the world ends, tear down, write the summary."""
     w = _Watch(time.monotonic())
     session = None
     status_q: queue.SimpleQueue = queue.SimpleQueue()
+    served = w.served = _Served()
     try:
         world = Child("world", "world", spawn("world", "world"))
         w.children.append(world)
@@ -291,19 +305,61 @@ def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, end
             if h.launch is not None:  # started by its command; otherwise by the user, as printed
                 w.children.append(_launch_host(cfg, h, plan, logs))
         for p in plan.procs:
-            if not p.remote:  # a remote process is started on its own computer; the world watches it
+            if p.inproc:  # served here, by the caller's host
+                served.start(p.name, hosted[p.name], endpoint, namespace)
+            elif not p.remote:  # a remote process is started on its own computer; the world watches it
                 w.children.append(Child(p.name, p.kind, spawn(p.kind, p.name), p.robots))
         _watch(cfg, w, status_q, control, logs, stops, prog, ports, remote)
     except _Abort:
         w.interrupted = bool(stops.count)
         stops.used = min(stops.count, 1)
     finally:
-        _teardown(w, stops, session, session_dir)
+        try:
+            _teardown(w, stops, session, session_dir)
+        finally:
+            served.end()
     wall = time.monotonic() - w.t_launch
     if w.world_code is None and w.children:
         w.world_code = w.children[0].exit_code  # the world, reaped during teardown
     return _finish(cfg, plan, out, w.children, w.world_code, w.interrupted, wall, w.t_started, w.t_launch, prog,
                    plot, w.startup_error, stops)
+
+
+class _Served:
+    """The processes the launcher serves itself (``run_session(hosted=...)``), each answering the world's ticks in a
+    thread of its own until the session is over."""
+
+    def __init__(self) -> None:
+        self.over = threading.Event()
+        self.threads: list[threading.Thread] = []
+        self.told: set[str] = set()
+
+    def died(self) -> list[str]:
+        """The served processes whose thread ended while the session runs (their host raised), once each."""
+        gone = [t.name.removeprefix("swarm-sitl-") for t in self.threads if not t.is_alive()]
+        new = [p for p in gone if p not in self.told]
+        self.told.update(new)
+        return [] if self.over.is_set() else new
+
+    def start(self, proc: str, host: Any, endpoint: str, namespace: str) -> None:
+        from bridge.hosts.participant import serve
+
+        def run() -> None:
+            try:
+                serve(proc, endpoint, namespace, host, watch=lambda: 0 if self.over.is_set() else None)
+            finally:
+                if hasattr(host, "ended"):
+                    host.ended()
+
+        t = threading.Thread(target=run, name=f"swarm-sitl-{proc}", daemon=True)
+        t.start()
+        self.threads.append(t)
+
+    def end(self) -> None:
+        """After the teardown: every served process stops (within a second of its idle poll)."""
+        self.over.set()
+        for t in self.threads:
+            t.join()
 
 
 def _await_endpoint(cfg, world: Child, sock: Path, t_launch: float, logs: Path, stops: _Stops) -> str | None:
@@ -330,6 +386,8 @@ def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, sto
                 break
             _on_status(cfg, w, transport.unpack(data), prog, ports, remote)
         _reap_running(w.children, world, control, logs)
+        for proc in w.served.died() if w.served else ():
+            control.put(transport.pack({"op": "dead", "proc": proc, "detail": "its host in the launcher stopped"}))
         if w.t_started is None and not w.startup_error and (
                 gone := [c for c in w.children if c.kind == "host" and c.exit_code not in (None, 0)]):
             w.startup_error = (f"host {gone[0].name.removeprefix('host-')}'s launch command exited (code "
@@ -637,7 +695,7 @@ def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interr
         "name": cfg.session.name,
         "seed": cfg.session.seed,
         "robots": n,
-        "processes": len(children) + sum(p.remote for p in plan.procs),
+        "processes": len(children) + sum(p.remote or p.inproc for p in plan.procs),
         "remote_processes": [p.name for p in plan.procs if p.remote],  # joined from other computers
         "hosts": _hosts_summary(cfg, plan, hosts, world_res),
         "robots_per_process": cfg.session.robots_per_process,

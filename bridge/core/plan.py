@@ -110,6 +110,9 @@ class ProcPlan:
     remote: bool = False  # it joins from another computer (swarm-sitl join); the launcher does not start it
     service: str | None = None  # a service's process: the service's name (its one entity, svc/NAME)
     host: str | None = None  # the host of [[hosts]] it runs on (remote; joined by swarm-sitl join --host)
+    # served in the launcher's own process (a test driving the session, ``run_session(hosted=...)``): not started,
+    # never killed, and waited for without a hang timeout (it lives as long as the launcher, which the world dies with)
+    inproc: bool = False
 
     def entities(self, robots: list[RobotPlan]) -> list[str]:
         if self.kind == "service":
@@ -134,7 +137,7 @@ class Plan:
         robots = [RobotPlan(**{**r, "pose": tuple(r["pose"]), "payload": tuple(r.get("payload", ()))})
                   for r in d["robots"]]
         procs = [ProcPlan(p["name"], p["kind"], tuple(p["robots"]), p.get("remote", False), p.get("service"),
-                          p.get("host")) for p in d["procs"]]
+                          p.get("host"), p.get("inproc", False)) for p in d["procs"]]
         return cls(d["config"], robots, procs)
 
 

@@ -56,8 +56,18 @@ def _poses(world: Any, robots: list[int]) -> dict[str, Any]:
     }
 
 
+def _robot_state(world: Any, robots: list[int]) -> dict[str, Any]:
+    """What an observer of the arena sees of each robot besides its pose: its LED colour (RGB), its battery voltage
+    and how far it has travelled (its odometer, m)."""
+    return {
+        "led": [world.led[r].tolist() for r in robots],
+        "battery_v": [float(world.battery_v[r]) for r in robots],
+        "distance_m": [float(world.odometer[r]) for r in robots],
+    }
+
+
 # what a service kind may be entitled to sense of the world, by name: (world, robot ids) -> the values
-SENSES: dict[str, Callable[[Any, list[int]], dict[str, Any]]] = {"poses": _poses}
+SENSES: dict[str, Callable[[Any, list[int]], dict[str, Any]]] = {"poses": _poses, "robot_state": _robot_state}
 
 
 @dataclass(frozen=True)
@@ -115,6 +125,13 @@ class Service:
         draws), else the generic log schema."""
         self._out.append(["log", topic, values] if schema is None else ["log", topic, values, schema])
 
+    def stop_session(self, reason: str) -> None:
+        """End the session after this quantum, as at its duration's end (recorded as a ``stopped`` event)."""
+        self._out.append(["stop", str(reason)])
+
+    def on_record(self, t_ns: int, topic: str, values: Any) -> None:
+        """A record its kind hears (``ServiceSpec.hears``), before the ``step`` of its next run, in recording order."""
+
     def step(self, t_ns: int, datagrams: list[tuple[str, bytes]], sensed: dict[str, Any]) -> int | None:
         """Run at ``t_ns``; returns the next wake time (ns) or None."""
         return None
@@ -128,10 +145,15 @@ class Service:
 
     def run(self, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         """One tick, as the service host calls it: the inputs unpacked for ``step``, the outputs packed."""
-        datagrams = [(item[1][0], item[1][1]) for item in inputs.get("in", ()) if item[0] == "wifi"]
+        datagrams = []
+        for item in inputs.get("in", ()):
+            if item[0] == "wifi":
+                datagrams.append((item[1][0], item[1][1]))
+            elif item[0] == "rec":
+                self.on_record(item[1], item[2], item[3])
         wake = self.step(t_ns, datagrams, inputs.get("sens") or {})
         out, self._out = self._out, []
-        return {"out": out, "wake": wake, "wom": self.wake_on_datagram}
+        return {"out": out, "wake": wake, "wom": ["wifi"] if self.wake_on_datagram else False}  # records never wake it
 
 
 @dataclass(frozen=True)
@@ -144,6 +166,9 @@ class ServiceSpec:
     options: type[BaseModel] = ServiceOptions
     senses: tuple[str, ...] = ()
     title: str = ""
+    # the records it hears as they are written (``Service.on_record``): topic patterns (fnmatch), e.g. the robots'
+    # logs ``/r*/log/*`` and the session's events ``/session/events``
+    hears: tuple[str, ...] = ()
     # checks against the whole config once it is valid (an option naming a robot the session lacks): (options,
     # config) -> None, raising ValueError naming the option
     check: Callable[[Any, Any], None] | None = field(default=None)

@@ -283,3 +283,13 @@ def test_floor_patches_paint_the_arena_and_a_reversed_one_is_named(tmp_path) -> 
                  '[[robots]]\ncount = 1\n')
     with pytest.raises(ConfigError, match=r"arena\.floor\[0\]: a floor patch needs x_min < x_max"):
         load_config(p)
+
+
+def test_overrides_reach_nested_values_and_name_a_wrong_path(demo_config: Path) -> None:
+    DEMO = demo_config
+    cfg = load_config(DEMO, {"robots.0.count": 3, "session.seed": 9, "services": []})
+    assert cfg.robots[0].count == 3 and cfg.session.seed == 9 and cfg.services == []
+    with pytest.raises(ConfigError, match=r"demo\.toml: override robots\.2\.count: robots has no entry '2'"):
+        load_config(DEMO, {"robots.2.count": 3})
+    with pytest.raises(ConfigError, match=r"override session\.seed\.x: session\.seed is a value, not a table"):
+        load_config(DEMO, {"session.seed.x": 1})
