@@ -11,6 +11,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 DEMO = ROOT / "hil_configs" / "demo.toml"
 os.environ.setdefault("MAVLINK20", "1")
+pytest_plugins = ["pytester"]
 
 
 @pytest.fixture

@@ -1,0 +1,266 @@
+"""A session a test drives in simulated time: ``SwarmSession``.
+
+The session runs as ``swarm-sitl run`` runs it (the world, firmware and logic processes, the recording), with one more
+participant: the probe (``bridge.testing.probe``), served in the test's own process. Between two calls of the test the
+world waits for the probe, so simulated time stands still while the test looks, asserts or acts; ``run_for`` and
+``run_until`` let it go on. What a test sees is fixed by the seed, whatever the machine's load: the same seed, the same
+outcome.
+
+    with SwarmSession("hil_configs/demo.toml", {"robots.count": 4}, out_dir=tmp_path) as s:
+        s.run_until(lambda s: s.distance_m(0) > 0.5, timeout_s=30)
+        assert s.alive(0)
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bridge.core.config import read_toml
+from bridge.core.services import service_proc
+from bridge.testing.probe import PROBE_NAME, Ended, Go, ProbeChannel, ProbeHost, Seen
+
+LONGEST_S = 30 * 24 * 3600.0  # a driven session runs until the test stops it: its duration is the longest allowed
+
+
+class SessionEnded(Exception):
+    """The session is over (it reached its duration, a robot's failure stopped it, or it failed) and cannot go on."""
+
+
+class SimTimeout(AssertionError):
+    """``run_until``'s condition did not hold within its simulated time."""
+
+
+@dataclass(frozen=True)
+class LogLine:
+    """One record a robot's logic (``robot.log``) or a service logged, or a session event."""
+
+    t_s: float
+    source: str  # "r003", "svc/camera" or "session"
+    topic: str  # the log's topic ("rdpso"), "events" for a session event
+    values: Any
+
+    @property
+    def robot(self) -> int | None:
+        return int(self.source[1:]) if self.source.startswith("r") and self.source[1:].isdigit() else None
+
+    def __str__(self) -> str:
+        return f"t={self.t_s:.3f} s {self.source} {self.topic}: {self.values}"
+
+
+class SwarmSession:
+    """One session from ``config`` (a TOML path) with ``overrides`` (``{"session.seed": 3, "robots.count": 5}``, as
+    ``load_config`` takes them), recorded into ``out_dir``. ``start()`` (or ``with``) runs it to simulated time 0 and
+    holds it there; ``stop()`` ends it cleanly and returns its summary."""
+
+    def __init__(self, config: str | Path, overrides: dict[str, Any] | None = None, out_dir: str | Path = "runs/test",
+                 ) -> None:
+        self.config = str(config)
+        self.overrides = dict(overrides or {})
+        self.out_dir = Path(out_dir)
+        self.recording = self.out_dir / "session.mcap"
+        self.summary: dict[str, Any] | None = None
+        self.code: int | None = None
+        self.touched: set[int] = set()  # the robots the test looked at or acted on (for a failure's report)
+        self._channel = ProbeChannel()
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+        self._seen: Seen | None = None
+        self._ended = False
+        self._ids: list[int] = []
+        self._log: list[LogLine] = []
+
+    # -- lifecycle -------------------------------------------------------------------------------------------
+    def start(self) -> SwarmSession:
+        """Start the session's processes and run it to simulated time 0, where it waits for the test."""
+        from bridge.core.launcher import run_session
+
+        if self._thread is not None:
+            raise RuntimeError("this session was started already")
+        raw = read_toml(Path(self.config))
+        overrides = {"session.duration_s": LONGEST_S, **self.overrides}
+        overrides["services"] = [*raw.get("services", []), {"kind": "probe", "name": PROBE_NAME}]
+        channel = self._channel
+        plan = _plan(self.config, overrides)  # a wrong config or override is refused here, in the test's thread
+        self._ids = [r.id for r in plan.robots if r.gateway is None]
+        hosted = {service_proc(PROBE_NAME): ProbeHost(plan, channel)}
+
+        def launch() -> None:
+            try:
+                res = run_session(self.config, overrides, str(self.out_dir), progress=None, plot=False, hosted=hosted)
+                self.code, self.summary = res.code, res.summary
+            except BaseException as e:  # a config error, or the launcher failed: told to the test's thread
+                self._error = e
+            finally:
+                channel.seen.put(Ended())
+
+        self._thread = threading.Thread(target=launch, name="swarm-sitl-launcher", daemon=True)
+        self._thread.start()
+        self._wait()
+        return self
+
+    def stop(self, reason: str = "the test stopped it") -> dict[str, Any]:
+        """End the session now (the processes stop, the recording is finished) and return its summary."""
+        if self._thread is None:
+            raise RuntimeError("this session was never started")
+        if not self._ended:
+            self._channel.commands.put(Go(None, [["stop", reason]]))
+            while not self._ended:
+                self._take(self._channel.seen.get())
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self.summary or {}
+
+    def __enter__(self) -> SwarmSession:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- simulated time ---------------------------------------------------------------------------------------
+    @property
+    def t_ns(self) -> int:
+        """Simulated time now (ns): the world stands at the start of this quantum."""
+        return self._now().t_ns
+
+    @property
+    def t(self) -> float:
+        """Simulated time now (s)."""
+        return self.t_ns / 1e9
+
+    def run_for(self, seconds: float) -> float:
+        """Let the session run ``seconds`` of simulated time (to the first quantum at or after); returns the time."""
+        if seconds < 0:
+            raise ValueError("run_for: seconds must not be negative")
+        self._go(self.t_ns + round(seconds * 1e9))
+        return self.t
+
+    def run_until(self, condition: Callable[[SwarmSession], bool], timeout_s: float,
+                  every_s: float | None = None) -> float:
+        """Let the session run until ``condition(session)`` holds, checked now and then every ``every_s`` simulated
+        seconds (default: every quantum); returns the time. ``SimTimeout`` (an AssertionError) if it still does
+        not hold ``timeout_s`` simulated seconds from now."""
+        end = self.t_ns + round(timeout_s * 1e9)
+        step = round(every_s * 1e9) if every_s else 1
+        while not condition(self):
+            if self.t_ns >= end:
+                raise SimTimeout(f"not within {timeout_s:g} s of simulated time (now t={self.t:.3f} s)")
+            self._go(min(end, self.t_ns + step))
+        return self.t
+
+    # -- the robots ---------------------------------------------------------------------------------------------
+    @property
+    def robots(self) -> list[int]:
+        """The session's robots' ids (XBee gateways, which are no robots, left out)."""
+        return list(self._ids)
+
+    def pose(self, robot: int) -> tuple[float, float, float]:
+        """Robot ``robot``'s true pose now: x, y (m, arena frame) and yaw (rad)."""
+        i = self._row(robot)
+        p = self._now().sensed["poses"]
+        return float(p["x"][i]), float(p["y"][i]), float(p["yaw"][i])
+
+    def alive(self, robot: int) -> bool:
+        """Whether robot ``robot`` still runs (not failed, not out of battery)."""
+        return bool(self._now().sensed["poses"]["alive"][self._row(robot)])
+
+    def led(self, robot: int) -> tuple[int, int, int]:
+        """Robot ``robot``'s LED colour now (RGB, 0-255)."""
+        r, g, b = self._now().sensed["robot_state"]["led"][self._row(robot)]
+        return int(r), int(g), int(b)
+
+    def battery_v(self, robot: int) -> float:
+        """Robot ``robot``'s battery voltage now (V)."""
+        return float(self._now().sensed["robot_state"]["battery_v"][self._row(robot)])
+
+    def distance_m(self, robot: int) -> float:
+        """How far robot ``robot`` has travelled since the start (m)."""
+        return float(self._now().sensed["robot_state"]["distance_m"][self._row(robot)])
+
+    def logs(self, robot: int | None = None, topic: str | None = None) -> list[LogLine]:
+        """The log records so far (the robots' ``robot.log``, the services' logs, the session's events as topic
+        ``events``), in recording order; only robot ``robot``'s, or only topic ``topic``'s, when given."""
+        self._now()
+        if robot is not None:
+            self.touched.add(robot)
+        return [ln for ln in self._log if (robot is None or ln.robot == robot) and (topic is None or ln.topic == topic)]
+
+    def events(self) -> list[LogLine]:
+        """The session's events so far (failures, a stop)."""
+        return [ln for ln in self._log if ln.source == "session"]
+
+    def describe(self, lines: int = 5) -> str:
+        """Where the session stands, for a failing test's report: the simulated time, the recording, and the last log
+        lines of the robots the test touched (of every robot if it touched none)."""
+        where = f"t={self._seen.t_ns / 1e9:.3f} s" if self._seen is not None else "not started"
+        out = [f"swarm-sitl session {self.config} at simulated {where}" + (" (ended)" if self._ended else ""),
+               f"recording: {self.recording}"]
+        robots = sorted(self.touched) or sorted({ln.robot for ln in self._log if ln.robot is not None})
+        for r in robots:
+            mine = [ln for ln in self._log if ln.robot == r][-lines:]
+            out.append(f"robot {r}, last {len(mine)} log lines:" if mine else f"robot {r}: no log line")
+            out += [f"  {ln}" for ln in mine]
+        if events := self.events():
+            out.append("session events:")
+            out += [f"  {ln}" for ln in events[-lines:]]
+        return "\n".join(out)
+
+    # -- internals ----------------------------------------------------------------------------------------------
+    def _row(self, robot: int) -> int:
+        try:
+            i = self._ids.index(robot)
+        except ValueError:
+            raise KeyError(f"no robot {robot} in this session (robots {self._ids})") from None
+        self.touched.add(robot)
+        return i
+
+    def _now(self) -> Seen:
+        if self._seen is None:
+            raise RuntimeError("the session is not started: call start() or use it in a with block")
+        return self._seen
+
+    def _go(self, wake_ns: int) -> None:
+        if self._ended:
+            raise SessionEnded(self._why_ended())
+        self._channel.commands.put(Go(wake_ns))
+        self._wait()
+
+    def _wait(self) -> None:
+        """Wait for the probe's next run (the world then holds), or the session's end."""
+        self._take(self._channel.seen.get())
+        if self._ended:
+            self._thread.join() if self._thread is not None else None
+            if self._error is not None:
+                raise self._error
+            raise SessionEnded(self._why_ended())
+
+    def _take(self, item: Seen | Ended) -> None:
+        if isinstance(item, Ended):
+            self._ended = True
+            return
+        self._seen = item
+        for t, topic, values in item.records:
+            parts = topic.strip("/").split("/")
+            if topic == "/session/events":
+                self._log.append(LogLine(t / 1e9, "session", "events", values))
+            elif parts[0] == "svc":
+                self._log.append(LogLine(t / 1e9, f"svc/{parts[1]}", parts[-1], values))
+            else:
+                self._log.append(LogLine(t / 1e9, parts[0], parts[-1], values))
+
+    def _why_ended(self) -> str:
+        s = self.summary or {}
+        why = s.get("stop_reason") or ("it reached its duration" if s else "it is over")
+        return f"the session ended ({why}); its recording: {self.recording}"
+
+
+def _plan(config: str, overrides: dict[str, Any]) -> Any:
+    from bridge.core.config import load_config
+    from bridge.core.plan import make_plan
+
+    return make_plan(load_config(config, overrides), config)
+

@@ -1,0 +1,119 @@
+"""The pytest plugin and the driven session (bridge.testing): a test holds simulated time, sees the swarm, stops it;
+a failing test's report says where the session stood; sessions run in parallel under ``pytest -n``."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from bridge.core.config import ConfigError
+from bridge.testing import SessionEnded, SimTimeout, SwarmSession
+
+pytestmark = pytest.mark.session
+
+ROOT = Path(__file__).resolve().parents[2]
+WALK = ROOT / "hil_configs" / "demos" / "random_walk.toml"
+SMALL = {"robots.count": 3, "session.robots_per_process": 3}
+
+
+def test_the_test_holds_time_and_sees_the_swarm(tmp_path: Path) -> None:
+    with SwarmSession(WALK, SMALL, tmp_path / "a") as s:
+        assert s.t == 0.0 and s.robots == [0, 1, 2]
+        start = s.pose(0)
+        assert s.pose(0) == start  # held: nothing moves while the test looks
+        assert s.run_for(1.5) == 1.5
+        assert s.distance_m(0) > 0.0 and s.pose(0) != start
+        assert s.alive(0) and 7.0 < s.battery_v(0) < 9.0
+        t = s.run_until(lambda s: s.distance_m(1) > 0.4, timeout_s=30)
+        assert s.distance_m(1) > 0.4 and 1.5 < t < 31.5
+        with pytest.raises(SimTimeout, match="simulated time"):
+            s.run_until(lambda s: False, timeout_s=0.5, every_s=0.1)
+        assert s.t == pytest.approx(t + 0.5)
+    assert s.code == 0 and s.summary["stop_reason"] == "service probe: the test stopped it"
+    assert s.summary["sim_time_s"] == pytest.approx(s.t + 0.01)
+    with open(s.recording, "rb") as f:  # finished and readable, with the stop as an event
+        events = [json.loads(m.data) for _, ch, m in make_reader(f).iter_messages() if ch.topic == "/session/events"]
+    assert events == [{"kind": "stopped", "service": "probe", "detail": "the test stopped it"}]
+
+
+def test_the_same_seed_gives_the_same_swarm(tmp_path: Path) -> None:
+    seen = []
+    for i in range(2):
+        with SwarmSession(WALK, {**SMALL, "session.seed": 11}, tmp_path / str(i)) as s:
+            s.run_until(lambda s: s.distance_m(2) > 0.3, timeout_s=30, every_s=0.05)
+            seen.append((s.t, [s.pose(r) for r in s.robots], [s.led(r) for r in s.robots]))
+    assert seen[0] == seen[1]
+
+
+def test_logs_arrive_as_the_robots_write_them(tmp_path: Path) -> None:
+    with SwarmSession(ROOT / "hil_configs" / "demo.toml", {"robots.count": 3, "session.robots_per_process": 3},
+                      tmp_path) as s:
+        assert s.logs() == []
+        s.run_for(2.5)
+        lines = s.logs(robot=1, topic="neighbours")
+        assert lines and all(ln.robot == 1 and 0 < ln.t_s <= 2.5 for ln in lines)
+        assert [ln.t_s for ln in s.logs()] == sorted(ln.t_s for ln in s.logs())
+        report = s.describe()
+        assert "at simulated t=2.500 s" in report and str(s.recording) in report and "robot 1, last" in report
+
+
+def test_a_session_that_reaches_its_duration_ends(tmp_path: Path) -> None:
+    with SwarmSession(WALK, {**SMALL, "session.duration_s": 1.0}, tmp_path) as s:
+        with pytest.raises(SessionEnded, match="recording"):
+            s.run_for(2.0)
+        with pytest.raises(SessionEnded):
+            s.run_for(0.1)
+    assert s.summary["sim_time_s"] == 1.0 and s.summary["stop_reason"] is None
+
+
+def test_a_wrong_override_is_refused_in_the_test(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"override robots\.4\.count"):
+        SwarmSession(WALK, {"robots.4.count": 2}, tmp_path).start()
+
+
+def test_the_probe_is_refused_outside_a_test(tmp_path: Path) -> None:
+    from bridge.core.launcher import run_session
+
+    res = run_session(str(WALK), {**SMALL, "services": [{"kind": "probe", "name": "probe"}]}, str(tmp_path),
+                      progress=None, plot=False)
+    assert res.code != 0
+    assert "only a test drives" in (tmp_path / "logs" / "svc-probe.log").read_text()
+
+
+PLUGIN_TESTS = """
+    from pathlib import Path
+
+    WALK = Path({walk!r})
+
+    def test_walks(swarm_session):
+        s = swarm_session(WALK, {{"robots.count": 2, "session.robots_per_process": 2}})
+        s.run_until(lambda s: s.distance_m(0) > 0.2, timeout_s=20)
+        assert s.alive(0)
+
+    def test_fails(swarm_session):
+        s = swarm_session(WALK, {{"robots.count": 2, "session.robots_per_process": 2}})
+        s.run_for(1.0)
+        assert s.pose(1)[0] > 1000, "robot 1 is not that far"
+"""
+
+
+def test_the_plugin_reports_where_a_failing_session_stood(pytester: pytest.Pytester) -> None:
+    pytester.makepyfile(textwrap.dedent(PLUGIN_TESTS.format(walk=str(WALK))))
+    res = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    res.assert_outcomes(passed=1, failed=1)
+    out = res.stdout.str()
+    assert "swarm-sitl session 0" in out and "at simulated t=1.000 s" in out
+    assert "session.mcap" in out and "robot 1" in out
+
+
+def test_the_plugin_runs_sessions_in_parallel(pytester: pytest.Pytester) -> None:
+    pytester.makepyfile(textwrap.dedent(PLUGIN_TESTS.format(walk=str(WALK))).replace("def test_fails",
+                                                                                     "def _not_this_one"))
+    pytester.makepyfile(test_more=textwrap.dedent(PLUGIN_TESTS.format(walk=str(WALK))).replace(
+        "def test_fails", "def _not_this_one").replace("def test_walks", "def test_walks_too"))
+    res = pytester.runpytest_subprocess("-n", "2", "-p", "no:cacheprovider")
+    res.assert_outcomes(passed=2)
