@@ -19,6 +19,7 @@ order, so the recording does not depend on process packing, speed or machine loa
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import fnmatch
 import json
@@ -35,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from bridge.core import transport
-from bridge.core.config import Config
+from bridge.core.config import Config, FaultCfg
 from bridge.core.entities import entity, robot_of
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.medium import Medium, route_table
@@ -128,6 +129,7 @@ class Hub:
         # battery deaths to come: (time, robot)
         self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
         self.module_stats: dict[str, dict] = {}
+        self.crashes: dict[int, int] = {}  # firmware crashes injected while running: robot -> time
 
     def _wiring(self, plan: Plan) -> None:
         """Each LLC's wiring in the world, and the robots carried on board."""
@@ -163,6 +165,7 @@ class Hub:
         self.routes[("log", "logic")] = self._log
         self.routes[("log", SERVICE_ROLE)] = self._service_log
         self.routes[("stop", SERVICE_ROLE)] = self._service_stop
+        self.routes[("fault", SERVICE_ROLE)] = self._service_fault
         self._taps(cfg)
         self._log_hooks = self._media + self.loop_functions
 
@@ -549,6 +552,36 @@ class Hub:
                                                                    "detail": reason[:2000]})
         self.stop_reason = self.stop_reason or f"service {service}: {reason[:200]}"
 
+    def _service_fault(self, e: str, r: int, t: int, item: list) -> None:
+        """``["fault", {fields of a [[faults]] entry}]`` from a service (a test's probe): injected at ``at_s``, no
+        earlier than the next quantum, recorded as an event."""
+        _, fields = item
+        f = FaultCfg.model_validate(fields)  # a pydantic ValidationError is a ValueError: counted, dropped
+        if f.robot >= self.n or round(f.at_s * 1e9) < t + self.q_ns:
+            raise ValueError
+        self.inject_fault(f, t)
+        self.rec.write(t, "/session/events", "swarm_sitl.Event", {"kind": "fault_injected", "robot": f.robot,
+                                                                   "service": e.removeprefix("svc/"),
+                                                                   "detail": json.dumps({**f.model_dump(exclude_defaults=True),
+                                                                                         "kind": f.kind})})
+
+    def inject_fault(self, f: FaultCfg, t: int) -> None:
+        """Fault ``f`` from ``f.at_s`` on, as if the config had listed it: a battery death, a firmware crash (its
+        firmware raises at its first run from then on), or a fault a medium carries (CAN bus-off, CAN noise).
+        ValueError if nothing in this session can carry it."""
+        at = round(f.at_s * 1e9)
+        if f.kind == "battery_depleted":
+            bisect.insort(self.battery_deaths, (at, f.robot))
+        elif f.kind == "firmware_crash":
+            self.crashes[f.robot] = min(at, self.crashes.get(f.robot, at))
+            for role in self.plan.robots[f.robot].modules():
+                ent = entity(f.robot, role)
+                w = self.next_wake.get(ent)
+                if ent in self.next_wake and f.robot not in self.dead:
+                    self.next_wake[ent] = at if w is None else min(w, at)
+        elif not any(m.inject_fault(f, t) for m in self._media):
+            raise ValueError(f"nothing in this session carries a {f.kind} fault on robot {f.robot}")
+
     def _taps(self, cfg: Config) -> None:
         """Services that hear records (``ServiceSpec.hears``): every record whose topic matches one of their
         patterns also goes into their inbox, ``["rec", t, topic, values]``, for their next run."""
@@ -642,6 +675,10 @@ class Hub:
                 senses = self.service_senses.get(e)
                 if senses:  # a service: the ground truth its kind is entitled to, at t
                     entry["sens"] = {k: SENSES[k](self.world, self._sensed_robots) for k in senses}
+                if self.crashes:  # a firmware crash injected while running reaches the robot's boards
+                    at = self.crashes.get(self.ent_robot[e])
+                    if at is not None and t >= at and self.ent_role[e] != "logic":
+                        entry["crash_ns"] = at
                 wiring = self.wiring.get(e)
                 if wiring is not None:
                     r = robot_of(e)

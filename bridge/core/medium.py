@@ -55,6 +55,11 @@ class Medium:
     def on_log(self, robot: int, topic: str, values: dict[str, Any], t: int) -> None:
         """A robot's logic logged ``values`` under ``topic`` (already recorded); raise ``ValueError`` if malformed."""
 
+    def inject_fault(self, f: Any, t: int) -> bool:
+        """A fault (``FaultCfg``, from ``f.at_s`` on) injected while the session runs, at quantum ``t``: True if this
+        medium carries it (a CAN fault into a robot's bus)."""
+        return False
+
     def report(self, result: dict[str, Any]) -> None:
         """Add this medium's figures to the world's result (at the end of the run)."""
 

@@ -175,6 +175,8 @@ class FirmwareHost:
 
     def run(self, ent: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         r = robot_of(ent)
+        if "crash_ns" in inputs:  # a crash injected while the session runs (Hub.inject_fault)
+            self.crash_ns[r] = min(self.crash_ns.get(r, inputs["crash_ns"]), int(inputs["crash_ns"]))
         if t_ns >= self.crash_ns.get(r, t_ns + 1):
             raise RuntimeError(f"injected fault: robot {r}'s firmware crashed at {self.crash_ns[r] / 1e9:g} s")
         role = ent[ent.index("/") + 1:]

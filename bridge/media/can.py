@@ -548,15 +548,26 @@ class CanBuses(Medium):
         for role in rp.can_nodes():
             bus.add_node(entity(r, role), host_restart if role == "logic" else 0)
         for f in cfg.faults:
-            if f.robot != r or f.kind in ("firmware_crash", "battery_depleted"):
-                continue
-            start = round(f.at_s * 1e9)
-            end = None if f.duration_s is None else start + round(f.duration_s * 1e9)
-            if f.kind == "can_bus_off":
-                bus.inject(entity(r, rp.host_node if f.node == "host" else f.node), "tx_error", start, end)
-            else:
-                bus.inject("*", "noise", start, end, f.probability)
+            if f.robot == r:
+                self._fault(bus, r, rp, f)
         return bus
+
+    @staticmethod
+    def _fault(bus: CanMedium, r: int, rp: Any, f: Any) -> bool:
+        """Fault ``f`` into robot ``r``'s bus, if it is a CAN fault."""
+        if f.kind not in ("can_bus_off", "can_noise"):
+            return False
+        start = round(f.at_s * 1e9)
+        end = None if f.duration_s is None else start + round(f.duration_s * 1e9)
+        if f.kind == "can_bus_off":
+            bus.inject(entity(r, rp.host_node if f.node == "host" else f.node), "tx_error", start, end)
+        else:
+            bus.inject("*", "noise", start, end, f.probability)
+        return True
+
+    def inject_fault(self, f: Any, t: int) -> bool:
+        """A CAN fault injected while the session runs (from ``f.at_s`` on), as one from the config."""
+        return f.robot < len(self.buses) and self._fault(self.buses[f.robot], f.robot, self.hub.plan.robots[f.robot], f)
 
     def frame(self, e: str, r: int, t: int, item: list) -> None:
         """``[bus, id, data, extended]`` (a fifth element ``True`` asks for the echo) offered by node ``e``."""

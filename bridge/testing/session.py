@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bridge.core.config import read_toml
+from bridge.core.config import Config, read_toml
 from bridge.core.services import service_proc
 from bridge.testing.probe import PROBE_NAME, Ended, Go, ProbeChannel, ProbeHost, Seen
 
@@ -72,6 +72,9 @@ class SwarmSession:
         self._ended = False
         self._ids: list[int] = []
         self._log: list[LogLine] = []
+        self._plan: Any = None
+        self._q_ns = 0
+        self._pending: list[list[Any]] = []  # what the probe sends with its next answer (faults)
 
     # -- lifecycle -------------------------------------------------------------------------------------------
     def start(self) -> SwarmSession:
@@ -84,8 +87,9 @@ class SwarmSession:
         overrides = {"session.duration_s": LONGEST_S, **self.overrides}
         overrides["services"] = [*raw.get("services", []), {"kind": "probe", "name": PROBE_NAME}]
         channel = self._channel
-        plan = _plan(self.config, overrides)  # a wrong config or override is refused here, in the test's thread
+        plan = self._plan = _plan(self.config, overrides)  # a wrong config or override is refused here, in the test
         self._ids = [r.id for r in plan.robots if r.gateway is None]
+        self._q_ns = Config.model_validate(plan.config).session.quantum_ns
         hosted = {service_proc(PROBE_NAME): ProbeHost(plan, channel)}
 
         def launch() -> None:
@@ -151,6 +155,32 @@ class SwarmSession:
                 raise SimTimeout(f"not within {timeout_s:g} s of simulated time (now t={self.t:.3f} s)")
             self._go(min(end, self.t_ns + step))
         return self.t
+
+    # -- faults -------------------------------------------------------------------------------------------------
+    def fault(self, kind: str, robot: int, **fields: Any) -> None:
+        """Inject a fault of any kind a config's ``[[faults]]`` knows, from the next quantum on (the world applies what
+        the test does at simulated time t from t + one quantum, as any entity's output): ``firmware_crash``,
+        ``battery_depleted``, ``can_bus_off`` (``node``, ``duration_s``), ``can_noise`` (``probability``,
+        ``duration_s``). A fault this session cannot carry is refused here (ConfigError naming the field)."""
+        from pydantic import ValidationError
+
+        from bridge.core.config import ConfigError, FaultCfg
+
+        at_s = (self.t_ns + self._q_ns) / 1e9
+        try:
+            f = FaultCfg.model_validate({"kind": kind, "robot": robot, "at_s": at_s, **fields})
+        except ValidationError as e:
+            raise ConfigError(f"fault {kind} on robot {robot}: {e.errors()[0]['loc']}: {e.errors()[0]['msg']}"
+                              ) from None
+        if robot not in self._ids:
+            raise ConfigError(f"fault {kind}: no robot {robot} in this session (robots {self._ids})")
+        nodes = self._plan.robots[robot].can_nodes()
+        if kind.startswith("can_") and not nodes:
+            raise ConfigError(f"fault {kind}: robot {robot} has no CAN bus")
+        if kind == "can_bus_off" and f.node not in ("host", *nodes):
+            raise ConfigError(f"fault can_bus_off: node: robot {robot} has no {f.node} on its CAN bus")
+        self.touched.add(robot)
+        self._pending.append(["fault", {**f.model_dump(exclude_defaults=True), "kind": f.kind}])
 
     # -- the robots ---------------------------------------------------------------------------------------------
     @property
@@ -226,7 +256,8 @@ class SwarmSession:
     def _go(self, wake_ns: int) -> None:
         if self._ended:
             raise SessionEnded(self._why_ended())
-        self._channel.commands.put(Go(wake_ns))
+        out, self._pending = self._pending, []
+        self._channel.commands.put(Go(wake_ns, out))
         self._wait()
 
     def _wait(self) -> None:

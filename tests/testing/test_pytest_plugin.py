@@ -117,3 +117,49 @@ def test_the_plugin_runs_sessions_in_parallel(pytester: pytest.Pytester) -> None
         "def test_fails", "def _not_this_one").replace("def test_walks", "def test_walks_too"))
     res = pytester.runpytest_subprocess("-n", "2", "-p", "no:cacheprovider")
     res.assert_outcomes(passed=2)
+
+
+def test_every_fault_kind_is_injected_at_the_next_quantum(tmp_path: Path) -> None:
+    with SwarmSession(WALK, {"robots.count": 4, "session.robots_per_process": 4}, tmp_path) as s:
+        s.run_for(1.0)
+        s.fault("firmware_crash", 1)
+        s.fault("battery_depleted", 0)
+        s.fault("can_bus_off", 2, node="host", duration_s=0.3)
+        s.fault("can_noise", 3, probability=0.5, duration_s=0.3)
+        assert all(s.alive(r) for r in s.robots)  # nothing happens before the world goes on
+        s.run_for(0.01)  # at 1.01 the battery is empty; the firmware crashes in its run of that quantum
+        assert [s.alive(r) for r in s.robots] == [False, True, True, True]
+        s.run_for(0.01)
+        assert [s.alive(r) for r in s.robots] == [False, False, True, True]
+        kinds = {(e.values["kind"], e.values.get("robot")) for e in s.events() if e.t_s == 1.01}
+        assert {("battery_depleted", 0), ("raised", 1)} <= kinds
+        assert "robot 1's firmware crashed at 1.01 s" in next(e.values["detail"] for e in s.events()
+                                                              if e.values["kind"] == "raised")
+        s.run_for(0.5)
+        assert ("can_bus_off", 2) in {(e.values["kind"], e.values.get("robot")) for e in s.events()}
+        assert s.alive(2) and s.alive(3)
+    counts = s.summary["message_counts"]
+    assert counts["can_error_frames"] > 0 and "malformed_items" not in counts
+
+
+def test_a_fault_the_session_cannot_carry_is_refused_in_the_test(tmp_path: Path) -> None:
+    with SwarmSession(WALK, SMALL, tmp_path) as s:
+        with pytest.raises(ConfigError, match="probability"):
+            s.fault("can_noise", 1, probability=2.0)
+        with pytest.raises(ConfigError, match="no robot 7"):
+            s.fault("firmware_crash", 7)
+        with pytest.raises(ConfigError, match="no slcan"):
+            s.fault("can_bus_off", 1, node="slcan")
+        with pytest.raises(ConfigError, match="duration_s"):
+            s.fault("firmware_crash", 1, duration_s=1.0)
+        s.run_for(0.1)
+        assert all(s.alive(r) for r in s.robots)
+
+
+def test_the_readme_example_passes(pytester: pytest.Pytester) -> None:
+    text = (ROOT / "README.md").read_text()
+    start = text.index("def test_robots_keep_away_from_walls")
+    body = text[start:text.index("```", start)]
+    pytester.makepyfile(body.replace('"hil_configs/', f'"{ROOT}/hil_configs/'))
+    res = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    res.assert_outcomes(passed=1)
