@@ -560,10 +560,9 @@ class Hub:
         if f.robot >= self.n or round(f.at_s * 1e9) < t + self.q_ns:
             raise ValueError
         self.inject_fault(f, t)
+        detail = json.dumps({**f.model_dump(exclude_defaults=True), "kind": f.kind})
         self.rec.write(t, "/session/events", "swarm_sitl.Event", {"kind": "fault_injected", "robot": f.robot,
-                                                                   "service": e.removeprefix("svc/"),
-                                                                   "detail": json.dumps({**f.model_dump(exclude_defaults=True),
-                                                                                         "kind": f.kind})})
+                                                                   "service": e.removeprefix("svc/"), "detail": detail})
 
     def inject_fault(self, f: FaultCfg, t: int) -> None:
         """Fault ``f`` from ``f.at_s`` on, as if the config had listed it: a battery death, a firmware crash (its
