@@ -673,7 +673,8 @@ class Hub:
                 self.inbox[e] = []
                 senses = self.service_senses.get(e)
                 if senses:  # a service: the ground truth its kind is entitled to, at t
-                    entry["sens"] = {k: SENSES[k](self.world, self._sensed_robots) for k in senses}
+                    entry["sens"] = {k: SENSES[k](self.world, self._sensed_robots) if k in SENSES
+                                     else self.radio_report() for k in senses}
                 if self.crashes:  # a firmware crash injected while running reaches the robot's boards
                     at = self.crashes.get(self.ent_robot[e])
                     if at is not None and t >= at and self.ent_role[e] != "logic":

@@ -68,6 +68,9 @@ def _robot_state(world: Any, robots: list[int]) -> dict[str, Any]:
 
 # what a service kind may be entitled to sense of the world, by name: (world, robot ids) -> the values
 SENSES: dict[str, Callable[[Any, list[int]], dict[str, Any]]] = {"poses": _poses, "robot_state": _robot_state}
+# and of the session as the world process keeps it: "radio", the radio and UWB figures so far (``summary.json``'s
+# ``radio`` section as it stands: the media's counters and the connectivity; the modules' own counters come at the end)
+SESSION_SENSES = ("radio",)
 
 
 @dataclass(frozen=True)
@@ -174,8 +177,9 @@ class ServiceSpec:
     check: Callable[[Any, Any], None] | None = field(default=None)
 
     def __post_init__(self) -> None:
-        unknown = sorted(set(self.senses) - set(SENSES))
+        known = {*SENSES, *SESSION_SENSES}
+        unknown = sorted(set(self.senses) - known)
         if unknown:
             from swarm_logic.plugins import PluginError
 
-            raise PluginError(f"service {self.name!r}: cannot sense {unknown}; a service senses {sorted(SENSES)}")
+            raise PluginError(f"service {self.name!r}: cannot sense {unknown}; a service senses {sorted(known)}")

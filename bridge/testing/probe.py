@@ -104,5 +104,5 @@ def _refuse(ctx: ServiceContext) -> Service:
                        "plugin's swarm_session fixture, or bridge.testing.SwarmSession); remove it from the config")
 
 
-SPEC = ServiceSpec("probe", _refuse, senses=("poses", "robot_state"), hears=PROBE_HEARS,
+SPEC = ServiceSpec("probe", _refuse, senses=("poses", "robot_state", "radio"), hears=PROBE_HEARS,
                    title="a test's seat in the lock-step (bridge.testing)")

@@ -211,6 +211,13 @@ class SwarmSession:
         """How far robot ``robot`` has travelled since the start (m)."""
         return float(self._now().sensed["robot_state"]["distance_m"][self._row(robot)])
 
+    def radio(self) -> dict[str, Any]:
+        """The session's radio and UWB figures so far, as ``summary.json``'s ``radio`` section will give them at the end
+        (``connectivity``: the share of samples the swarm's graph was connected, λ2; ``totals``; ``per_robot``: each
+        robot's frames sent, received and lost, its UWB exchanges), without the modules' own counters, which come at
+        the end. Empty for a session without radios."""
+        return self._now().sensed.get("radio") or {}
+
     def logs(self, robot: int | None = None, topic: str | None = None) -> list[LogLine]:
         """The log records so far (the robots' ``robot.log``, the services' logs, the session's events as topic
         ``events``), in recording order; only robot ``robot``'s, or only topic ``topic``'s, when given."""

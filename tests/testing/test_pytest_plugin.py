@@ -57,6 +57,9 @@ def test_logs_arrive_as_the_robots_write_them(tmp_path: Path) -> None:
         lines = s.logs(robot=1, topic="neighbours")
         assert lines and all(ln.robot == 1 and 0 < ln.t_s <= 2.5 for ln in lines)
         assert [ln.t_s for ln in s.logs()] == sorted(ln.t_s for ln in s.logs())
+        radio = s.radio()
+        assert radio["connectivity"]["samples"] >= 2 and radio["totals"]["tx"]["frames"] > 0
+        assert radio["per_robot"][1]["uwb_raw"]["exchanges"] > 0
         report = s.describe()
         assert "at simulated t=2.500 s" in report and str(s.recording) in report and "robot 1, last" in report
 
