@@ -585,24 +585,31 @@ class Hub:
         """Services that hear records (``ServiceSpec.hears``): every record whose topic matches one of their
         patterns also goes into their inbox, ``["rec", t, topic, values]``, for their next run."""
         kinds = {s.name: s.kind for s in cfg.services}
+        self._heard: dict[str, list[str]] = {}  # topic -> the services that hear it
         self._tapping = [(e, SERVICES.get(kinds[name]).hears) for name, e in self.service_entities.items()
                          if SERVICES.get(kinds[name]).hears]
         if not self._tapping:
             return
         write = self.rec.write
-        heard: dict[str, list[str]] = {}  # topic -> the services that hear it
 
         def tapped(t: int, topic: str, schema: str, payload: Any) -> None:
             write(t, topic, schema, payload)
-            ents = heard.get(topic)
-            if ents is None:
-                ents = heard[topic] = [e for e, pats in self._tapping if any(fnmatch.fnmatchcase(topic, p)
-                                                                           for p in pats)]
-            for e in ents:
-                if e not in self.dead_services:
-                    self.inbox[e].append(["rec", t, topic, payload])
+            self.overhear(t, topic, payload)
 
         self.rec.write = tapped  # type: ignore[method-assign]
+
+    def overhear(self, t: int, topic: str, payload: Any) -> None:
+        """A record for the services that hear ``topic`` (``ServiceSpec.hears``); what ``rec.write`` passes on, and
+        what a medium passes on without recording it (the faces' MAVLink to a ground station)."""
+        if not self._tapping:
+            return
+        ents = self._heard.get(topic)
+        if ents is None:
+            ents = self._heard[topic] = [e for e, pats in self._tapping if any(fnmatch.fnmatchcase(topic, p)
+                                                                             for p in pats)]
+        for e in ents:
+            if e not in self.dead_services:
+                self.inbox[e].append(["rec", t, topic, payload])
 
     def run(self) -> dict[str, Any]:
         q = self.q_ns

@@ -86,24 +86,37 @@ class MavlinkGateway:
         for r, port in self.ports.items():
             for data in port.recv_all():
                 self.counts["from_gcs_datagrams"] += 1
-                for msg in port.parser.parse_buffer(data) or ():
-                    kind = msg.get_type()
-                    if kind == "BAD_DATA":
-                        self.counts["bad_packets"] += 1
-                        continue
-                    self.counts["from_gcs_packets"] += 1
-                    raw = bytes(msg.get_msgbuf())
-                    if r is not None:
-                        out.append((r, raw, kind))
-                        continue
-                    target = getattr(msg, "target_system", 0)
-                    if target == 0:
-                        out += [(rr, raw, kind) for rr in sorted(self.system_ids)]
-                    elif target in self.robot_of:
-                        out.append((self.robot_of[target], raw, kind))
-                    else:
-                        self.counts["unknown_target"] += 1
+                out += self.route(port.parser, data, r)
         return out
+
+    def route(self, parser: Any, data: bytes, robot: int | None = None) -> list[tuple[int, bytes, str]]:
+        """The packets in ``data`` (parsed by ``parser``, a ground station's own) with the robots they are for: by
+        ``target_system``, every robot for a broadcast or a message without a target, or ``robot``'s alone."""
+        out: list[tuple[int, bytes, str]] = []
+        for msg in parser.parse_buffer(data) or ():
+            kind = msg.get_type()
+            if kind == "BAD_DATA":
+                self.counts["bad_packets"] += 1
+                continue
+            self.counts["from_gcs_packets"] += 1
+            raw = bytes(msg.get_msgbuf())
+            if robot is not None:
+                out.append((robot, raw, kind))
+                continue
+            target = getattr(msg, "target_system", 0)
+            if target == 0:
+                out += [(rr, raw, kind) for rr in sorted(self.system_ids)]
+            elif target in self.robot_of:
+                out.append((self.robot_of[target], raw, kind))
+            else:
+                self.counts["unknown_target"] += 1
+        return out
+
+    def parser(self) -> Any:
+        """A MAVLink 2 parser for one ground station's bytes."""
+        parser = mavlink2.MAVLink(None)
+        parser.robust_parsing = True
+        return parser
 
     def stats(self) -> dict[str, Any]:
         return {"endpoints": self.endpoints, **dict(sorted(self.counts.items()))}

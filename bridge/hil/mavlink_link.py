@@ -15,10 +15,14 @@ if TYPE_CHECKING:
 
 
 class MavlinkLink(Medium):
-    """The swarm's MAVLink UDP endpoint: ground stations to every robot's face, by system id."""
+    """The swarm's MAVLink UDP endpoint: ground stations to every robot's face, by system id. A service may be a
+    ground station too, inside the lock-step (a test's probe): its ``["mavlink", bytes]`` outputs reach the faces at
+    the next quantum, routed as a UDP ground station's, and what the faces write reaches it as the records it hears
+    (``/mavlink/to_gcs``: robot, bytes as hex), without being recorded."""
 
     name = "mavlink"
     order = 50
+    routes = {("mavlink", "service"): "from_service"}  # noqa: RUF012 (a class-level table)
 
     @classmethod
     def wanted(cls, hub: Hub) -> bool:
@@ -31,7 +35,24 @@ class MavlinkLink(Medium):
         m = hub.cfg.mavlink
         self.gateway = MavlinkGateway(m.endpoint, {r: m.system_id_base + r for r, rp in enumerate(hub.plan.robots)
                                                    if rp.has_logic and rp.vehicle is None}, m.per_robot)
-        hub.medium("uart").links["mavlink"] = self.gateway.from_robot  # sitl://mavlink is a network port
+        hub.medium("uart").links["mavlink"] = self.from_robot  # sitl://mavlink is a network port
+        self.parsers: dict[str, Any] = {}  # a ground station service's own parser (its bytes may span packets)
+
+    def from_robot(self, r: int, data: bytes) -> None:
+        """Bytes robot ``r``'s face wrote: to its UDP ground station now, and to the services that hear them."""
+        self.gateway.from_robot(r, data)
+        self.hub.overhear(self.hub.k * self.hub.q_ns, "/mavlink/to_gcs", {"robot": r, "data": data.hex()})
+
+    def from_service(self, e: str, r: int, t: int, item: list) -> None:
+        """``["mavlink", bytes]`` a service sent as a ground station: to the addressed faces at the next quantum,
+        recorded as a UDP ground station's are."""
+        _, data = item
+        if not isinstance(data, bytes):
+            raise ValueError
+        parser = self.parsers.get(e)
+        if parser is None:
+            parser = self.parsers[e] = self.gateway.parser()
+        self.hub.deliver_at(t + self.hub.q_ns, self._to_faces, self.gateway.route(parser, data))
 
     def started(self) -> dict[str, Any]:
         return {"mavlink": self.gateway.endpoints}
@@ -39,8 +60,11 @@ class MavlinkLink(Medium):
     def start_quantum(self, t: int) -> None:
         """What ground stations sent since the last quantum: to the robots' faces now, and to the recording (it
         comes from outside the session, in wall time)."""
+        self._to_faces(t, self.gateway.poll())
+
+    def _to_faces(self, t: int, packets: list[tuple[int, bytes, str]]) -> None:
         hub = self.hub
-        for r, data, kind in self.gateway.poll():
+        for r, data, kind in packets:
             if r in hub.dead:
                 continue
             hub.inbox[entity(r, "logic")].append(["uart:mavlink", data])

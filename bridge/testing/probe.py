@@ -20,7 +20,7 @@ from bridge.core.plan import Plan
 from bridge.core.services import Service, ServiceContext, ServiceSpec, service_entity
 
 PROBE_NAME = "probe"  # its name in the session ([[services]]), so its process is svc-probe
-PROBE_HEARS = ("/r*/log/*", "/svc/*/log/*", "/session/events")
+PROBE_HEARS = ("/r*/log/*", "/svc/*/log/*", "/session/events", "/mavlink/to_gcs")
 
 
 @dataclass

@@ -5,11 +5,11 @@
         s.run_until(lambda s: s.distance_m(0) > 0.5, timeout_s=30)
         assert s.alive(0)
 
-``swarm_session(config, overrides=None, out_dir=None)`` starts a session (``bridge.testing.SwarmSession``) recorded
-under the test's ``tmp_path`` (or ``out_dir``), held at simulated time 0, and stops it when the test ends. When a test
-fails, its report gets a ``swarm-sitl`` section per session: the simulated time it stood at, its recording's path and
-the last log lines of the robots the test touched. ``pytest -n`` runs tests with sessions in parallel: each session
-has its own namespace, socket and output directory.
+``swarm_session(config, overrides=None, out_dir=None, mavlink=False)`` starts a session
+(``bridge.testing.SwarmSession``) recorded under the test's ``tmp_path`` (or ``out_dir``), held at simulated time 0,
+and stops it when the test ends. When a test fails, its report gets a ``swarm-sitl`` section per session: the
+simulated time it stood at, its recording's path and the last log lines of the robots the test touched. ``pytest
+-n`` runs tests with sessions in parallel: each session has its own namespace, socket and output directory.
 
 This module imports nothing of the simulator until a test asks for a session: it is loaded by every pytest run in
 the environment.
@@ -30,16 +30,17 @@ _SESSIONS = pytest.StashKey[list]()
 @pytest.fixture
 def swarm_session(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Callable[..., Any]]:
     """Start a session from a config with overrides, held at simulated time 0: ``swarm_session(config,
-    overrides=None, out_dir=None) -> SwarmSession``. Every session it started is stopped when the test ends."""
+    overrides=None, out_dir=None, mavlink=False) -> SwarmSession`` (``mavlink``: every robot gets its MAVLink face, and
+    ``session.mavlink`` is a ground station of the swarm). Every session it started is stopped when the test ends."""
     from bridge.testing.session import SwarmSession
 
     sessions: list[SwarmSession] = []
     request.node.stash[_SESSIONS] = sessions
 
-    def start(config: str | Path, overrides: dict[str, Any] | None = None,
-              out_dir: str | Path | None = None) -> SwarmSession:
+    def start(config: str | Path, overrides: dict[str, Any] | None = None, out_dir: str | Path | None = None,
+              mavlink: bool = False) -> SwarmSession:
         out = Path(out_dir) if out_dir is not None else tmp_path / f"session-{len(sessions)}"
-        s = SwarmSession(config, overrides, out)
+        s = SwarmSession(config, overrides, out, mavlink=mavlink)
         sessions.append(s)
         return s.start()
 

@@ -57,9 +57,11 @@ class SwarmSession:
     holds it there; ``stop()`` ends it cleanly and returns its summary."""
 
     def __init__(self, config: str | Path, overrides: dict[str, Any] | None = None, out_dir: str | Path = "runs/test",
-                 ) -> None:
+                 mavlink: bool = False) -> None:
         self.config = str(config)
         self.overrides = dict(overrides or {})
+        if mavlink and "mavlink.endpoint" not in self.overrides:  # every robot gets its MAVLink face
+            self.overrides["mavlink.endpoint"] = "udpin:127.0.0.1:0"
         self.out_dir = Path(out_dir)
         self.recording = self.out_dir / "session.mcap"
         self.summary: dict[str, Any] | None = None
@@ -74,7 +76,8 @@ class SwarmSession:
         self._log: list[LogLine] = []
         self._plan: Any = None
         self._q_ns = 0
-        self._pending: list[list[Any]] = []  # what the probe sends with its next answer (faults)
+        self._pending: list[list[Any]] = []  # what the probe sends with its next answer (faults, MAVLink)
+        self._mavlink: MavlinkHandle | None = None
 
     # -- lifecycle -------------------------------------------------------------------------------------------
     def start(self) -> SwarmSession:
@@ -155,6 +158,21 @@ class SwarmSession:
                 raise SimTimeout(f"not within {timeout_s:g} s of simulated time (now t={self.t:.3f} s)")
             self._go(min(end, self.t_ns + step))
         return self.t
+
+    # -- a ground station ---------------------------------------------------------------------------------------
+    @property
+    def mavlink(self) -> MavlinkHandle:
+        """The test as a ground station of the whole swarm (the session needs ``mavlink=True`` or a
+        ``mavlink.endpoint``): what it sends reaches the robots' faces at the next quantum, routed by
+        ``target_system`` as the swarm's MAVLink endpoint routes a ground station's packets; what the faces send
+        arrives as they send it. Deterministic: it goes through the lock-step, not a socket."""
+        if self._mavlink is None:
+            cfg = Config.model_validate(self._plan.config) if self._plan is not None else None
+            if cfg is None or not cfg.mavlink.endpoint:
+                raise RuntimeError("this session's robots have no MAVLink face: SwarmSession(..., mavlink=True), or "
+                                   "swarm_session(..., mavlink=True)")
+            self._mavlink = MavlinkHandle(self, cfg.mavlink.system_id_base)
+        return self._mavlink
 
     # -- faults -------------------------------------------------------------------------------------------------
     def fault(self, kind: str, robot: int, **fields: Any) -> None:
@@ -283,7 +301,10 @@ class SwarmSession:
         self._seen = item
         for t, topic, values in item.records:
             parts = topic.strip("/").split("/")
-            if topic == "/session/events":
+            if topic == "/mavlink/to_gcs":
+                if self._mavlink is not None:
+                    self._mavlink.heard(t, int(values["robot"]), bytes.fromhex(values["data"]))
+            elif topic == "/session/events":
                 self._log.append(LogLine(t / 1e9, "session", "events", values))
             elif parts[0] == "svc":
                 self._log.append(LogLine(t / 1e9, f"svc/{parts[1]}", parts[-1], values))
@@ -302,3 +323,50 @@ def _plan(config: str, overrides: dict[str, Any]) -> Any:
 
     return make_plan(load_config(config, overrides), config)
 
+
+
+class MavlinkHandle:
+    """A test's ground station: ``mav`` encodes and sends (``handle.mav.command_long_send(...)``, pymavlink's MAVLink 2
+    encoder, system 255), ``messages``/``last`` read what the robots' faces sent, decoded, with their robot and
+    simulated time. ``system_id(robot)`` is the robot's MAVLink system id."""
+
+    def __init__(self, session: SwarmSession, system_id_base: int) -> None:
+        import os
+
+        os.environ.setdefault("MAVLINK20", "1")
+        from pymavlink.dialects.v20 import common as mavlink2
+
+        self.session = session
+        self.base = system_id_base
+        self.mav = mavlink2.MAVLink(self, srcSystem=255, srcComponent=190)
+        self._mavlink2 = mavlink2
+        self._parsers: dict[int, Any] = {}
+        self.received: list[tuple[float, int, Any]] = []  # (t s, robot, message), in the order the faces sent them
+
+    def system_id(self, robot: int) -> int:
+        return self.base + robot
+
+    def write(self, buf: bytes) -> None:
+        """pymavlink's file interface: the encoded packet goes with the probe's next answer."""
+        self.session._pending.append(["mavlink", bytes(buf)])
+
+    def heard(self, t_ns: int, robot: int, data: bytes) -> None:
+        parser = self._parsers.get(robot)
+        if parser is None:
+            parser = self._parsers[robot] = self._mavlink2.MAVLink(None)
+            parser.robust_parsing = True
+        for msg in parser.parse_buffer(data) or ():
+            if msg.get_type() != "BAD_DATA":
+                self.received.append((t_ns / 1e9, robot, msg))
+
+    def messages(self, type: str | None = None, robot: int | None = None) -> list[Any]:
+        """The decoded messages the faces sent so far, of ``type`` (``"HEARTBEAT"``) and from ``robot`` if given."""
+        if robot is not None:
+            self.session.touched.add(robot)
+        return [m for _, r, m in self.received if (type is None or m.get_type() == type) and
+                (robot is None or r == robot)]
+
+    def last(self, type: str, robot: int) -> Any | None:
+        """The newest ``type`` message robot ``robot``'s face sent, or None."""
+        found = self.messages(type, robot)
+        return found[-1] if found else None

@@ -166,3 +166,32 @@ def test_the_readme_example_passes(pytester: pytest.Pytester) -> None:
     pytester.makepyfile(body.replace('"hil_configs/', f'"{ROOT}/hil_configs/'))
     res = pytester.runpytest_subprocess("-p", "no:cacheprovider")
     res.assert_outcomes(passed=1)
+
+
+def test_the_test_is_a_ground_station_in_the_lock_step(tmp_path: Path) -> None:
+    from pymavlink.dialects.v20 import common as mavlink
+
+    with SwarmSession(WALK, SMALL, tmp_path, mavlink=True) as s:
+        g = s.mavlink
+        s.run_for(1.0)
+        assert g.last("HEARTBEAT", 0).custom_mode == 10  # AUTO: the behaviour runs
+        g.mav.command_long_send(g.system_id(0), 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                                mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 15, 0, 0, 0, 0, 0)
+        s.run_until(lambda s: g.last("COMMAND_ACK", 0) is not None, timeout_s=1.0)  # the face answers within 0.1 s
+        assert g.last("COMMAND_ACK", 0).result == mavlink.MAV_RESULT_ACCEPTED and s.t <= 1.12
+        x, y, _ = s.pose(0)
+        gx, gy = min(max(x + 1.0, 1.0), 9.0), y
+        g.mav.set_position_target_local_ned_send(0, g.system_id(0), 1, mavlink.MAV_FRAME_LOCAL_NED, 0b1101_1111_1100,
+                                                 gy, gx, 0, 0, 0, 0, 0, 0, 0, 0, 0)  # north = arena y, east = x
+        s.run_until(lambda s: abs(s.pose(0)[0] - gx) < 0.2 and abs(s.pose(0)[1] - gy) < 0.2, timeout_s=30)
+        assert [m.text for m in g.messages("STATUSTEXT", 0)][-1].startswith("mode GUIDED")
+        assert g.messages(robot=1) and not g.messages("COMMAND_ACK", 1)  # robot 1 heard nothing addressed to it
+    with open(s.recording, "rb") as f:  # the test's packets are recorded as a UDP ground station's
+        sent = [json.loads(m.data) for _, ch, m in make_reader(f).iter_messages() if ch.topic == "/mavlink/from_gcs"]
+    assert [m["type"] for m in sent] == ["COMMAND_LONG", "SET_POSITION_TARGET_LOCAL_NED"]
+    assert {m["robot"] for m in sent} == {0}
+
+
+def test_a_session_without_faces_has_no_ground_station(tmp_path: Path) -> None:
+    with SwarmSession(WALK, SMALL, tmp_path) as s, pytest.raises(RuntimeError, match="mavlink=True"):
+        _ = s.mavlink
