@@ -627,21 +627,25 @@ class FaultCfg(_Model):
     node ``node`` transmits is destroyed (a failing transceiver, a loose CAN_H/CAN_L wire at its connector), so its
     error counter climbs to bus-off within a few milliseconds and again after each recovery, for ``duration_s``.
     ``can_noise``: every frame on the robot's bus is destroyed with ``probability`` (EMI), for ``duration_s``.
+    ``unplugged``: the robot's ``device`` module (its XBee or UWB module on a USB serial adapter) is pulled out, for
+    good: the module is gone from the air, and its serial port raises ``SerialException`` in the robot program, as
+    pyserial's does for a disconnected device.
     """
 
     robot: int = Field(ge=0, description="robot id")
     at_s: float = Field(gt=0, description="simulated time the fault starts")
-    kind: Literal["firmware_crash", "battery_depleted", "can_bus_off", "can_noise"] = "firmware_crash"
+    kind: Literal["firmware_crash", "battery_depleted", "can_bus_off", "can_noise", "unplugged"] = "firmware_crash"
     node: Literal["host", "llc", "slcan"] = Field(
         "host", description="can_bus_off: whose transmissions fail: host (the companion computer's CAN adapter), llc "
                             "or slcan")
     duration_s: float | None = Field(None, gt=0, description="can faults: how long it lasts (none: to the end)")
     probability: float = Field(0.01, gt=0, le=1, description="can_noise: share of frames destroyed")
+    device: Literal["xbee", "uwb"] = Field("xbee", description="unplugged: which module is pulled out")
 
     @model_validator(mode="after")
     def _fields_fit_kind(self) -> FaultCfg:
         applies = {"firmware_crash": set(), "battery_depleted": set(), "can_bus_off": {"node", "duration_s"},
-                   "can_noise": {"duration_s", "probability"}}[self.kind]
+                   "can_noise": {"duration_s", "probability"}, "unplugged": {"device"}}[self.kind]
         self._only_for_kind(self.kind, applies, {"robot", "at_s", "kind"})
         return self
 
@@ -1203,6 +1207,8 @@ def _check_geometry(path: str, cfg: Config) -> None:
             raise ConfigError(f"{path}: faults[{i}].robot: no robot {f.robot} (the session has {cfg.robot_count})")
         if f.kind == "can_bus_off" and f.node == "slcan" and not groups[f.robot].can.slcan_pty:
             raise ConfigError(f"{path}: faults[{i}].node: robot {f.robot} has no slcan adapter (can.slcan_pty)")
+        if f.kind == "unplugged" and not (groups[f.robot].xbee if f.device == "xbee" else groups[f.robot].uwb):
+            raise ConfigError(f"{path}: faults[{i}].device: robot {f.robot} has no {f.device} module")
     for i, light in enumerate(cfg.light.sources):
         if not (math.isfinite(light.x) and math.isfinite(light.y)):
             raise ConfigError(f"{path}: light.sources[{i}]: position must be finite")

@@ -130,6 +130,7 @@ class Hub:
         self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
         self.module_stats: dict[str, dict] = {}
         self.crashes: dict[int, int] = {}  # firmware crashes injected while running: robot -> time
+        self.unplugged: set[str] = set()  # modules pulled out (unplugged faults): they run and hear no more
 
     def _wiring(self, plan: Plan) -> None:
         """Each LLC's wiring in the world, and the robots carried on board."""
@@ -167,6 +168,9 @@ class Hub:
         self.routes[("stop", SERVICE_ROLE)] = self._service_stop
         self.routes[("fault", SERVICE_ROLE)] = self._service_fault
         self._taps(cfg)
+        for f in cfg.faults:
+            if f.kind == "unplugged":
+                self.inject_fault(f, 0)
         self._log_hooks = self._media + self.loop_functions
 
     def robot_spec(self, r: int) -> Any:
@@ -375,6 +379,8 @@ class Hub:
 
     def _due(self, t: int) -> dict[str, list[str]]:
         due: dict[str, list[str]] = defaultdict(list)
+        for e in self.unplugged:  # what reached a module that is gone is lost
+            self.inbox[e].clear()
         nw, wom, inbox, proc_of = self.next_wake, self.wom, self.inbox, self.proc_of
         for e in self.ents:
             w = nw[e]
@@ -578,8 +584,28 @@ class Hub:
                 w = self.next_wake.get(ent)
                 if ent in self.next_wake and f.robot not in self.dead:
                     self.next_wake[ent] = at if w is None else min(w, at)
+        elif f.kind == "unplugged":
+            if f.device not in self.roles[f.robot]:
+                raise ValueError(f"robot {f.robot} has no {f.device} module")
+            self.deliver_at(-(-at // self.q_ns) * self.q_ns, self._unplug, f.robot, f.device)
         elif not any(m.inject_fault(f, t) for m in self._media):
             raise ValueError(f"nothing in this session carries a {f.kind} fault on robot {f.robot}")
+
+    def _unplug(self, t: int, r: int, device: str) -> None:
+        """A delivery: robot ``r``'s ``device`` module is pulled out. It runs and hears no more (gone from the air and
+        from its line), and its robot program's port learns the device is gone (``["uart:DEVICE", None]``: the
+        ``sitl://`` port then raises ``SerialException``, as pyserial's does for a disconnected device)."""
+        e = entity(r, device)
+        if r in self.dead or e in self.unplugged:
+            return
+        self.unplugged.add(e)
+        self.next_wake[e] = None
+        self.wom[e] = False
+        self.inbox[e].clear()
+        if self.plan.robots[r].has_logic:
+            self.to_inbox(t, entity(r, "logic"), [f"uart:{device}", None])
+        self.rec.write(t, "/session/events", "swarm_sitl.Event", {"kind": "unplugged", "robot": r,
+                                                                   "detail": f"its {device} module was unplugged"})
 
     def _taps(self, cfg: Config) -> None:
         """Services that hear records (``ServiceSpec.hears``): every record whose topic matches one of their

@@ -81,7 +81,7 @@ class RobotRuntime:
         q = self.rx.get(bus)
         if q is None:
             self.unrouted += 1  # nobody has this bus open: a real socket would not exist either
-        elif len(q) >= RX_QUEUE_FRAMES:
+        elif len(q) >= RX_QUEUE_FRAMES and item is not None:  # None: the device is gone, which is never lost
             self.rx_dropped += 1  # the socket's receive buffer is full, as on a real host
         else:
             q.append(item)

@@ -48,6 +48,7 @@ class Serial(SerialBase):
         self._buf = bytearray()
         self.device = ""
         self._real: SerialBase | None = None  # a real device behind this port (``?device=``)
+        self._gone = False  # its module was unplugged: every use raises, as a disconnected USB device's does
         super().__init__(*args, **kwargs)
 
     # -- SerialBase ------------------------------------------------------------------------------------
@@ -123,7 +124,14 @@ class Serial(SerialBase):
             return
         rx = self._rx
         while rx:
-            self._buf += rx.popleft()
+            data = rx.popleft()
+            if data is None:  # the module was unplugged (an ``unplugged`` fault)
+                self._gone = True
+                break
+            self._buf += data
+        if self._gone:
+            raise SerialException(f"sitl://{self.device}: device reports readiness to read but returned no data "
+                                  "(device disconnected or multiple access on port?)")
 
     @property
     def in_waiting(self) -> int:
@@ -157,6 +165,7 @@ class Serial(SerialBase):
             except (OSError, SerialException) as e:
                 raise SerialException(f"{self._real.port}: the device failed or disappeared: {e}") from e
         if data:
+            self._pull()  # raises once the module is gone
             rt.outbox.append(["uart", self.device, bytes(data), int(self._baudrate)])
         return len(data)
 

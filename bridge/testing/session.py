@@ -179,7 +179,8 @@ class SwarmSession:
         """Inject a fault of any kind a config's ``[[faults]]`` knows, from the next quantum on (the world applies what
         the test does at simulated time t from t + one quantum, as any entity's output): ``firmware_crash``,
         ``battery_depleted``, ``can_bus_off`` (``node``, ``duration_s``), ``can_noise`` (``probability``,
-        ``duration_s``). A fault this session cannot carry is refused here (ConfigError naming the field)."""
+        ``duration_s``), ``unplugged`` (``device``: its ``xbee`` or ``uwb`` module pulled out). A fault this session
+        cannot carry is refused here (ConfigError naming the field)."""
         from pydantic import ValidationError
 
         from bridge.core.config import ConfigError, FaultCfg
@@ -197,6 +198,8 @@ class SwarmSession:
             raise ConfigError(f"fault {kind}: robot {robot} has no CAN bus")
         if kind == "can_bus_off" and f.node not in ("host", *nodes):
             raise ConfigError(f"fault can_bus_off: node: robot {robot} has no {f.node} on its CAN bus")
+        if kind == "unplugged" and f.device not in self._plan.robots[robot].modules():
+            raise ConfigError(f"fault unplugged: device: robot {robot} has no {f.device} module")
         self.touched.add(robot)
         self._pending.append(["fault", {**f.model_dump(exclude_defaults=True), "kind": f.kind}])
 

@@ -10,13 +10,14 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from bridge.core.config import ConfigError
+from bridge.core.config import ConfigError, load_config
 from bridge.testing import SessionEnded, SimTimeout, SwarmSession
 
 pytestmark = pytest.mark.session
 
 ROOT = Path(__file__).resolve().parents[2]
 WALK = ROOT / "hil_configs" / "demos" / "random_walk.toml"
+DEMO = ROOT / "hil_configs" / "demo.toml"
 SMALL = {"robots.count": 3, "session.robots_per_process": 3}
 
 
@@ -50,7 +51,7 @@ def test_the_same_seed_gives_the_same_swarm(tmp_path: Path) -> None:
 
 
 def test_logs_arrive_as_the_robots_write_them(tmp_path: Path) -> None:
-    with SwarmSession(ROOT / "hil_configs" / "demo.toml", {"robots.count": 3, "session.robots_per_process": 3},
+    with SwarmSession(DEMO, {"robots.count": 3, "session.robots_per_process": 3},
                       tmp_path) as s:
         assert s.logs() == []
         s.run_for(2.5)
@@ -155,6 +156,8 @@ def test_a_fault_the_session_cannot_carry_is_refused_in_the_test(tmp_path: Path)
             s.fault("can_bus_off", 1, node="slcan")
         with pytest.raises(ConfigError, match="duration_s"):
             s.fault("firmware_crash", 1, duration_s=1.0)
+        with pytest.raises(ConfigError, match="no xbee module"):
+            s.fault("unplugged", 0)
         s.run_for(0.1)
         assert all(s.alive(r) for r in s.robots)
 
@@ -195,3 +198,27 @@ def test_the_test_is_a_ground_station_in_the_lock_step(tmp_path: Path) -> None:
 def test_a_session_without_faces_has_no_ground_station(tmp_path: Path) -> None:
     with SwarmSession(WALK, SMALL, tmp_path) as s, pytest.raises(RuntimeError, match="mavlink=True"):
         _ = s.mavlink
+
+
+def test_an_unplugged_xbee_fails_only_its_robot(tmp_path: Path) -> None:
+    with SwarmSession(DEMO, {"robots.count": 3, "session.robots_per_process": 3}, tmp_path) as s:
+        s.run_for(2.0)
+        s.fault("unplugged", 1, device="xbee")
+        s.run_until(lambda s: not s.alive(1), timeout_s=5)
+        assert s.t <= 2.1  # its program reads its XBee all the time: the next read raises
+        failure = next(e.values for e in s.events() if e.values["kind"] == "raised")
+        assert failure["robot"] == 1 and "device disconnected" in failure["detail"]
+        sent = s.radio()["per_robot"][1]["radio"]["tx"]["frames"]
+        s.run_for(5.0)
+        assert s.alive(0) and s.alive(2) and s.radio()["per_robot"][1]["radio"]["tx"]["frames"] == sent
+
+
+def test_an_unplugged_fault_from_the_config(tmp_path: Path) -> None:
+    from bridge.core.launcher import run_session
+
+    res = run_session(str(DEMO), {"robots.count": 3, "session.robots_per_process": 3, "session.duration_s": 3.0,
+                                  "faults": [{"robot": 2, "at_s": 1.0, "kind": "unplugged"}]},
+                      str(tmp_path), progress=None, plot=False)
+    assert [(f["robot"], f["kind"], f["t_s"]) for f in res.summary["failures"]] == [(2, "raised", 1.0)]
+    with pytest.raises(ConfigError, match=r"faults\[0\]\.device: robot 0 has no xbee module"):
+        load_config(WALK, {"robots.count": 3, "faults": [{"robot": 0, "at_s": 1.0, "kind": "unplugged"}]})
