@@ -20,12 +20,12 @@ demo: $(STAMP)
 	$(BIN)/swarm-sitl run hil_configs/demo.toml --out $(OUT)
 
 test: $(STAMP)
-	$(BIN)/ruff check bridge firmware_sim swarm_logic tests
+	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n 2 -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check bridge firmware_sim swarm_logic tests
+	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
 	$(BIN)/lint-imports
 
 bench: $(STAMP)
