@@ -78,6 +78,8 @@ class SwarmSession:
         self._q_ns = 0
         self._pending: list[list[Any]] = []  # what the probe sends with its next answer (faults, MAVLink)
         self._mavlink: MavlinkHandle | None = None
+        self._running = False  # the world runs on (a run_for or run_until has not returned)
+        self._stop_asked = False  # the launcher's stop hook: end the session even while the world runs
 
     # -- lifecycle -------------------------------------------------------------------------------------------
     def start(self) -> SwarmSession:
@@ -97,7 +99,8 @@ class SwarmSession:
 
         def launch() -> None:
             try:
-                res = run_session(self.config, overrides, str(self.out_dir), progress=None, plot=False, hosted=hosted)
+                res = run_session(self.config, overrides, str(self.out_dir), progress=None, plot=False, hosted=hosted,
+                                  stop=lambda: self._stop_asked)
                 self.code, self.summary = res.code, res.summary
             except BaseException as e:  # a config error, or the launcher failed: told to the test's thread
                 self._error = e
@@ -115,6 +118,8 @@ class SwarmSession:
             raise RuntimeError("this session was never started")
         if not self._ended:
             self._channel.commands.put(Go(None, [["stop", reason]]))
+            if self._running:  # interrupted while the world runs (Ctrl-C): it stops at the end of its quantum
+                self._stop_asked = True
             while not self._ended:
                 self._take(self._channel.seen.get())
         self._thread.join()
@@ -285,8 +290,10 @@ class SwarmSession:
         if self._ended:
             raise SessionEnded(self._why_ended())
         out, self._pending = self._pending, []
+        self._running = True
         self._channel.commands.put(Go(wake_ns, out))
         self._wait()
+        self._running = False
 
     def _wait(self) -> None:
         """Wait for the probe's next run (the world then holds), or the session's end."""
