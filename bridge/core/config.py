@@ -64,6 +64,8 @@ class SessionCfg(_Model):
     hang_timeout_s: float = Field(20.0, gt=0, description="wall seconds a process may take for one quantum")
     startup_timeout_s: float = Field(120.0, gt=0)
     poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
+    scene_hz: float = Field(10.0, ge=0, le=1000, description="Foxglove scene updates (/scene/robots, /tf) per "
+                                                             "simulated second in the recording; 0: no scene channels")
     end_after_deployment: bool = Field(False, description="end the session 1 s after the study's loop functions "
                                                           "say the deployment is done (deployment studies need no "
                                                           "mission)")

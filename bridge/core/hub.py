@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from bridge.core import foxglove as fx
 from bridge.core import transport
 from bridge.core.config import Config, FaultCfg
 from bridge.core.entities import entity, robot_of
@@ -43,6 +44,7 @@ from bridge.core.medium import Medium, route_table
 from bridge.core.plan import Plan, plan_offer
 from bridge.core.recorder import SCHEMAS, Recorder
 from bridge.core.registry import MEDIA, SERVICES, STUDIES, robot_spec
+from bridge.core.scene import Scene
 from bridge.core.services import SENSES, SERVICE_ROLE
 from bridge.core.world import World
 
@@ -62,6 +64,7 @@ class Hub:
         self.geometry = _Geometry(self.world)  # what the media ask of the world
         self.rec = Recorder(self.out / "session.mcap", {"config": json.dumps(plan.config, sort_keys=True),
                                                         "robots": str(len(plan.robots))})
+        self.scene: Scene | None = None  # the Foxglove scene channels (session.scene_hz), built with the media
         self.n = len(plan.robots)
         self._entities(plan)
         self._sensed_robots = [r for r, rp in enumerate(plan.robots) if rp.gateway is None]
@@ -162,6 +165,8 @@ class Hub:
             if cls.wanted(self):
                 self.media[name] = cls(self)
         self._media = list(self.media.values())
+        if cfg.session.scene_hz > 0:
+            self.scene = Scene(self)
         self.routes = route_table(self._media)
         self.routes[("log", "logic")] = self._log
         self.routes[("log", SERVICE_ROLE)] = self._service_log
@@ -200,6 +205,12 @@ class Hub:
     def record(self, t: int, topic: str, schema: str, payload: Any) -> None:
         """A delivery: a message to the recording at its time."""
         self.rec.write(t, topic, schema, payload)
+
+    def event(self, t: int, payload: dict[str, Any]) -> None:
+        """A session event (a failure, a fault, a stop) to ``/session/events``, and to the scene's log."""
+        self.rec.write(t, "/session/events", "swarm_sitl.Event", payload)
+        if self.scene is not None:
+            self.scene.log(t, "session", str(payload.get("kind", "event")), payload, fx.LOG_WARNING)
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def open(self) -> None:
@@ -312,7 +323,7 @@ class Hub:
             self.wom[e] = False
             self.inbox[e].clear()
         rec = {"robot": r, "t_s": t_ns / 1e9, "kind": kind, "detail": detail[-2000:]}
-        self.rec.write(t_ns, "/session/events", "swarm_sitl.Event", {"kind": kind, "robot": r, "detail": rec["detail"]})
+        self.event(t_ns, {"kind": kind, "robot": r, "detail": rec["detail"]})
         if proc:  # which process is a packing detail: reported, not recorded
             rec["process"] = proc
         self.failures.append(rec)
@@ -332,7 +343,7 @@ class Hub:
         self.inbox[e].clear()
         name = self.service_of[e]
         rec = {"service": name, "t_s": t_ns / 1e9, "kind": kind, "detail": detail[-2000:]}
-        self.rec.write(t_ns, "/session/events", "swarm_sitl.Event", {"kind": kind, "service": name,
+        self.event(t_ns, {"kind": kind, "service": name,
                                                                       "detail": rec["detail"]})
         self.failures.append(rec)
         last = detail.strip().splitlines()[-1] if detail.strip() else ""
@@ -528,6 +539,8 @@ class Hub:
             raise ValueError
         json.dumps(values, allow_nan=False)  # strict JSON only: NaN would make the recording unreadable
         self.rec.write(t, f"/r{r:03d}/log/{topic}", "swarm_sitl.Log", values)
+        if self.scene is not None:
+            self.scene.log(t, f"r{r:03d}", topic, values)
         for hook in self._log_hooks:
             hook.on_log(r, topic, values, t)
 
@@ -543,6 +556,8 @@ class Hub:
             raise ValueError
         json.dumps(values, allow_nan=False)
         self.rec.write(t, f"/{e}/log/{topic}", name, values)
+        if self.scene is not None and name == "swarm_sitl.Log":  # a scene a service draws is not a log line
+            self.scene.log(t, e, topic, values)
         service = e.removeprefix("svc/")
         for lf in self.loop_functions:
             lf.on_service_log(service, topic, values, t)
@@ -554,7 +569,7 @@ class Hub:
         if not isinstance(reason, str):
             raise ValueError
         service = e.removeprefix("svc/")
-        self.rec.write(t, "/session/events", "swarm_sitl.Event", {"kind": "stopped", "service": service,
+        self.event(t, {"kind": "stopped", "service": service,
                                                                    "detail": reason[:2000]})
         self.stop_reason = self.stop_reason or f"service {service}: {reason[:200]}"
 
@@ -567,7 +582,7 @@ class Hub:
             raise ValueError
         self.inject_fault(f, t)
         detail = json.dumps({**f.model_dump(exclude_defaults=True), "kind": f.kind})
-        self.rec.write(t, "/session/events", "swarm_sitl.Event", {"kind": "fault_injected", "robot": f.robot,
+        self.event(t, {"kind": "fault_injected", "robot": f.robot,
                                                                    "service": e.removeprefix("svc/"), "detail": detail})
 
     def inject_fault(self, f: FaultCfg, t: int) -> None:
@@ -604,7 +619,7 @@ class Hub:
         self.inbox[e].clear()
         if self.plan.robots[r].has_logic:
             self.to_inbox(t, entity(r, "logic"), [f"uart:{device}", None])
-        self.rec.write(t, "/session/events", "swarm_sitl.Event", {"kind": "unplugged", "robot": r,
+        self.event(t, {"kind": "unplugged", "robot": r,
                                                                    "detail": f"its {device} module was unplugged"})
 
     def _taps(self, cfg: Config) -> None:
@@ -659,6 +674,8 @@ class Hub:
             sensed = self._publish_ticks(t, due)
             if self.k % poses_every == 0:
                 self._record_poses(t)
+            if self.scene is not None:
+                self.scene.tick(t)
             world.step_quantum(t, q)
             self._take_releases()
             if due:

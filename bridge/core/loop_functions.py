@@ -41,6 +41,11 @@ class LoopFunctions:
     def on_radio_sample(self, t: int, live: list[int], adj: np.ndarray) -> None:
         """The radio medium sampled the live robots' radio graph (``live`` robots, adjacency ``adj``)."""
 
+    def scene(self, t: int) -> list[dict[str, Any]]:
+        """What the study adds to the recording's scene at ``t`` (``foxglove.SceneEntity`` dicts, built with
+        ``bridge.core.foxglove``): its particles, targets, regions."""
+        return []
+
     def radio_report(self, connectivity: dict[str, Any]) -> None:
         """Add the study's figures to the summary's ``radio.connectivity``."""
 

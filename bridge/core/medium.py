@@ -60,6 +60,11 @@ class Medium:
         medium carries it (a CAN fault into a robot's bus)."""
         return False
 
+    def scene(self, t: int) -> list[dict[str, Any]]:
+        """What this medium adds to the recording's scene at ``t`` (``foxglove.SceneEntity`` dicts, built with
+        ``bridge.core.foxglove``): the radio links."""
+        return []
+
     def report(self, result: dict[str, Any]) -> None:
         """Add this medium's figures to the world's result (at the end of the run)."""
 

@@ -57,6 +57,11 @@ class World:
         self._walls_boxed = False  # its bounding boxes computed as a physics step computes them
         self.static_rects: list[tuple[float, float, float, float, float]] = []  # cx, cy, sx, sy, yaw (plots)
         self.cylinders: list[tuple[float, float, float]] = []
+        # the same with their heights, for the scene a viewer draws (bridge.core.scene); obstacles on a path: sizes
+        self.scenery_boxes: list[tuple[float, float, float, float, float, float]] = []  # cx, cy, sx, sy, yaw, h
+        self.scenery_cylinders: list[tuple[float, float, float, float]] = []  # x, y, r, h
+        self.scenery_movers: list[tuple[float, float, float]] = []  # each mover's size (x, y, z)
+        self.scenery_mover_round: list[bool] = []
         self._build_arena(cfg.arena)
         # obstacles on a stated path (toy cars): (body, path rows (t_s, x, y, yaw), period_s or 0, half height)
         self.movers: list[tuple[int, np.ndarray, float, float]] = []
@@ -91,8 +96,11 @@ class World:
                       for c in (self.cid, self.walls_cid))
         if static:
             self.static_rects.append((x, y, size[0], size[1], yaw))
+            self.scenery_boxes.append((x, y, size[0], size[1], yaw, size[2]))
         else:
             self._walls_twins[body] = twin
+            self.scenery_movers.append(tuple(size))
+            self.scenery_mover_round.append(False)
         return body
 
     def _cylinder(self, x: float, y: float, r: float, h: float, static: bool = True) -> int:
@@ -102,8 +110,11 @@ class World:
                       for c in (self.cid, self.walls_cid))
         if static:
             self.cylinders.append((x, y, r))
+            self.scenery_cylinders.append((x, y, r, h))
         else:
             self._walls_twins[body] = twin
+            self.scenery_movers.append((2 * r, 2 * r, h))
+            self.scenery_mover_round.append(True)
         return body
 
     def _build_arena(self, a: ArenaCfg) -> None:

@@ -640,8 +640,7 @@ class CanBuses(Medium):
                    "event": "bus_off" if ev.state == "bus_off" else "recovered", "tec": ev.tec}
             self.events.append(rec)
             if ev.state == "bus_off":
-                hub.rec.write(t, "/session/events", "swarm_sitl.Event",
-                              {"kind": "can_bus_off", "robot": r, "detail": f"CAN node {node} is bus-off"})
+                hub.event(t, {"kind": "can_bus_off", "robot": r, "detail": f"CAN node {node} is bus-off"})
             # a node that keeps failing goes bus-off every restart: tell the user at once, then every 10 s at most
             last, quiet = self.noticed.get(node, (None, 0))
             if last is None or ev.wire_ns - last >= 10_000_000_000:

@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from bridge.core import foxglove as fx
 from bridge.core.entities import entity
 from bridge.core.medium import Medium
 from bridge.core.rng import stream
@@ -792,6 +793,7 @@ class RadioChannel(Medium):
         self.node_sens: dict[int, float] = {}  # each module's receiver sensitivity, as it reported it
         self.node_net: dict[int, tuple[int, int]] = {}  # each module's (channel, PAN id)
         self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
+        self.links: dict[tuple[int, int], tuple[int, float]] = {}  # (robot, robot) -> last frame decoded: t, RSSI
         self.pieces: list[int] = []  # how many pieces the live swarm's radio graph is in, by sample
         for r in range(hub.n):  # the LLC samples its XBee's RSSI PWM output on a pin
             if "xbee" in hub.roles[r]:
@@ -869,6 +871,8 @@ class RadioChannel(Medium):
             f = ev["frame"]
             src = self.addr_robot.get(("64", f.get("src64")), -1)
             d = float(np.hypot(*(pos[r] - pos[src]))) if 0 <= src < hub.n else None
+            if d is not None and ev.get("rssi_dbm") is not None:
+                self.links[(min(r, src), max(r, src))] = (t_ev, float(ev["rssi_dbm"]))
             hub.deliver_at(t_del, hub.record, "/radio/rx", "swarm_sitl.RadioRx", {
                 "t_ns": t_ev, "dst": r, "src": src, "handle": f.get("handle"), "rssi_dbm": ev.get("rssi_dbm"),
                 "len": len(f.get("payload", b"")), "distance_m": None if d is None else round(d, 3)})
@@ -881,6 +885,25 @@ class RadioChannel(Medium):
             hub.deliver_at(t_del, hub.record, "/radio/tx", "swarm_sitl.RadioTx", {
                 "t_ns": t_ev, "src": r, "handle": ev.get("handle"), "status": ev.get("status"),
                 "attempts": ev.get("attempts"), "dst": dst, "seq": seq, "distance_m": d, "walls": walls})
+
+    LINK_FRESH_NS = 2_000_000_000  # a link is drawn while a frame crossed it in the last 2 s
+
+    def scene(self, t: int) -> list[dict[str, Any]]:
+        """The radio links as one line list: every pair of live robots a frame crossed in the last ``LINK_FRESH_NS``,
+        coloured by the RSSI of the last one (red weak, green strong)."""
+        w = self.hub.world
+        points: list[tuple[float, float, float]] = []
+        colours: list[dict[str, float]] = []
+        for (a, b), (t_rx, rssi) in sorted(self.links.items()):
+            if t - t_rx > self.LINK_FRESH_NS or not (w.alive[a] and w.alive[b]):
+                continue
+            c = fx.rssi_colour(rssi)
+            points += [(float(w.pos[a, 0]), float(w.pos[a, 1]), 0.15), (float(w.pos[b, 0]), float(w.pos[b, 1]), 0.15)]
+            colours += [c, c]
+        if not points:
+            return []
+        return [fx.entity(t, "radio/links", lines=[fx.line(points, fx.color(0.5, 0.5, 0.5), fx.LINE_LIST, 0.015,
+                                                           colours)])]
 
     def radio_report(self, out: dict[str, Any]) -> None:
         """The session's radio figures: per robot from the medium and the modules, and the network's connectivity

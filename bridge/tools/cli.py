@@ -408,6 +408,25 @@ def _parser_canlog(sub: Any) -> None:
     p.set_defaults(fn=cmd_canlog)
 
 
+def cmd_layout(a: argparse.Namespace) -> int:
+    from bridge.tools.foxglove_layout import layout_json
+
+    text = layout_json()
+    if a.out:
+        Path(a.out).write_text(text)
+        print(a.out)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def _parser_layout(sub: Any) -> None:
+    p = sub.add_parser("layout", help="the Foxglove layout that opens a recording or the live scene ready to watch "
+                                      "(docs/foxglove-layout.json)")
+    p.add_argument("--out", help="write it to this file (default: standard output)")
+    p.set_defaults(fn=cmd_layout)
+
+
 def _parser_plot(sub: Any) -> None:
     p = sub.add_parser("plot", help="draw trajectories.png from a recording (plan.json beside it)")
     p.add_argument("recording")
@@ -422,7 +441,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     for add in (_parser_run, _parser_join, _parser_validate, _parser_bench, _parser_radio_survey, _parser_radio_fit,
-                _parser_experiment, _parser_digest, _parser_devices, _parser_canlog, add_list, _parser_plot):
+                _parser_experiment, _parser_digest, _parser_devices, _parser_canlog, add_list, _parser_plot,
+                _parser_layout):
         add(sub)
     return ap
 

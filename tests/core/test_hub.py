@@ -106,5 +106,7 @@ def test_a_service_log_is_recorded_with_the_registered_schema_it_names(tmp_path:
         h.world.close()
     with open(tmp_path / "session.mcap", "rb") as f:
         got = {c.topic: s.name for s, c, _ in make_reader(f).iter_messages()}
-    assert got == {"/svc/ctl/log/plain": "swarm_sitl.Log", "/svc/ctl/log/scene": SCENE_SCHEMA}
-    assert [t for t, _, _ in iter_messages(tmp_path / "session.mcap")] == ["/svc/ctl/log/plain", "/svc/ctl/log/scene"]
+    # a plain log record also goes to the scene's log panel (/log); a scene does not
+    assert got == {"/svc/ctl/log/plain": "swarm_sitl.Log", "/log": "foxglove.Log", "/svc/ctl/log/scene": SCENE_SCHEMA}
+    assert [t for t, _, _ in iter_messages(tmp_path / "session.mcap")] == ["/svc/ctl/log/plain", "/log",
+                                                                            "/svc/ctl/log/scene"]

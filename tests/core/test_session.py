@@ -139,7 +139,7 @@ def _check_messages_match_their_schemas(path: Path, expect: frozenset[str] = fro
     """Every recorded message is a JSON object whose fields are declared in its embedded schema, with the
     declared JSON types (what Foxglove relies on to show them)."""
     types = {"integer": int, "number": (int, float), "string": str, "boolean": bool, "array": list,
-             "null": type(None)}
+             "null": type(None), "object": dict}
     seen = set()
     with open(path, "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages():
