@@ -603,8 +603,12 @@ class Hub:
             if f.device not in self.roles[f.robot]:
                 raise ValueError(f"robot {f.robot} has no {f.device} module")
             self.deliver_at(-(-at // self.q_ns) * self.q_ns, self._unplug, f.robot, f.device)
-        elif not any(m.inject_fault(f, t) for m in self._media):
-            raise ValueError(f"nothing in this session carries a {f.kind} fault on robot {f.robot}")
+        else:
+            rp = self.plan.robots[f.robot]
+            if f.kind == "can_bus_off" and (rp.host_node if f.node == "host" else f.node) not in rp.can_nodes():
+                raise ValueError(f"robot {f.robot} has no {f.node} node on its CAN bus")
+            if not any(m.inject_fault(f, t) for m in self._media):
+                raise ValueError(f"nothing in this session carries a {f.kind} fault on robot {f.robot}")
 
     def _unplug(self, t: int, r: int, device: str) -> None:
         """A delivery: robot ``r``'s ``device`` module is pulled out. It runs and hears no more (gone from the air and
@@ -617,6 +621,8 @@ class Hub:
         self.next_wake[e] = None
         self.wom[e] = False
         self.inbox[e].clear()
+        for m in self._media:  # off the air
+            m.unplug(r, device)
         if self.plan.robots[r].has_logic:
             self.to_inbox(t, entity(r, "logic"), [f"uart:{device}", None])
         self.event(t, {"kind": "unplugged", "robot": r,
@@ -631,24 +637,28 @@ class Hub:
                          if SERVICES.get(kinds[name]).hears]
         if not self._tapping:
             return
-        write = self.rec.write
+        write_json = self.rec.write_json  # every record goes through it (``write`` encodes, then calls it)
 
-        def tapped(t: int, topic: str, schema: str, payload: Any) -> None:
-            write(t, topic, schema, payload)
-            self.overhear(t, topic, payload)
+        def tapped(t: int, topic: str, schema: str, data: bytes) -> None:
+            write_json(t, topic, schema, data)
+            if self._hearers(topic):
+                self.overhear(t, topic, json.loads(data))
 
-        self.rec.write = tapped  # type: ignore[method-assign]
+        self.rec.write_json = tapped  # type: ignore[method-assign]
 
-    def overhear(self, t: int, topic: str, payload: Any) -> None:
-        """A record for the services that hear ``topic`` (``ServiceSpec.hears``); what ``rec.write`` passes on, and
-        what a medium passes on without recording it (the faces' MAVLink to a ground station)."""
-        if not self._tapping:
-            return
+    def _hearers(self, topic: str) -> list[str]:
         ents = self._heard.get(topic)
         if ents is None:
             ents = self._heard[topic] = [e for e, pats in self._tapping if any(fnmatch.fnmatchcase(topic, p)
                                                                              for p in pats)]
-        for e in ents:
+        return ents
+
+    def overhear(self, t: int, topic: str, payload: Any) -> None:
+        """A record for the services that hear ``topic`` (``ServiceSpec.hears``); what the recorder passes on, and
+        what a medium passes on without recording it (the faces' MAVLink to a ground station)."""
+        if not self._tapping:
+            return
+        for e in self._hearers(topic):
             if e not in self.dead_services:
                 self.inbox[e].append(["rec", t, topic, payload])
 

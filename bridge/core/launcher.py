@@ -333,6 +333,7 @@ class _Served:
         self.over = threading.Event()
         self.threads: list[threading.Thread] = []
         self.told: set[str] = set()
+        self.why: dict[str, str] = {}  # a served process's thread that raised: what it raised
 
     def died(self) -> list[str]:
         """The served processes whose thread ended while the session runs (their host raised), once each."""
@@ -347,6 +348,8 @@ class _Served:
         def run() -> None:
             try:
                 serve(proc, endpoint, namespace, host, watch=lambda: 0 if self.over.is_set() else None)
+            except Exception as e:  # told to the world (``died``) with what went wrong, not as a traceback
+                self.why[proc] = f"{type(e).__name__}: {e}"
             finally:
                 if hasattr(host, "ended"):
                     host.ended()
@@ -386,8 +389,11 @@ def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, sto
                 break
             _on_status(cfg, w, transport.unpack(data), prog, ports, remote)
         _reap_running(w.children, world, control, logs)
-        for proc in w.served.died() if w.served else ():
-            control.put(transport.pack({"op": "dead", "proc": proc, "detail": "its host in the launcher stopped"}))
+        for proc in w.served.died() if w.served else ():  # what drives the session is gone: so is the session
+            why = w.served.why.get(proc, "it stopped serving")
+            control.put(transport.pack({"op": "dead", "proc": proc,
+                                        "detail": f"its host in the launcher stopped: {why}"}))
+            control.put(transport.pack({"op": "stop", "reason": f"{proc}, served by the launcher, stopped"}))
         if w.t_started is None and not w.startup_error and (
                 gone := [c for c in w.children if c.kind == "host" and c.exit_code not in (None, 0)]):
             w.startup_error = (f"host {gone[0].name.removeprefix('host-')}'s launch command exited (code "

@@ -60,6 +60,10 @@ class Medium:
         medium carries it (a CAN fault into a robot's bus)."""
         return False
 
+    def unplug(self, r: int, device: str) -> None:
+        """Robot ``r``'s ``device`` module (``xbee``, ``uwb``) was pulled out (an ``unplugged`` fault): a medium that
+        carries it takes it off (the radio, the UWB ranging)."""
+
     def scene(self, t: int) -> list[dict[str, Any]]:
         """What this medium adds to the recording's scene at ``t`` (``foxglove.SceneEntity`` dicts, built with
         ``bridge.core.foxglove``): the radio links."""

@@ -45,6 +45,7 @@ class RobotRuntime:
         self.wake_ns: int | None = 0
         self.wom: bool | list[str] = False
         self.rx: dict[str, deque] = {}
+        self.gone: set[str] = set()  # devices pulled out (an unplugged fault): they cannot be opened again
         self.unrouted = 0
         self.rx_dropped = 0
         self.outbox: list[list[Any]] = []
@@ -78,9 +79,12 @@ class RobotRuntime:
             self._back.release()
 
     def deliver(self, bus: str, item: Any) -> None:
+        if item is None:  # the device is gone (an unplugged module): its port raises from now on
+            self.gone.add(bus)
         q = self.rx.get(bus)
         if q is None:
-            self.unrouted += 1  # nobody has this bus open: a real socket would not exist either
+            if item is not None:
+                self.unrouted += 1  # nobody has this bus open: a real socket would not exist either
         elif len(q) >= RX_QUEUE_FRAMES and item is not None:  # None: the device is gone, which is never lost
             self.rx_dropped += 1  # the socket's receive buffer is full, as on a real host
         else:
@@ -134,6 +138,9 @@ class RobotRuntime:
             raise SessionEnded
 
     def open_bus(self, name: str) -> deque:
+        if name in self.gone:
+            raise OSError(f"could not open port {name.removeprefix('uart:')}: [Errno 2] No such file or directory "
+                          "(the device was unplugged)")
         if name in self.rx:
             raise OSError(f"bus {name!r} of robot {self.robot_id} is already open in this session")
         q: deque = deque()

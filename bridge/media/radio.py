@@ -791,7 +791,7 @@ class RadioChannel(Medium):
         self.addr_robot: dict[tuple[str, int], int] = {}  # ("64" | "16", address) -> robot, from the modules
         self.tx_dst: dict[tuple[int, int], tuple] = {}  # (robot, frame handle) -> (addressed robot, MAC seq)
         self.node_sens: dict[int, float] = {}  # each module's receiver sensitivity, as it reported it
-        self.node_net: dict[int, tuple[int, int]] = {}  # each module's (channel, PAN id)
+        self.node_net: dict[int, tuple[int, int] | None] = {}  # each module's (channel, PAN id); None: unplugged
         self.connectivity: list[tuple[float, float]] = []  # (t s, lambda2)
         self.links: dict[tuple[int, int], tuple[int, float]] = {}  # (robot, robot) -> last frame decoded: t, RSSI
         self.pieces: list[int] = []  # how many pieces the live swarm's radio graph is in, by sample
@@ -818,6 +818,13 @@ class RadioChannel(Medium):
         self.addr_robot[("16", int(node["addr16"]))] = r
         self.node_sens[r] = float(node["sensitivity_dbm"])
         self.node_net[r] = (node["channel"], node["pan_id"])
+
+    def unplug(self, r: int, device: str) -> None:
+        """Robot ``r``'s XBee was pulled out: its radio is off (its queued frames dropped, what it was receiving
+        aborted), it hears and acknowledges nothing, and it has no link in the radio graph."""
+        if device == "xbee":
+            self.medium.set_node(r, None)
+            self.node_net[r] = None
 
     def rssi_pwm(self, e: str, r: int, t: int, item: list) -> None:
         self.hub.pin_inputs[r]["rssi_pwm"] = min(1.0, max(0.0, float(item[1])))

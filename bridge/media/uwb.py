@@ -153,6 +153,7 @@ class UwbMedium:
         keys = ("exchanges", "ok", "dropout", "out_of_range", "no_response", "nlos", "responded")
         self._count = [dict.fromkeys(keys, 0) for _ in range(n)]
         self._err = [{"los": _err_acc(), "nlos": _err_acc()} for _ in range(n)]
+        self.off: set[int] = set()  # robots whose module was pulled out: they neither range nor answer
 
     def _frames_ns(self, k: int) -> int:
         return (k * 1_000_000_000) // self.cfg.frames_per_s
@@ -199,7 +200,7 @@ class UwbMedium:
         cfg = self.cfg
         t_ns = int(t_ns)
         alive = np.asarray(self.geometry.alive())
-        if not (0 <= i < self.n and 0 <= j < self.n) or i == j or not alive[i]:
+        if not (0 <= i < self.n and 0 <= j < self.n) or i == j or not alive[i] or i in self.off:
             return []
         pos = np.asarray(self.geometry.positions(), dtype=float)
         d = float(math.hypot(*(pos[i] - pos[j])))
@@ -212,7 +213,7 @@ class UwbMedium:
         t_resp = t_ns + self._frames_ns(3)
         t_init = t_ns + self._frames_ns(cfg.frames_per_exchange)
         base = {"ev": "range", "true_m": d, "nlos": nlos, "walls": walls}
-        if not alive[j]:
+        if not alive[j] or j in self.off:
             cause = "no_response"
         elif d > cfg.max_range_m:
             cause = "out_of_range"
@@ -271,6 +272,11 @@ class UwbRanging(Medium):
         self.medium = UwbMedium(hub.cfg.uwb, hub.n, hub.cfg.session.seed, hub.geometry)
         self.robot_of = {uwb_addr16(r): r for r, rp in enumerate(hub.plan.robots) if rp.uwb}
         self.log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+
+    def unplug(self, r: int, device: str) -> None:
+        """Robot ``r``'s UWB module was pulled out: it answers nobody from now on."""
+        if device == "uwb":
+            self.medium.off.add(r)
 
     def exchange(self, e: str, r: int, t: int, item: list) -> None:
         """``["uwb", {op: "range", peer, t_ns}]``: resolved at once, at its slot start (kept within t+q..t+2q); the

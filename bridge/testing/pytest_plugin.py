@@ -17,7 +17,6 @@ the environment.
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from typing import Any
 import pytest
 
 _SESSIONS = pytest.StashKey[list]()
+_FAILED = pytest.StashKey[bool]()  # the test itself failed: its report has said what went wrong
 
 
 @pytest.fixture
@@ -45,14 +45,23 @@ def swarm_session(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Ca
         return s.start()
 
     yield start
-    for s in sessions:
-        with contextlib.suppress(RuntimeError):  # one that never started (its config was refused)
+    errors = []
+    for s in sessions:  # every one is stopped, whatever another's stop raises
+        try:
             s.stop()
+        except RuntimeError:  # one that never started (its config was refused: the test saw that already)
+            pass
+        except Exception as e:  # its launcher failed (the test saw it too, if it got that far)
+            errors.append(e)
+    if errors and not request.node.stash.get(_FAILED, False):
+        raise errors[0]
 
 
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Iterator[None]:
     report = yield
+    if report.failed:
+        item.stash[_FAILED] = True
     if report.failed and report.when == "call":
         for i, s in enumerate(item.stash.get(_SESSIONS, [])):
             report.sections.append((f"swarm-sitl session {i}", s.describe()))

@@ -88,9 +88,7 @@ class SwarmSession:
 
         if self._thread is not None:
             raise RuntimeError("this session was started already")
-        raw = read_toml(Path(self.config))
-        overrides = {"session.duration_s": LONGEST_S, **self.overrides}
-        overrides["services"] = [*raw.get("services", []), {"kind": "probe", "name": PROBE_NAME}]
+        overrides = self.session_overrides()
         channel = self._channel
         plan = self._plan = _plan(self.config, overrides)  # a wrong config or override is refused here, in the test
         self._ids = [r.id for r in plan.robots if r.gateway is None]
@@ -111,6 +109,15 @@ class SwarmSession:
         self._thread.start()
         self._wait()
         return self
+
+    def session_overrides(self) -> dict[str, Any]:
+        """The overrides the session runs with: the test's, the longest duration unless they give one, and the probe
+        among the services. The probe joins the config's services (or a whole list the overrides give) before the
+        overrides that reach into them (``services.0.options.fps``) apply, so none is lost."""
+        raw = read_toml(Path(self.config))
+        services = self.overrides.get("services", raw.get("services", []))
+        return {"session.duration_s": LONGEST_S, "services": [*services, {"kind": "probe", "name": PROBE_NAME}],
+                **{k: v for k, v in self.overrides.items() if k != "services"}}
 
     def stop(self, reason: str = "the test stopped it") -> dict[str, Any]:
         """End the session now (the processes stop, the recording is finished) and return its summary."""
@@ -146,9 +153,10 @@ class SwarmSession:
 
     def run_for(self, seconds: float) -> float:
         """Let the session run ``seconds`` of simulated time (to the first quantum at or after); returns the time."""
-        if seconds < 0:
-            raise ValueError("run_for: seconds must not be negative")
-        self._go(self.t_ns + round(seconds * 1e9))
+        if not 0 <= seconds <= LONGEST_S:
+            raise ValueError(f"run_for: seconds must lie in [0, {LONGEST_S:g}], not {seconds}")
+        if seconds > 0:
+            self._go(self.t_ns + round(seconds * 1e9))
         return self.t
 
     def run_until(self, condition: Callable[[SwarmSession], bool], timeout_s: float,
@@ -156,6 +164,8 @@ class SwarmSession:
         """Let the session run until ``condition(session)`` holds, checked now and then every ``every_s`` simulated
         seconds (default: every quantum); returns the time. ``SimTimeout`` (an AssertionError) if it still does
         not hold ``timeout_s`` simulated seconds from now."""
+        if not 0 <= timeout_s <= LONGEST_S:
+            raise ValueError(f"run_until: timeout_s must lie in [0, {LONGEST_S:g}], not {timeout_s}")
         end = self.t_ns + round(timeout_s * 1e9)
         step = round(every_s * 1e9) if every_s else 1
         while not condition(self):

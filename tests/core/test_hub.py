@@ -76,7 +76,7 @@ def test_events_are_recorded(hub: Hub, tmp_path: Path) -> None:
     hub.robot_failed(1, 5 * Q, "died", "exit code -9", proc="fw1")
     hub.rec.finish()
     _, n = file_digest(tmp_path / "session.mcap")
-    assert n == 1 and hub.failures[0]["process"] == "fw1"
+    assert n == 2 and hub.failures[0]["process"] == "fw1"  # /session/events, and its line in the scene's /log
 
 
 def test_entity_ids_beyond_999_robots() -> None:
@@ -110,3 +110,34 @@ def test_a_service_log_is_recorded_with_the_registered_schema_it_names(tmp_path:
     assert got == {"/svc/ctl/log/plain": "swarm_sitl.Log", "/log": "foxglove.Log", "/svc/ctl/log/scene": SCENE_SCHEMA}
     assert [t for t, _, _ in iter_messages(tmp_path / "session.mcap")] == ["/svc/ctl/log/plain", "/log",
                                                                             "/svc/ctl/log/scene"]
+
+
+def test_an_unplugged_module_is_off_the_air_and_its_port_cannot_be_opened_again(tmp_path: Path) -> None:
+    """Even before its robot program touches the port (and dies of it), a pulled-out module neither hears, answers
+    nor acknowledges: the radio switches its node off and drops it from the graph; the UWB medium answers nothing."""
+    from bridge.hosts.sim_context import RobotRuntime
+
+    cfg = Config.model_validate({"robots": [{"count": 3, "xbee": {"series": 2}, "uwb": True}]})
+    h = Hub(make_plan(cfg), str(tmp_path), str(tmp_path), "test")
+    try:
+        radio, uwb = h.medium("radio"), h.medium("uwb")
+        for r in range(3):  # the modules announce themselves, as they do at power-up
+            radio.node(entity(r, "xbee"), r, 0, ["node", {"channel": 12, "pan_id": 0x3332, "addr64": 100 + r,
+                                                          "addr16": 0xFFFE, "tx_power_dbm": 3.0,
+                                                          "sensitivity_dbm": -96.0, "series": 2}])
+        assert radio.radio_graph()[1].sum() == 6  # three robots a few metres apart: all linked
+        assert uwb.medium.exchange(0, 0, 2)[-1][2]["peer"] == 2
+        h._unplug(0, 1, "xbee")
+        h._unplug(0, 2, "uwb")
+        assert radio.medium._chan[1] < 0 and radio.radio_graph()[1][1].sum() == 0
+        assert uwb.medium.exchange(0, 0, 2)[0][2]["cause"] == "no_response" and uwb.medium.exchange(0, 2, 0) == []
+        assert h.inbox[entity(1, "logic")] == [["uart:xbee", None]] and h.next_wake[entity(1, "xbee")] is None
+    finally:
+        h.rec.finish()
+        h.world.close()
+    rt = RobotRuntime(1)
+    rt.open_bus("uart:xbee")
+    rt.deliver("uart:xbee", None)
+    rt.close_bus("uart:xbee")
+    with pytest.raises(OSError, match="unplugged"):
+        rt.open_bus("uart:xbee")

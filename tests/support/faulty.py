@@ -18,3 +18,4 @@ class HangsAtOneSecond(RandomWalk):
             while True:  # never yields: the world must declare it hung, not wait forever
                 pass
         super().step()
+

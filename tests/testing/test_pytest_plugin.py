@@ -222,3 +222,21 @@ def test_an_unplugged_fault_from_the_config(tmp_path: Path) -> None:
     assert [(f["robot"], f["kind"], f["t_s"]) for f in res.summary["failures"]] == [(2, "raised", 1.0)]
     with pytest.raises(ConfigError, match=r"faults\[0\]\.device: robot 0 has no xbee module"):
         load_config(WALK, {"robots.count": 3, "faults": [{"robot": 0, "at_s": 1.0, "kind": "unplugged"}]})
+
+
+def test_overrides_into_the_services_are_kept(tmp_path: Path) -> None:
+    cam = ROOT / "hil_configs" / "demos" / "overhead_camera.toml"
+    s = SwarmSession(cam, {"services.0.options.fps": 2}, tmp_path)
+    cfg = load_config(cam, s.session_overrides())
+    assert cfg.services[0].options["fps"] == 2 and [x.kind for x in cfg.services][-1] == "probe"
+    s = SwarmSession(cam, {"services": []}, tmp_path)  # a whole list replaces the config's; the probe joins it
+    assert [x.kind for x in load_config(cam, s.session_overrides()).services] == ["probe"]
+
+
+def test_a_probe_that_dies_ends_the_session(tmp_path: Path) -> None:
+    with SwarmSession(WALK, SMALL, tmp_path) as s:
+        with pytest.raises(ValueError, match="seconds must lie"):
+            s.run_for(1e11)
+        with pytest.raises(SessionEnded):
+            s._go(10**20)  # the probe's answer cannot be packed (beyond 64 bits): its thread dies
+    assert "svc-probe, served by the launcher, stopped" in s.summary["stop_reason"]
