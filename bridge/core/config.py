@@ -66,6 +66,8 @@ class SessionCfg(_Model):
     poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
     scene_hz: float = Field(10.0, ge=0, le=1000, description="Foxglove scene updates (/scene/robots, /tf) per "
                                                              "simulated second in the recording; 0: no scene channels")
+    live: str | None = Field(None, description="HOST:PORT (loopback; port 0: any free one) where Foxglove's WebSocket "
+                                               "server serves the scene while the session runs (swarm-sitl run --live)")
     end_after_deployment: bool = Field(False, description="end the session 1 s after the study's loop functions "
                                                           "say the deployment is done (deployment studies need no "
                                                           "mission)")
@@ -83,6 +85,21 @@ class SessionCfg(_Model):
                 raise ValueError(f"{v!r} is not tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447, or tcp/192.168.1.10:7447 "
                                  "for a logic on another computer)")
         return v
+
+    @field_validator("live")
+    @classmethod
+    def _live_loopback(cls, v: str | None) -> str | None:
+        if v is not None:
+            from bridge.core.live import parse_listen
+
+            parse_listen(v)
+        return v
+
+    @model_validator(mode="after")
+    def _live_needs_a_scene(self) -> SessionCfg:
+        if self.live is not None and self.scene_hz <= 0:
+            raise ValueError("live: serves the scene, which scene_hz = 0 switches off")
+        return self
 
     @field_validator("speed")
     @classmethod

@@ -224,6 +224,10 @@ class Hub:
             transport.queue_subscriber(s, "control", self.q),
         ]
         self.status_pub = transport.publisher(s, "status")
+        if self.cfg.session.live and self.scene is not None:  # the scene, served while the session runs
+            from bridge.core.live import LiveScene
+
+            self.scene.live = LiveScene(self.cfg.session.live, self.cfg.session.name)
         self.tick_pub = {p: transport.publisher(s, f"tick/{p}") for p in self.procs}
         # the remote procs that may still join (None: started); the plan's answer tells a joiner, who refuses to
         # join twice or late
@@ -309,6 +313,8 @@ class Hub:
         info: dict[str, Any] = {}
         for m in self._media:
             info.update(m.started())
+        if self.scene is not None and self.scene.live is not None:
+            info["live"] = self.scene.live.url
         self.status(op="started", startup_s=self.startup_wall_s, **info)
 
     # -- failures ------------------------------------------------------------------------------------
@@ -869,6 +875,8 @@ class Hub:
         try:
             self.rec.finish()
         finally:
+            if self.scene is not None and self.scene.live is not None:
+                self.scene.live.close()
             self.world.close()
             for m in self._media:
                 m.close()

@@ -425,6 +425,9 @@ def _on_status(cfg, w: _Watch, msg: dict[str, Any], prog: _Progress, ports: list
         if msg.get("mavlink"):
             prog.note(f"[{cfg.session.name}] MAVLink: " + ", ".join(
                 f"{who} {ep}" for who, ep in msg["mavlink"].items()))
+        if msg.get("live"):
+            prog.note(f"[{cfg.session.name}] live scene: {msg['live']} (Foxglove: open connection, Foxglove "
+                      "WebSocket; layout docs/foxglove-layout.json)")
         for who, ep in (msg.get("wifi_udp") or {}).items():
             prog.note(f"[{cfg.session.name}] port: {who} Wi-Fi (UDP): {ep}")
     elif op == "progress" and w.t_started is not None and msg["t"] >= 1.0:

@@ -48,7 +48,8 @@ def cmd_run(a: argparse.Namespace) -> int:
     from bridge.core.launcher import run_session, say
 
     out = a.out or f"runs/{Path(a.config).stem}"
-    res = run_session(a.config, _overrides(a), out, progress=None if a.quiet else sys.stderr)
+    res = run_session(a.config, {**_overrides(a), "session.live": a.live}, out,
+                      progress=None if a.quiet else sys.stderr)
     if res.summary.get("error"):
         say(sys.stderr, res.summary["error"].strip().splitlines()[-1] + "\n")
     return res.code
@@ -276,6 +277,9 @@ def _session_args(p: argparse.ArgumentParser) -> None:
 def _parser_run(sub: Any) -> None:
     p = sub.add_parser("run", help="run one session")
     _session_args(p)
+    p.add_argument("--live", nargs="?", const="127.0.0.1:0", metavar="HOST:PORT",
+                   help="serve the scene to Foxglove while the session runs (its WebSocket server on loopback; "
+                        "default 127.0.0.1 and a free port, printed at the start)")
     p.add_argument("--out", help="output directory (default runs/<config name>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(fn=cmd_run)
