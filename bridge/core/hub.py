@@ -631,16 +631,17 @@ class Hub:
             m.unplug(r, device)
         if self.plan.robots[r].has_logic:
             self.to_inbox(t, entity(r, "logic"), [f"uart:{device}", None])
-        self.event(t, {"kind": "unplugged", "robot": r,
-                                                                   "detail": f"its {device} module was unplugged"})
+        self.event(t, {"kind": "unplugged", "robot": r, "detail": f"its {device} module was unplugged"})
 
     def _taps(self, cfg: Config) -> None:
         """Services that hear records (``ServiceSpec.hears``): every record whose topic matches one of their
         patterns also goes into their inbox, ``["rec", t, topic, values]``, for their next run."""
         kinds = {s.name: s.kind for s in cfg.services}
-        self._heard: dict[str, list[str]] = {}  # topic -> the services that hear it
-        self._tapping = [(e, SERVICES.get(kinds[name]).hears) for name, e in self.service_entities.items()
-                         if SERVICES.get(kinds[name]).hears]
+        self._heard: dict[str, list[tuple[str, bool]]] = {}  # topic -> the services that hear it (newest only?)
+        self._latest: dict[str, dict[str, list]] = defaultdict(dict)  # service -> topic -> its newest record
+        specs = {e: SERVICES.get(kinds[name]) for name, e in self.service_entities.items()}
+        self._tapping = [(e, spec.hears, spec.hears_latest) for e, spec in specs.items()
+                         if spec.hears or spec.hears_latest]
         if not self._tapping:
             return
         write_json = self.rec.write_json  # every record goes through it (``write`` encodes, then calls it)
@@ -652,20 +653,29 @@ class Hub:
 
         self.rec.write_json = tapped  # type: ignore[method-assign]
 
-    def _hearers(self, topic: str) -> list[str]:
+    def _hearers(self, topic: str) -> list[tuple[str, bool]]:
         ents = self._heard.get(topic)
         if ents is None:
-            ents = self._heard[topic] = [e for e, pats in self._tapping if any(fnmatch.fnmatchcase(topic, p)
-                                                                             for p in pats)]
+            ents = self._heard[topic] = []
+            for e, every, latest in self._tapping:
+                if any(fnmatch.fnmatchcase(topic, p) for p in every):
+                    ents.append((e, False))
+                elif any(fnmatch.fnmatchcase(topic, p) for p in latest):
+                    ents.append((e, True))
         return ents
 
     def overhear(self, t: int, topic: str, payload: Any) -> None:
-        """A record for the services that hear ``topic`` (``ServiceSpec.hears``); what the recorder passes on, and
-        what a medium passes on without recording it (the faces' MAVLink to a ground station)."""
+        """A record for the services that hear ``topic`` (``ServiceSpec.hears``, or only its newest record for
+        ``hears_latest``); what the recorder passes on, and what a medium passes on without recording it (the faces'
+        MAVLink to a ground station)."""
         if not self._tapping:
             return
-        for e in self._hearers(topic):
-            if e not in self.dead_services:
+        for e, latest in self._hearers(topic):
+            if e in self.dead_services:
+                continue
+            if latest:
+                self._latest[e][topic] = ["rec", t, topic, payload]
+            else:
                 self.inbox[e].append(["rec", t, topic, payload])
 
     def run(self) -> dict[str, Any]:
@@ -737,6 +747,9 @@ class Hub:
                 self.wakeups[self.ent_role[e]] += 1
                 entry: dict[str, Any] = {"in": self.inbox[e]}
                 self.inbox[e] = []
+                if e in self.service_of and self._tapping and self._latest.get(e):  # the newest of each topic
+                    newest = self._latest.pop(e)
+                    entry["in"] = entry["in"] + [newest[k] for k in sorted(newest)]
                 senses = self.service_senses.get(e)
                 if senses:  # a service: the ground truth its kind is entitled to, at t
                     entry["sens"] = {k: SENSES[k](self.world, self._sensed_robots) if k in SENSES

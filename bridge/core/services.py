@@ -172,6 +172,8 @@ class ServiceSpec:
     # the records it hears as they are written (``Service.on_record``): topic patterns (fnmatch), e.g. the robots'
     # logs ``/r*/log/*`` and the session's events ``/session/events``
     hears: tuple[str, ...] = ()
+    # topics of which it hears only the newest record at each run (a board's pins, written at its loop rate)
+    hears_latest: tuple[str, ...] = ()
     # checks against the whole config once it is valid (an option naming a robot the session lacks): (options,
     # config) -> None, raising ValueError naming the option
     check: Callable[[Any, Any], None] | None = field(default=None)

@@ -105,4 +105,5 @@ def _refuse(ctx: ServiceContext) -> Service:
 
 
 SPEC = ServiceSpec("probe", _refuse, senses=("poses", "robot_state", "radio"), hears=PROBE_HEARS,
+                   hears_latest=("/r*/*/pins",),
                    title="a test's seat in the lock-step (bridge.testing)")

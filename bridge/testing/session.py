@@ -77,6 +77,7 @@ class SwarmSession:
         self._plan: Any = None
         self._q_ns = 0
         self._pending: list[list[Any]] = []  # what the probe sends with its next answer (faults, MAVLink)
+        self._pins: dict[tuple[int, str], tuple[float, dict[str, Any]]] = {}  # (robot, board) -> newest pins record
         self._mavlink: MavlinkHandle | None = None
         self._running = False  # the world runs on (a run_for or run_until has not returned)
         self._stop_asked = False  # the launcher's stop hook: end the session even while the world runs
@@ -254,6 +255,17 @@ class SwarmSession:
         the end. Empty for a session without radios."""
         return self._now().sensed.get("radio") or {}
 
+    def pins(self, robot: int, board: str = "llc") -> dict[str, Any]:
+        """Robot ``robot``'s board ``board`` as its pins stood at its last loop: what it read (encoders, sonar, light,
+        battery) and what it wrote (PWM, LED), as the recording's ``/rNNN/<board>/pins`` has it. Empty before its
+        first loop, or for a board the robot does not have."""
+        self._row(robot)
+        return dict(self._pins.get((robot, board), (0.0, {}))[1])
+
+    def llc(self, robot: int) -> dict[str, Any]:
+        """Robot ``robot``'s low-level controller's state: its pins at its last loop (``pins(robot, "llc")``)."""
+        return self.pins(robot, "llc")
+
     def logs(self, robot: int | None = None, topic: str | None = None) -> list[LogLine]:
         """The log records so far (the robots' ``robot.log``, the services' logs, the session's events as topic
         ``events``), in recording order; only robot ``robot``'s, or only topic ``topic``'s, when given."""
@@ -321,7 +333,9 @@ class SwarmSession:
         self._seen = item
         for t, topic, values in item.records:
             parts = topic.strip("/").split("/")
-            if topic == "/mavlink/to_gcs":
+            if parts[-1] == "pins" and len(parts) == 3 and parts[0][1:].isdigit():  # /rNNN/<board>/pins
+                self._pins[(int(parts[0][1:]), parts[1])] = (t / 1e9, values)
+            elif topic == "/mavlink/to_gcs":
                 if self._mavlink is not None:
                     self._mavlink.heard(t, int(values["robot"]), bytes.fromhex(values["data"]))
             elif topic == "/session/events":

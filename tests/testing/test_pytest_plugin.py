@@ -240,3 +240,14 @@ def test_a_probe_that_dies_ends_the_session(tmp_path: Path) -> None:
         with pytest.raises(SessionEnded):
             s._go(10**20)  # the probe's answer cannot be packed (beyond 64 bits): its thread dies
     assert "svc-probe, served by the launcher, stopped" in s.summary["stop_reason"]
+
+
+def test_the_llc_state_is_its_pins_at_its_last_loop(tmp_path: Path) -> None:
+    with SwarmSession(WALK, SMALL, tmp_path) as s:
+        assert s.llc(0) == {}  # no loop yet at t = 0
+        s.run_for(1.0)
+        pins = s.llc(0)
+        assert set(pins) >= {"enc", "sonar_m", "pwm", "led"} and pins["enc"][0] > 0
+        assert list(pins["led"]) != [] and s.pins(0, "no_such_board") == {}
+        s.run_for(1.0)
+        assert s.llc(0)["enc"][0] > pins["enc"][0]  # the newest record, not the first
