@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import Field
 
+from bridge.core import foxglove as fx
 from bridge.core.config import Section
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.recorder import register_schema
@@ -108,6 +109,21 @@ class PfsmLoopFunctions(LoopFunctions):
                     self.hub.end_ns = min(self.hub.end_ns, max(t + q, -(-end // q) * q))
             if state == "home":
                 self.home.add(robot)
+
+    def scene(self, t: int) -> list[dict[str, Any]]:
+        """The targets: a ring around each, red while it waits to be found, green once found, blue once home."""
+        w = self.hub.world
+        out = []
+        for r in self.targets:
+            colour = (fx.color(0.1, 0.4, 0.95) if r in self.home else fx.color(0.1, 0.8, 0.2) if r in self.found_s
+                      else fx.color(0.9, 0.1, 0.1))
+            x, y = float(w.pos[r, 0]), float(w.pos[r, 1])
+            ring = [(x + 0.25 * math.cos(a), y + 0.25 * math.sin(a), 0.02) for a in
+                    (2 * math.pi * i / 24 for i in range(24))]
+            state = "home" if r in self.home else "found" if r in self.found_s else "waiting"
+            out.append(fx.entity(t, f"pfsm/target{r}", metadata={"state": state},
+                                 lines=[fx.line(ring, colour, fx.LINE_LOOP, 0.03)]))
+        return out
 
     def summary(self) -> dict[str, Any]:
         """``search``: each target's discovery time, the targets found and home, T_total, E_total and P_STA."""

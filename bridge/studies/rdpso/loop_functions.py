@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from bridge.core import foxglove as fx
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.recorder import register_schema
 from bridge.media.radio import splits
@@ -43,6 +44,9 @@ register_schema("swarm_sitl.Mapping", {
 BEHAVIOURS = ("rdpso", "est_ranger")  # the study's controllers: their logs are read here
 
 
+SUBGROUP_COLOURS = ((0.9, 0.6, 0.0), (0.0, 0.6, 0.9), (0.8, 0.2, 0.6), (0.2, 0.7, 0.3), (0.6, 0.4, 0.9))
+
+
 class RdpsoLoopFunctions(LoopFunctions):
     @classmethod
     def wanted(cls, cfg: Config) -> bool:
@@ -61,6 +65,7 @@ class RdpsoLoopFunctions(LoopFunctions):
                       and rp.params.get("link_mode") == "rssi" and "q_min_dbm" in rp.params}  # ranger -> its scouts'
         self.deployed: dict[int, dict[str, Any]] = {}  # ranger -> its deployment as it ended (deployment_report)
         self.comm: dict[int, dict[str, Any]] = {}  # robot -> its routing layer's latest counters (comm_report)
+        self.particles: dict[int, tuple[int, tuple[float, float]]] = {}  # robot -> (subgroup, its ledger's best)
         self.mapping = None
         if hub.cfg.section("objective").kind == "mapping":
             from bridge.studies.rdpso.mapping import SessionMap
@@ -77,8 +82,35 @@ class RdpsoLoopFunctions(LoopFunctions):
     def on_log(self, robot: int, topic: str, values: dict[str, Any], t: int) -> None:
         if topic == "deployment" and values.get("event") == "done" and robot in self.carriers:
             self._deployed(robot, t)
-        elif topic == "rdpso" and isinstance(values.get("comm"), dict):
-            self.comm[robot] = values["comm"]
+        elif topic == "rdpso":
+            if isinstance(values.get("comm"), dict):
+                self.comm[robot] = values["comm"]
+            chi2 = values.get("chi2")
+            if isinstance(values.get("sid"), int) and isinstance(chi2, list | tuple) and len(chi2) == 2:
+                self.particles[robot] = (values["sid"], (float(chi2[0]), float(chi2[1])))
+
+    def scene(self, t: int) -> list[dict[str, Any]]:
+        """The swarm as particles: each subgroup's best solution as its members last logged it (chi_2, a sphere in
+        the subgroup's colour), joined to the members that know it; the socially excluded are left undrawn."""
+        w = self.hub.world
+        best: dict[int, tuple[float, float]] = {}
+        members: dict[int, list[int]] = defaultdict(list)
+        for r, (sid, chi2) in sorted(self.particles.items()):
+            if sid and w.alive[r] and all(np.isfinite(chi2)):
+                best.setdefault(sid, chi2)
+                members[sid].append(r)
+        out = []
+        for sid in sorted(best):
+            rgba = fx.color(*SUBGROUP_COLOURS[sid % len(SUBGROUP_COLOURS)], 0.9)
+            bx, by = best[sid]
+            pts = []
+            for r in members[sid]:
+                pts += [(float(w.pos[r, 0]), float(w.pos[r, 1]), 0.05), (bx, by, 0.05)]
+            out.append(fx.entity(t, f"rdpso/subgroup{sid}", metadata={"members": ",".join(map(str, members[sid]))},
+                                 spheres=[fx.shape(bx, by, 0.1, (0.2, 0.2, 0.2), rgba)],
+                                 lines=[fx.line(pts, {**rgba, "a": 0.35}, fx.LINE_LIST, 0.01)],
+                                 texts=[fx.text(bx, by, 0.3, f"subgroup {sid}", rgba)]))
+        return out
 
     def _deployed(self, carrier: int, t: int) -> None:
         """A ranger says it has deployed its scouts (and broadcast START): where they are, by ground truth."""
