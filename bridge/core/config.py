@@ -66,6 +66,9 @@ class SessionCfg(_Model):
     poses_every_quanta: int = Field(1, ge=1, description="ground-truth pose recording period, in quanta")
     scene_hz: float = Field(10.0, ge=0, le=1000, description="Foxglove scene updates (/scene/robots, /tf) per "
                                                              "simulated second in the recording; 0: no scene channels")
+    record_ticks: bool = Field(False, description="record every run of every entity of the robots' processes (its "
+                                                  "inputs and its answer, /ticks/<entity>), so swarm-sitl replay can "
+                                                  "re-run one process against them")
     live: str | None = Field(None, description="HOST:PORT (loopback; port 0: any free one) where Foxglove's WebSocket "
                                                "server serves the scene while the session runs (swarm-sitl run --live)")
     end_after_deployment: bool = Field(False, description="end the session 1 s after the study's loop functions "

@@ -19,6 +19,7 @@ order, so the recording does not depend on process packing, speed or machine loa
 
 from __future__ import annotations
 
+import base64
 import bisect
 import contextlib
 import fnmatch
@@ -133,6 +134,8 @@ class Hub:
         self.battery_deaths = sorted((round(f.at_s * 1e9), f.robot) for f in cfg.faults if f.kind == "battery_depleted")
         self.module_stats: dict[str, dict] = {}
         self.crashes: dict[int, int] = {}  # firmware crashes injected while running: robot -> time
+        # session.record_ticks: this quantum's inputs per entity (msgpack), recorded with its answer
+        self._ticks_in: dict[str, bytes] | None = {} if cfg.session.record_ticks else None
         self.unplugged: set[str] = set()  # modules pulled out (unplugged faults): they run and hear no more
 
     def _wiring(self, plan: Plan) -> None:
@@ -485,6 +488,13 @@ class Hub:
                     merged[e] = v
                 else:
                     self.counts["malformed_done"] += 1
+        if self._ticks_in:  # each entity's run: what it was given and what it answered (swarm-sitl replay)
+            for e in sorted(self._ticks_in):
+                reply = merged.get(e)
+                self.rec.write(t, f"/ticks/{e}", "swarm_sitl.Tick", {
+                    "k": self.k, "in": base64.b64encode(self._ticks_in[e]).decode(),
+                    "out": None if reply is None else base64.b64encode(transport.pack(reply)).decode()})
+            self._ticks_in.clear()
         for e in sorted(merged):
             r = self.ent_robot[e]
             if self.is_dead(e):
@@ -763,6 +773,8 @@ class Hub:
                     r = robot_of(e)
                     entry["sens"], sensed[e] = wiring.sense(self.world, r, self.pin_inputs[r], r in self.ideal_pose)
                 run[e] = entry
+                if self._ticks_in is not None and e not in self.service_of:
+                    self._ticks_in[e] = transport.pack(entry)
             self.tick_pub[p].put(transport.pack({"k": self.k, "t": t, "run": run}))
             self.proc_ticks += 1
         return sensed

@@ -43,6 +43,14 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                        "time)",
         "properties": {"robot": {"type": "integer"}, "type": {"type": "string"}, "data": {"type": "string"}},
     },
+    "swarm_sitl.Tick": {
+        "type": "object",
+        "description": "One run of an entity (session.record_ticks): the inputs the world gave it and its answer, "
+                       "each msgpack as the world and the process exchanged them, base64 (swarm-sitl replay)",
+        "properties": {"k": {"type": "integer", "description": "the quantum"},
+                       "in": {"type": "string"}, "out": {"type": ["string", "null"],
+                                                         "description": "null: no answer (its process failed)"}},
+    },
     "swarm_sitl.Poses": {
         "type": "object",
         "description": "Ground-truth planar poses of all robots",

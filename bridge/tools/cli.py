@@ -48,7 +48,8 @@ def cmd_run(a: argparse.Namespace) -> int:
     from bridge.core.launcher import run_session, say
 
     out = a.out or f"runs/{Path(a.config).stem}"
-    res = run_session(a.config, {**_overrides(a), "session.live": a.live}, out,
+    res = run_session(a.config, {**_overrides(a), "session.live": a.live,
+                                 "session.record_ticks": True if a.record_ticks else None}, out,
                       progress=None if a.quiet else sys.stderr)
     if res.summary.get("error"):
         say(sys.stderr, res.summary["error"].strip().splitlines()[-1] + "\n")
@@ -280,6 +281,8 @@ def _parser_run(sub: Any) -> None:
     p.add_argument("--live", nargs="?", const="127.0.0.1:0", metavar="HOST:PORT",
                    help="serve the scene to Foxglove while the session runs (its WebSocket server on loopback; "
                         "default 127.0.0.1 and a free port, printed at the start)")
+    p.add_argument("--record-ticks", action="store_true",
+                   help="record every run of the robots' processes, for swarm-sitl replay (session.record_ticks)")
     p.add_argument("--out", help="output directory (default runs/<config name>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(fn=cmd_run)
@@ -412,6 +415,31 @@ def _parser_canlog(sub: Any) -> None:
     p.set_defaults(fn=cmd_canlog)
 
 
+def cmd_replay(a: argparse.Namespace) -> int:
+    from bridge.tools.replay import ReplayError, replay
+
+    try:
+        out = replay(a.run, a.robot, a.role, stop_in_pdb=a.pdb)
+    except ReplayError as e:
+        print(f"swarm-sitl replay: {e}", file=sys.stderr)
+        return 2
+    if out.divergence is None:
+        print(f"identical: robot {a.robot}'s {a.role}, {out.runs} runs")
+        return 0
+    print(f"robot {a.robot}'s {a.role}, run {out.runs}: {out.divergence}")
+    return 1
+
+
+def _parser_replay(sub: Any) -> None:
+    p = sub.add_parser("replay", help="re-run one robot's logic or firmware against its recorded inputs and compare "
+                                      "its answers (a run recorded with session.record_ticks = true)")
+    p.add_argument("run", help="the session's output directory (or its session.mcap)")
+    p.add_argument("--robot", type=int, required=True)
+    p.add_argument("--role", choices=["logic", "firmware"], required=True)
+    p.add_argument("--pdb", action="store_true", help="stop in the debugger at the first divergence")
+    p.set_defaults(fn=cmd_replay)
+
+
 def cmd_layout(a: argparse.Namespace) -> int:
     from bridge.tools.foxglove_layout import layout_json
 
@@ -446,7 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     for add in (_parser_run, _parser_join, _parser_validate, _parser_bench, _parser_radio_survey, _parser_radio_fit,
                 _parser_experiment, _parser_digest, _parser_devices, _parser_canlog, add_list, _parser_plot,
-                _parser_layout):
+                _parser_layout, _parser_replay):
         add(sub)
     return ap
 
