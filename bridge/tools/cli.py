@@ -440,6 +440,24 @@ def _parser_replay(sub: Any) -> None:
     p.set_defaults(fn=cmd_replay)
 
 
+def cmd_report(a: argparse.Namespace) -> int:
+    from bridge.tools.report import ReportError, write_report
+
+    try:
+        print(write_report(a.run, a.out))
+    except ReportError as e:
+        print(f"swarm-sitl report: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _parser_report(sub: Any) -> None:
+    p = sub.add_parser("report", help="one HTML page about a session: figures, plots, robots, failures, config")
+    p.add_argument("run", help="the session's output directory")
+    p.add_argument("--out", help="the page (default RUN/report.html)")
+    p.set_defaults(fn=cmd_report)
+
+
 def cmd_layout(a: argparse.Namespace) -> int:
     from bridge.tools.foxglove_layout import layout_json
 
@@ -474,7 +492,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     for add in (_parser_run, _parser_join, _parser_validate, _parser_bench, _parser_radio_survey, _parser_radio_fit,
                 _parser_experiment, _parser_digest, _parser_devices, _parser_canlog, add_list, _parser_plot,
-                _parser_layout, _parser_replay):
+                _parser_layout, _parser_replay, _parser_report):
         add(sub)
     return ap
 
