@@ -109,10 +109,14 @@ def color(r: float, g: float, b: float, a: float = 1.0) -> dict[str, float]:
     return {"r": round(r, 4), "g": round(g, 4), "b": round(b, 4), "a": round(a, 4)}
 
 
+def yaw_rotation(yaw: float) -> dict[str, float]:
+    """The quaternion of a rotation by ``yaw`` (rad) about the vertical."""
+    return {"x": 0.0, "y": 0.0, "z": round(math.sin(yaw / 2), 6), "w": round(math.cos(yaw / 2), 6)}
+
+
 def pose(x: float = 0.0, y: float = 0.0, z: float = 0.0, yaw: float = 0.0) -> dict[str, Any]:
     """A pose on the floor: a position and a rotation about the vertical."""
-    return {"position": {"x": round(x, 5), "y": round(y, 5), "z": round(z, 5)},
-            "orientation": {"x": 0.0, "y": 0.0, "z": round(math.sin(yaw / 2), 6), "w": round(math.cos(yaw / 2), 6)}}
+    return {"position": {"x": round(x, 5), "y": round(y, 5), "z": round(z, 5)}, "orientation": yaw_rotation(yaw)}
 
 
 def shape(x: float, y: float, z: float, size: tuple[float, float, float], rgba: dict[str, float],

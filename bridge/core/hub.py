@@ -606,6 +606,8 @@ class Hub:
         firmware raises at its first run from then on), or a fault a medium carries (CAN bus-off, CAN noise).
         ValueError if nothing in this session can carry it."""
         at = round(f.at_s * 1e9)
+        if why := self.plan.robots[f.robot].fault_problem(f.kind, f.node, f.device):
+            raise ValueError(why)
         if f.kind == "battery_depleted":
             bisect.insort(self.battery_deaths, (at, f.robot))
         elif f.kind == "firmware_crash":
@@ -616,15 +618,9 @@ class Hub:
                 if ent in self.next_wake and f.robot not in self.dead:
                     self.next_wake[ent] = at if w is None else min(w, at)
         elif f.kind == "unplugged":
-            if f.device not in self.roles[f.robot]:
-                raise ValueError(f"robot {f.robot} has no {f.device} module")
             self.deliver_at(-(-at // self.q_ns) * self.q_ns, self._unplug, f.robot, f.device)
-        else:
-            rp = self.plan.robots[f.robot]
-            if f.kind == "can_bus_off" and (rp.host_node if f.node == "host" else f.node) not in rp.can_nodes():
-                raise ValueError(f"robot {f.robot} has no {f.node} node on its CAN bus")
-            if not any(m.inject_fault(f, t) for m in self._media):
-                raise ValueError(f"nothing in this session carries a {f.kind} fault on robot {f.robot}")
+        elif not any(m.inject_fault(f, t) for m in self._media):
+            raise ValueError(f"nothing in this session carries a {f.kind} fault on robot {f.robot}")
 
     def _unplug(self, t: int, r: int, device: str) -> None:
         """A delivery: robot ``r``'s ``device`` module is pulled out. It runs and hears no more (gone from the air and
@@ -757,7 +753,7 @@ class Hub:
                 self.wakeups[self.ent_role[e]] += 1
                 entry: dict[str, Any] = {"in": self.inbox[e]}
                 self.inbox[e] = []
-                if e in self.service_of and self._tapping and self._latest.get(e):  # the newest of each topic
+                if self._latest and e in self._latest:  # a service that hears the newest record of each topic
                     newest = self._latest.pop(e)
                     entry["in"] = entry["in"] + [newest[k] for k in sorted(newest)]
                 senses = self.service_senses.get(e)

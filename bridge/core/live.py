@@ -9,11 +9,11 @@ served never feeds back into the session: the recording is the same with ``--liv
 
 from __future__ import annotations
 
-import ipaddress
 import json
 import time
 from typing import Any
 
+from bridge.core.endpoints import is_loopback
 from bridge.core.recorder import SCHEMAS
 
 LIVE_HZ = 10.0
@@ -28,11 +28,7 @@ def parse_listen(listen: str) -> tuple[str, int]:
     host = host.strip("[]")
     if not sep or not port.isdigit() or not 0 <= int(port) < 65536:
         raise ValueError(f"{listen!r} is not HOST:PORT (e.g. 127.0.0.1:8765, or 127.0.0.1:0 for any free port)")
-    try:
-        loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        loopback = False
-    if not loopback:
+    if not is_loopback(host):
         raise ValueError(f"{host!r} is not a loopback address: the live scene is served on this computer only "
                          "(127.0.0.1 or ::1)")
     return host, int(port)

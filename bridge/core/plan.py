@@ -80,6 +80,17 @@ class RobotPlan:
         """It carries an XBee the session simulates (not a real one on a device)."""
         return bool(self.xbee) and not self.xbee.get("device")
 
+    def fault_problem(self, kind: str, node: str = "host", device: str = "xbee") -> str | None:
+        """Why this robot cannot carry a fault of ``kind`` (a ``[[faults]]`` entry's), or None if it can."""
+        nodes = self.can_nodes()
+        if kind.startswith("can_") and not nodes:
+            return f"robot {self.id} has no CAN bus"
+        if kind == "can_bus_off" and (self.host_node if node == "host" else node) not in nodes:
+            return f"node: robot {self.id} has no {node} node on its CAN bus"
+        if kind == "unplugged" and device not in self.modules():
+            return f"device: robot {self.id} has no {device} module"
+        return None
+
     def can_nodes(self) -> tuple[str, ...]:
         """The roles of the nodes on this robot's CAN bus (none for a robot model without one): its LLC, its robot
         model's own boards on the bus (``RobotSpec.can_roles``), its companion computer, an slcan adapter."""

@@ -16,7 +16,6 @@ watch. The core draws no robot in particular: bodies come from the robots' profi
 from __future__ import annotations
 
 import json
-import math
 from typing import TYPE_CHECKING, Any
 
 import pybullet as pb
@@ -122,6 +121,5 @@ class Scene:
         return {"transforms": [
             {"timestamp": ts, "parent_frame_id": fx.WORLD_FRAME, "child_frame_id": f"r{r:03d}",
              "translation": {"x": round(float(w.pos[r, 0]), 5), "y": round(float(w.pos[r, 1]), 5), "z": 0.0},
-             "rotation": {"x": 0.0, "y": 0.0, "z": round(math.sin(float(w.yaw[r]) / 2), 6),
-                          "w": round(math.cos(float(w.yaw[r]) / 2), 6)}}
+             "rotation": fx.yaw_rotation(float(w.yaw[r]))}
             for r in range(self.hub.n)]}

@@ -209,13 +209,8 @@ class SwarmSession:
                               ) from None
         if robot not in self._ids:
             raise ConfigError(f"fault {kind}: no robot {robot} in this session (robots {self._ids})")
-        nodes = self._plan.robots[robot].can_nodes()
-        if kind.startswith("can_") and not nodes:
-            raise ConfigError(f"fault {kind}: robot {robot} has no CAN bus")
-        if kind == "can_bus_off" and f.node not in ("host", *nodes):
-            raise ConfigError(f"fault can_bus_off: node: robot {robot} has no {f.node} on its CAN bus")
-        if kind == "unplugged" and f.device not in self._plan.robots[robot].modules():
-            raise ConfigError(f"fault unplugged: device: robot {robot} has no {f.device} module")
+        if why := self._plan.robots[robot].fault_problem(f.kind, f.node, f.device):
+            raise ConfigError(f"fault {kind}: {why}")
         self.touched.add(robot)
         self._pending.append(["fault", {**f.model_dump(exclude_defaults=True), "kind": f.kind}])
 
