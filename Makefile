@@ -3,9 +3,10 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+BROWSER := $(VENV)/.browser
 OUT    ?= runs/demo
 
-.PHONY: setup demo test lint bench bench-smoke survey survey-smoke experiments experiments-smoke clean
+.PHONY: setup demo test lint screenshots bench bench-smoke survey survey-smoke experiments experiments-smoke clean
 
 setup: $(STAMP)
 
@@ -16,10 +17,15 @@ $(STAMP): pyproject.toml requirements.lock
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 
+# a headless browser (Qt WebEngine from PyPI, about 210 MB), for the tests and screenshots only: `make demo` skips it
+$(BROWSER): $(STAMP) requirements-browser.lock
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --only-binary :all: -r requirements-browser.lock
+	@touch $(BROWSER)
+
 demo: $(STAMP)
 	$(BIN)/swarm-sitl run hil_configs/demo.toml --out $(OUT)
 
-test: $(STAMP)
+test: $(STAMP) $(BROWSER)
 	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n 2 -q
@@ -60,6 +66,13 @@ experiments: $(STAMP)
 
 experiments-smoke: $(STAMP)
 	$(call each_experiment,--smoke --quiet)
+
+# the README's pictures of the run report, from a 60-s demo run, rendered in the headless browser
+screenshots: $(STAMP) $(BROWSER)
+	$(BIN)/swarm-sitl run hil_configs/demo.toml --duration 60 --quiet --out runs/screenshots
+	$(BIN)/swarm-sitl report runs/screenshots --screenshot docs/img/report-top.png --height 1150
+	$(BIN)/swarm-sitl report runs/screenshots --screenshot docs/img/report-connectivity.png --section connectivity
+	$(BIN)/swarm-sitl report runs/screenshots --screenshot docs/img/report-radio.png --section rssi
 
 clean:
 	rm -rf $(VENV) runs build *.egg-info .pytest_cache .ruff_cache

@@ -441,13 +441,25 @@ def _parser_replay(sub: Any) -> None:
 
 
 def cmd_report(a: argparse.Namespace) -> int:
+    from bridge.tools.browser import BrowserError, render
     from bridge.tools.report import ReportError, write_report
 
     try:
-        print(write_report(a.run, a.out))
+        page = write_report(a.run, a.out)
     except ReportError as e:
         print(f"swarm-sitl report: {e}", file=sys.stderr)
         return 2
+    print(page)
+    if a.screenshot:
+        try:
+            shown = render(page, a.screenshot, width=a.width, section=a.section, max_height=a.height)
+        except BrowserError as e:
+            print(f"swarm-sitl report: --screenshot: {e}", file=sys.stderr)
+            return 1
+        w, h = shown.png_size or (0, 0)
+        what = (f"section {a.section}" if a.section else "the whole page" if h >= shown.height else
+                f"the top {h} px of {shown.height}")
+        print(f"{a.screenshot} ({w}x{h}, {what})")
     return 0
 
 
@@ -455,6 +467,13 @@ def _parser_report(sub: Any) -> None:
     p = sub.add_parser("report", help="one HTML page about a session: figures, plots, robots, failures, config")
     p.add_argument("run", help="the session's output directory")
     p.add_argument("--out", help="the page (default RUN/report.html)")
+    p.add_argument("--screenshot", metavar="PNG", help="also render the page in a headless browser (Qt WebEngine) "
+                                                        "and save it as a PNG")
+    p.add_argument("--section", help="with --screenshot: only this section (figures, trajectories, connectivity, "
+                                     "rssi, robots, failures, events, config)")
+    p.add_argument("--width", type=int, default=1100, help="with --screenshot: the browser's width in pixels")
+    p.add_argument("--height", type=int, default=12000, help="with --screenshot: at most this many pixels from the "
+                                                               "top of the page")
     p.set_defaults(fn=cmd_report)
 
 

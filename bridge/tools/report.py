@@ -75,7 +75,7 @@ def _plots(run: Path, plan: Plan, series: dict[str, list]) -> list[tuple[str, st
             ax2.set_ylabel("robots alive")
             ax2.set_ylim(bottom=0)
         ax.set_ylabel("λ2")
-        fig.legend(loc="upper right", fontsize=8)
+        fig.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=2, fontsize=8, frameon=False)
         out.append(("connectivity", "Connectivity and robots alive over time", _png(fig)))
         plt.close(fig)
     if series["rssi"]:
@@ -89,10 +89,10 @@ def _plots(run: Path, plan: Plan, series: dict[str, list]) -> list[tuple[str, st
     return out
 
 
-def _table(rows: list[list[Any]], head: list[str]) -> str:
-    cells = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+def _table(rows: list[list[Any]], head: list[str] | None = None) -> str:
+    cells = "".join(f"<th>{html.escape(h)}</th>" for h in head or [])
     body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><thead><tr>{cells}</tr></thead><tbody>{body}</tbody></table>"
+    return f"<table>{f'<thead><tr>{cells}</tr></thead>' if head else ''}<tbody>{body}</tbody></table>"
 
 
 def write_report(run: str | Path, out: str | Path | None = None) -> Path:
@@ -133,7 +133,7 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Path:
 margin:1em 0}}td,th{{border:1px solid #ccc;padding:.2em .6em;font-size:.9em}}img{{max-width:100%}}
 pre{{background:#f6f6f6;padding:1em;overflow:auto;font-size:.8em}}</style></head><body>
 <h1>Session {html.escape(str(summary.get("name")))}</h1>
-<section id="figures"><h2>Figures</h2>{_table(figures, ["", ""])}</section>
+<section id="figures"><h2>Figures</h2>{_table(figures)}</section>
 {imgs}
 <section id="robots"><h2>Robots</h2>{_table(robots, ["robot", "profile", "alive", "distance (m)", "battery (V)",
                                                       "frames sent", "frames received", "UWB ranges"])}</section>
