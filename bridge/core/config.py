@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -1082,6 +1083,7 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
         except ValueError as e:
             raise ConfigError(f"{p}: {e} (random_obstacles drew it: keep the place clear with keep_clear)") from None
     _check_geometry(str(p), cfg)
+    _check_links(str(p), cfg)
     _check_behaviours(str(p), cfg)
     return cfg
 
@@ -1216,6 +1218,27 @@ def expand_random_obstacles(path: str, cfg: Config) -> None:
         new.append(BoxObstacle(type="box", x=round(x, 3), y=round(y, 3),
                                size=(round(sx, 3), round(sy, 3), ro.height_m), yaw_deg=round(yaw, 1)))
     cfg.obstacles = [*cfg.obstacles, *new]
+
+
+def _check_links(path: str, cfg: Config) -> None:
+    """Every pseudo-terminal a session links (an XBee's UART, an slcan adapter, a robot model's port) needs its own
+    path: two links on one path would leave one program talking to the other robot's, or the other module's, port."""
+    seen: dict[str, str] = {}
+    rid = 0
+    for i, g in enumerate(cfg.robots):
+        links = [("xbee.pty", g.xbee.pty if g.xbee else None), ("can.slcan_pty", g.can.slcan_pty),
+                 *g.model_ptys().items()]
+        for r in range(rid, rid + g.count):
+            for what, link in links:
+                if not link:
+                    continue
+                at = os.path.normpath(link.replace("{id}", str(r)))
+                here = f"robots[{i}].{what}"
+                if at in seen:
+                    raise ConfigError(f"{path}: {here}: robot {r}'s link {at!r} is also {seen[at]}: each "
+                                      "pseudo-terminal needs a path of its own ('{id}' in a group's path)")
+                seen[at] = f"{here} of robot {r}"
+        rid += g.count
 
 
 def _check_geometry(path: str, cfg: Config) -> None:
