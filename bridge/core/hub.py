@@ -49,6 +49,31 @@ from bridge.core.scene import Scene
 from bridge.core.services import SENSES, SERVICE_ROLE
 from bridge.core.world import World
 
+
+class AwakeDeadline:
+    """A wall-clock deadline that counts only the time this process was awake to see answers arrive.
+
+    The world waits in steps of at most ``step_s``; a step that took far longer means the world itself was not
+    running (paused with SIGSTOP, suspended, starved of CPU), not that the others were late: that gap is added to
+    the deadline, so a participant whose answer is already on its way is never declared hung for the world's own
+    pause."""
+
+    def __init__(self, seconds: float, step_s: float = 0.2, stall_s: float = 1.0) -> None:
+        self.seconds, self.step_s, self.stall_s = seconds, step_s, stall_s
+        self._last = time.monotonic()
+        self._end = self._last + seconds
+        self.stalled_s = 0.0  # how long the world was away, in all
+
+    def left(self) -> float:
+        """Seconds left, the world's own stalls not counted; call once per wait step."""
+        now = time.monotonic()
+        gap = now - self._last
+        if gap > self.step_s + self.stall_s:
+            self._end += gap
+            self.stalled_s += gap
+        self._last = now
+        return self._end - now
+
 LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
 
 
@@ -262,9 +287,10 @@ class Hub:
         remote = {p for p, pp in self.procs.items() if pp.remote}  # they join from other computers, maybe later
         self.status(op="listening", listen=self.cfg.session.listen, remote=sorted(remote))
         missing = set(self.procs)
+        deadline = AwakeDeadline(timeout)
         try:
             while missing:
-                left = timeout - (time.monotonic() - t0)
+                left = deadline.left()
                 if left <= 0:
                     hint = (" (remote processes: run the swarm-sitl join commands the launcher printed on the other "
                             "computers, or raise session.startup_timeout_s)" if missing & remote else "")
@@ -414,19 +440,21 @@ class Hub:
         outputs of this quantum are routed, so a late notice never discards answers already in."""
         results: dict[str, dict] = {}
         hang = self.cfg.session.hang_timeout_s
-        deadline = time.monotonic() + hang
+        deadline = AwakeDeadline(hang)
         procs = self.procs
         while waiting:
             if self.abort or os.getppid() != self.parent_pid:
                 self.abort = True
                 break
             # a process the launcher serves itself (a test driving the session) is waited for as long as it takes
-            left = deadline - time.monotonic() if any(not procs[p].inproc for p in waiting) else 0.2
+            left = deadline.left() if any(not procs[p].inproc for p in waiting) else 0.2
             if left <= 0:
                 for p in sorted(waiting):
                     if not procs[p].inproc:
+                        away = (f" (not counting {deadline.stalled_s:.1f} s the world itself was stopped)"
+                                if deadline.stalled_s else "")
                         self.proc_failed(p, t, "hung", f"no answer for the quantum at t={t / 1e9:.3f} s within "
-                                                       f"{hang} s")
+                                                       f"{hang} s{away}")
                         waiting.discard(p)
                 if waiting:
                     continue
@@ -826,8 +854,8 @@ class Hub:
         for p in sorted(waiting):
             self.tick_pub[p].put(stop)
         waiting -= self.unjoined
-        deadline = time.monotonic() + self.cfg.session.hang_timeout_s
-        while waiting and not self.abort and time.monotonic() < deadline:  # abort: SIGTERM, they are gone
+        deadline = AwakeDeadline(self.cfg.session.hang_timeout_s, step_s=0.05)
+        while waiting and not self.abort and deadline.left() > 0:  # abort: SIGTERM, they are gone
             try:
                 key, data = self.q.get(timeout=0.05)
             except queue.Empty:

@@ -43,6 +43,11 @@ import msgpack
 import zenoh
 
 PLAN_KEY = "plan"  # the world's queryable in a session that listens on TCP (see the key table)
+#: zenoh's link lease in a session: a world paused (SIGSTOP, a suspended laptop, a starved CPU) up to this long loses
+#: no participant, as what was on its way when it stopped still arrives (zenoh's own 10 s dropped the links: the
+#: paused side, on waking, found it had heard no one for longer). A link cut silently is still noticed sooner, by
+#: ``hang_timeout_s``; a closed connection at once.
+WORLD_LEASE_S = 120.0
 WORLD_KEY = "world"  # the world's liveliness token in such a session
 JOINED_KEY = "joined"  # a joiner's liveliness tokens, joined/<proc>: the world sees a remote computer go
 
@@ -86,6 +91,9 @@ def make_config(endpoint: str, namespace: str | None, listen: bool, extra_listen
         c.insert_json5("connect/retry", '{"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}')
     c.insert_json5("transport/shared_memory/enabled", "false")
     c.insert_json5("adminspace/enabled", "false")
+    # how long a silent peer keeps its link (and what was on its way): a world or a participant stopped for a while
+    # (and a world that wakes up to find it heard no one for as long) must not drop the others' links
+    c.insert_json5("transport/link/tx/lease", json.dumps(round(WORLD_LEASE_S * 1000)))
     return c
 
 
