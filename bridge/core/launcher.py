@@ -37,6 +37,7 @@ from typing import Any, TextIO
 from bridge.core import transport
 from bridge.core.config import ConfigError, config_warnings, load_config
 from bridge.core.plan import Plan, make_plan
+from bridge.core.recorder import NotARecording, Recovered, is_complete, recover
 from bridge.core.registry import PREFLIGHT, STUDIES
 
 # One worker thread per zenoh runtime: a session runs tens of processes on a few cores, and fewer
@@ -683,12 +684,39 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
     """Write the summary (and the plot) from the world's result, say how the session ended; its result."""
     res_path = out / "world_result.json"
     world_res: dict[str, Any] = json.loads(res_path.read_text()) if res_path.exists() else {}
+    recovered = _recover_recording(out) if not world_res else None
     summary = _summary(cfg, plan, children, world_res, interrupted, wall, t_started, t_launch)
+    if recovered is not None:  # what the world recorded before it died: the figures a reader recomputes from it
+        summary.update(sim_time_s=round(recovered.last_time_ns / 1e9, 6), messages=recovered.messages,
+                       digest=recovered.digest, recording=_recovery_note(recovered))
     _merge_radio(summary, world_res)
     code = _judge(summary, world_res, world_code, interrupted, t_started, startup_error, out)
     _write_outputs(summary, out, plan, prog, stops, plot)
     _report(cfg, summary, out, code, interrupted, wall, prog)
     return SessionResult(code, summary, out, children)
+
+
+def _recover_recording(out: Path) -> Recovered | None:
+    """The world ended without its result: rewrite its recording, up to where it was cut, as a finished MCAP file
+    (the cut one kept beside it, as ``session.mcap.damaged``). None: no recording, or a finished one."""
+    rec = out / "session.mcap"
+    try:
+        if not rec.exists() or is_complete(rec):
+            return None
+        damaged = out / "session.mcap.damaged"
+        rec.replace(damaged)
+        fixed = recover(damaged, out / "session.mcap.part")
+        (out / "session.mcap.part").replace(rec)
+        return fixed
+    except (OSError, NotARecording):
+        return None
+
+
+def _recovery_note(r: Recovered) -> dict[str, Any]:
+    return {"recovered": True, "messages": r.messages, "last_time_s": round(r.last_time_ns / 1e9, 6),
+            "damaged": "session.mcap.damaged",
+            "note": "the world died before finishing its recording: session.mcap holds every message up to the cut "
+                    "(the last chunk, still in memory, was lost), rewritten by swarm-sitl recover"}
 
 
 def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interrupted: bool, wall: float,
@@ -772,6 +800,21 @@ def _merge_radio(summary: dict[str, Any], world_res: dict[str, Any]) -> None:
         summary["radio"] = {k: v for k, v in radio.items() if k != "per_robot"}
 
 
+def _how_it_ended(code: int | None) -> str:
+    if code is not None and code < 0:
+        try:
+            return f"was killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"was killed by signal {-code}"
+    return f"ended (exit {code})"
+
+
+def _where_cut(summary: dict[str, Any]) -> str:
+    r = summary.get("recording") or {}
+    return (f" at simulated t={r['last_time_s']:.3f} s (its recording recovered up to there: {r['messages']} "
+            "messages)" if r.get("recovered") else "")
+
+
 def _judge(summary: dict[str, Any], world_res: dict[str, Any], world_code: int | None, interrupted: bool,
            t_started: float | None, startup_error: str | None, out: Path) -> int:
     """The session's exit code (130: interrupted; non-zero: an error, or every robot failed), with its error."""
@@ -780,8 +823,9 @@ def _judge(summary: dict[str, Any], world_res: dict[str, Any], world_code: int |
             "interrupted during start-up" if interrupted and t_started is None else
             "the world was killed before it wrote its result (Ctrl-C again); the recording ends where it was cut"
             if interrupted else startup_error or
-            f"the world process ended (exit {world_code}) without a result; see {out / 'logs'}")
-    code = world_code if world_code is not None else 1
+            f"the world process {_how_it_ended(world_code)}{_where_cut(summary)} without writing its result; see "
+            f"{out / 'logs'}")
+    code = world_code if world_code is not None and world_code > 0 else 1  # a signal's death is a failure: 1
     robots_alive = [r["alive"] for r in summary["per_robot"]]
     if startup_error and world_res and not interrupted:  # the launcher stopped the start (a host's launch failed)
         summary["error"] = startup_error

@@ -2,7 +2,8 @@
 
 Messages are JSON with JSON-Schema schemas embedded, so Foxglove and any MCAP reader can open the file.
 ``digest`` is a SHA-256 over the sim-time-ordered stream (log time, topic, payload of every message);
-``file_digest`` recomputes it from a file, also from one whose writer died before finishing it.
+``file_digest`` recomputes it from a file, also from one whose writer died before finishing it; ``recover`` rewrites
+such a file, up to its damage, as a whole recording that every MCAP reader opens.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import hashlib
 import json
 import struct
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -226,3 +228,68 @@ def file_digest(path: str | Path) -> tuple[str, int]:
         _digest_update(h, t, topic, data)
         n += 1
     return h.hexdigest(), n
+
+
+@dataclass
+class Recovered:
+    """What :func:`recover` saved of a damaged recording."""
+
+    messages: int
+    last_time_ns: int
+    digest: str  # of the messages saved, as ``file_digest`` computes it
+    complete: bool  # the file had its footer: nothing was damaged
+
+
+def is_complete(path: str | Path) -> bool:
+    """Whether ``path`` ends as a finished MCAP file does (its footer, then the magic)."""
+    with open(path, "rb") as f:
+        f.seek(0, 2)
+        if f.tell() < 2 * len(MCAP_MAGIC):
+            return False
+        f.seek(-len(MCAP_MAGIC), 2)
+        return f.read() == MCAP_MAGIC
+
+
+def recover(src: str | Path, dst: str | Path) -> Recovered:
+    """Write to ``dst`` every schema, channel, metadata record and message ``src`` holds up to its damage (the
+    partial record a killed writer left, whose last chunk was never written), as a finished MCAP file."""
+    from mcap.records import Channel, Header, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+
+    with open(src, "rb") as f:
+        if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise NotARecording(f"{src}: not an MCAP recording (no MCAP magic at its start)")
+    complete = is_complete(src)
+    h = hashlib.sha256()
+    n = last = 0
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        w = Writer(g, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
+        started = False
+        schemas: dict[int, int] = {}
+        channels: dict[int, tuple[int, str]] = {}
+        try:
+            for rec in StreamReader(f, validate_crcs=True).records:
+                if isinstance(rec, Header):
+                    w.start(profile=rec.profile, library=rec.library)
+                    started = True
+                elif isinstance(rec, Schema):
+                    schemas[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)
+                elif isinstance(rec, Channel):
+                    channels[rec.id] = (w.register_channel(rec.topic, rec.message_encoding,
+                                                           schemas.get(rec.schema_id, 0), rec.metadata), rec.topic)
+                elif isinstance(rec, Metadata):
+                    w.add_metadata(rec.name, rec.metadata)
+                elif isinstance(rec, Message) and rec.channel_id in channels:
+                    cid, topic = channels[rec.channel_id]
+                    w.add_message(cid, log_time=rec.log_time, data=rec.data, publish_time=rec.publish_time,
+                                  sequence=rec.sequence)
+                    _digest_update(h, rec.log_time, topic, rec.data)
+                    n += 1
+                    last = max(last, rec.log_time)
+        except Exception as e:  # the damage: a partial record, or a chunk whose checksum fails
+            if not (_is_truncation(e) or type(e).__name__ == "CRCValidationError"):
+                raise
+        if not started:
+            w.start(profile="", library="swarm-sitl")
+        w.finish()
+    return Recovered(n, last, h.hexdigest(), complete)

@@ -125,6 +125,40 @@ def cmd_digest(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_recover(a: argparse.Namespace) -> int:
+    from bridge.core.recorder import NotARecording, is_complete, recover
+
+    rec = Path(a.recording)
+    if rec.is_dir():
+        rec = rec / "session.mcap"
+    try:
+        if not rec.is_file():
+            raise NotARecording(f"{rec}: no such recording")
+        if is_complete(rec):
+            print(f"{rec}: a finished recording, nothing to recover")
+            return 0
+        damaged = rec.with_name(rec.name + ".damaged")
+        if damaged.exists():
+            print(f"swarm-sitl recover: {damaged} exists: move it away first (it may be the only copy)",
+                  file=sys.stderr)
+            return 2
+        rec.replace(damaged)
+        part = rec.with_name(rec.name + ".part")
+        try:
+            r = recover(damaged, part)
+        except BaseException:
+            damaged.replace(rec)  # as it was
+            part.unlink(missing_ok=True)
+            raise
+        part.replace(rec)
+    except NotARecording as e:
+        print(f"swarm-sitl recover: {e}", file=sys.stderr)
+        return 2
+    print(f"{rec}: {r.messages} messages up to simulated t={r.last_time_ns / 1e9:.3f} s, digest {r.digest} "
+          f"(the cut file kept as {damaged.name})")
+    return 0
+
+
 def cmd_plot(a: argparse.Namespace) -> int:
     from bridge.core.plan import Plan
     from bridge.core.plot import plot_session
@@ -397,6 +431,13 @@ def _parser_digest(sub: Any) -> None:
     p.set_defaults(fn=cmd_digest)
 
 
+def _parser_recover(sub: Any) -> None:
+    p = sub.add_parser("recover", help="rewrite a recording whose writer died (no footer) as a finished one, up to "
+                                       "where it was cut")
+    p.add_argument("recording", help="session.mcap, or the session's output directory")
+    p.set_defaults(fn=cmd_recover)
+
+
 def _parser_devices(sub: Any) -> None:
     p = sub.add_parser("devices", help="what a config would open to the outside world (pseudo-terminals, real "
                                        "devices, the MAVLink endpoint); checks that each real device answers")
@@ -511,7 +552,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     for add in (_parser_run, _parser_join, _parser_validate, _parser_bench, _parser_radio_survey, _parser_radio_fit,
                 _parser_experiment, _parser_digest, _parser_devices, _parser_canlog, add_list, _parser_plot,
-                _parser_layout, _parser_replay, _parser_report):
+                _parser_layout, _parser_replay, _parser_report, _parser_recover):
         add(sub)
     return ap
 

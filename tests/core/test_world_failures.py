@@ -1,18 +1,23 @@
 """The world itself may stall or fail, and the rest must not lie about it: a world paused longer than the hang
-timeout kills no healthy robot (the time it was away is not counted against the others)."""
+timeout kills no healthy robot (the time it was away is not counted against the others); a world killed outright
+ends the session with exit 1, a summary that says so and how far it got, and a recording every MCAP reader opens."""
 
 from __future__ import annotations
 
 import json
 import os
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 from bridge.core import hub
-from tests.core.test_session import config, session_procs, start, wait_running, wait_started
+from bridge.core.recorder import file_digest
+from tests.core.test_session import config, session_procs, start, wait_gone, wait_running, wait_started
 
 pytestmark = pytest.mark.session
 
@@ -55,3 +60,60 @@ def test_the_hang_deadline_does_not_count_the_worlds_own_stall(monkeypatch: pyte
     assert d.left() == pytest.approx(0.0, abs=1e-9)
     now[0] += 0.2
     assert d.left() < 0
+
+
+def test_a_world_killed_outright_leaves_a_summary_that_says_so_and_a_readable_recording(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=3600), out, "--speed", "2")
+    try:
+        wait_started(p)
+        wait_running(p)
+        wait_running(p)
+        (world,) = [q for q in session_procs(out) if "world" in q.cmdline()]
+        os.kill(world.pid, signal.SIGKILL)
+        p.wait(timeout=240)
+        wait_gone(out)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 1  # the README's "1 when the world fails", not the signal's 247
+    s = json.loads((out / "summary.json").read_text())
+    assert "the world process was killed by SIGKILL at simulated t=" in s["error"] and "recovered" in s["error"]
+    rec = s["recording"]
+    assert rec["recovered"] and rec["messages"] == s["messages"] > 0 and 0 < s["sim_time_s"] == rec["last_time_s"]
+    with open(out / "session.mcap", "rb") as f:  # the seeking reader needs the footer and summary section
+        reader = make_reader(f)
+        assert reader.get_summary() is not None
+        assert sum(1 for _ in reader.iter_messages()) == s["messages"]
+    assert file_digest(out / "session.mcap") == (s["digest"], s["messages"])
+    assert file_digest(out / "session.mcap.damaged") == (s["digest"], s["messages"])  # the cut file, kept as it was
+
+
+def test_swarm_sitl_recover_rewrites_a_cut_recording(tmp_path: Path) -> None:
+    from bridge.core.recorder import Recorder
+
+    run = tmp_path / "run"
+    run.mkdir()
+    r = Recorder(run / "session.mcap", metadata={"seed": "1"})
+    for i in range(20000):
+        r.write(i * 1_000_000, f"/r{i % 4:03d}/log", "swarm_sitl.Log", {"level": "info", "text": f"line {i}"})
+    r.finish()
+    whole = (run / "session.mcap").read_bytes()
+    (run / "session.mcap").write_bytes(whole[: len(whole) * 3 // 5])  # the writer killed mid-file
+    kept = file_digest(run / "session.mcap")
+    assert 0 < kept[1] < 20000
+    p = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "recover", str(run)], capture_output=True, text=True)
+    assert p.returncode == 0 and f"{kept[1]} messages" in p.stdout, p.stderr
+    with open(run / "session.mcap", "rb") as f:
+        reader = make_reader(f)
+        assert reader.get_summary().statistics.message_count == kept[1]
+        assert [m.metadata for m in reader.iter_metadata()] == [{"seed": "1"}]
+    assert file_digest(run / "session.mcap") == kept == file_digest(run / "session.mcap.damaged")
+    again = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "recover", str(run / "session.mcap")],
+                           capture_output=True, text=True)
+    assert again.returncode == 0 and "a finished recording, nothing to recover" in again.stdout
+    (tmp_path / "notes.txt").write_text("not a recording")
+    bad = subprocess.run([sys.executable, "-m", "bridge.tools.cli", "recover", str(tmp_path / "notes.txt")],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "not an MCAP recording" in bad.stderr and "Traceback" not in bad.stderr
+    assert (tmp_path / "notes.txt").read_text() == "not a recording"  # refused, left as it was
