@@ -281,6 +281,8 @@ class _Watch:
     world_code: int | None = None
     interrupted: bool = False
     startup_error: str | None = None
+    stopped_since: dict[str, float] = field(default_factory=dict)  # children seen stopped (SIGSTOP) in start-up
+    next_state_check: float = 0.0
 
 
 def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, endpoint: str, namespace: str,
@@ -294,7 +296,7 @@ def _supervise(cfg, plan: Plan, out: Path, logs: Path, spawn, stops: _Stops, end
     try:
         world = Child("world", "world", spawn("world", "world"))
         w.children.append(world)
-        w.startup_error = _await_endpoint(cfg, world, Path(session_dir) / "zenoh.sock", w.t_launch, logs, stops)
+        w.startup_error = _await_endpoint(cfg, w, Path(session_dir) / "zenoh.sock", w.t_launch, logs, stops)
         if w.startup_error or stops.asked():
             raise _Abort
         session = transport.open_session(endpoint, namespace, listen=False)
@@ -366,11 +368,16 @@ class _Served:
             t.join()
 
 
-def _await_endpoint(cfg, world: Child, sock: Path, t_launch: float, logs: Path, stops: _Stops) -> str | None:
+def _await_endpoint(cfg, w: _Watch, sock: Path, t_launch: float, logs: Path, stops: _Stops) -> str | None:
     """Wait for the world to open its endpoint (or a Ctrl-C); why it did not, if it failed or timed out."""
+    world = w.children[0]
     while not sock.exists():
         if world.popen.poll() is not None or time.monotonic() - t_launch > cfg.session.startup_timeout_s:
             return f"the world process did not open its endpoint; see {logs / 'world.log'}"
+        if _frozen_at_startup(w, cfg) is not None:
+            world.popen.kill()
+            return (f"the world process was stopped (SIGSTOP, or a debugger) for {cfg.session.hang_timeout_s:g} s "
+                    "during start-up (session.hang_timeout_s), so it was killed")
         if stops.asked():
             break
         time.sleep(0.01)
@@ -395,6 +402,13 @@ def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, sto
             control.put(transport.pack({"op": "dead", "proc": proc,
                                         "detail": f"its host in the launcher stopped: {why}"}))
             control.put(transport.pack({"op": "stop", "reason": f"{proc}, served by the launcher, stopped"}))
+        if w.t_started is None and not w.startup_error and (frozen := _frozen_at_startup(w, cfg)):
+            w.startup_error = (f"process {frozen.name} was stopped (SIGSTOP, or a debugger) for "
+                               f"{cfg.session.hang_timeout_s:g} s during start-up (session.hang_timeout_s), so "
+                               f"it was killed; see {logs / frozen.name}.log")
+            prog.note(f"[{cfg.session.name}] {w.startup_error}")
+            control.put(transport.pack({"op": "stop", "reason": w.startup_error}))
+            frozen.popen.kill()
         if w.t_started is None and not w.startup_error and (
                 gone := [c for c in w.children if c.kind == "host" and c.exit_code not in (None, 0)]):
             w.startup_error = (f"host {gone[0].name.removeprefix('host-')}'s launch command exited (code "
@@ -440,6 +454,30 @@ def _on_status(cfg, w: _Watch, msg: dict[str, Any], prog: _Progress, ports: list
     elif op == "event":
         prog.note(f"robot {msg['robot']} failed at sim t={msg['t_s']:.2f} s: {msg['kind']} "
                   f"({msg['detail'].strip().splitlines()[-1] if msg['detail'].strip() else ''})")
+
+
+def _frozen_at_startup(w: _Watch, cfg) -> Child | None:
+    """A process of this computer stopped (SIGSTOP, a debugger's break) for ``hang_timeout_s`` before the session
+    started: in a quantum, the hang timeout finds it; in start-up, nothing would before ``startup_timeout_s``. A
+    process waiting for the others sleeps, which is not stopped: only the stopped state counts."""
+    import psutil
+
+    now = time.monotonic()
+    if now < w.next_state_check:
+        return None
+    w.next_state_check = now + 0.25
+    for c in w.children:
+        if c.kind == "host" or c.exit_code is not None:
+            continue
+        try:
+            stopped = psutil.Process(c.popen.pid).status() in (psutil.STATUS_STOPPED, psutil.STATUS_TRACING_STOP)
+        except psutil.Error:
+            stopped = False
+        if not stopped:
+            w.stopped_since.pop(c.name, None)
+        elif now - w.stopped_since.setdefault(c.name, now) >= cfg.session.hang_timeout_s:
+            return c
+    return None
 
 
 def _reap_running(children: list[Child], world: Child, control, logs: Path) -> None:

@@ -1,6 +1,7 @@
 """The world itself may stall or fail, and the rest must not lie about it: a world paused longer than the hang
 timeout kills no healthy robot (the time it was away is not counted against the others); a world killed outright
-ends the session with exit 1, a summary that says so and how far it got, and a recording every MCAP reader opens."""
+ends the session with exit 1, a summary that says so and how far it got, and a recording every MCAP reader opens;
+a world stopped during start-up is noticed after the hang timeout, not the start-up timeout."""
 
 from __future__ import annotations
 
@@ -117,3 +118,24 @@ def test_swarm_sitl_recover_rewrites_a_cut_recording(tmp_path: Path) -> None:
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "not an MCAP recording" in bad.stderr and "Traceback" not in bad.stderr
     assert (tmp_path / "notes.txt").read_text() == "not a recording"  # refused, left as it was
+
+
+def test_a_world_stopped_during_start_up_is_noticed_within_the_hang_timeout(tmp_path: Path) -> None:
+    """Stopped before its robots could join (they need seconds to start; it is stopped as soon as it runs), the
+    world is killed after hang_timeout_s (10 s here), not startup_timeout_s (120 s), and the start fails saying so."""
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=3600), out)
+    try:
+        while not (world := [q for q in session_procs(out) if "world" in q.cmdline()]):
+            assert p.poll() is None, "the launcher ended before its world ran"
+            time.sleep(0.005)
+        os.kill(world[0].pid, signal.SIGSTOP)
+        p.wait(timeout=240)
+        wait_gone(out)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    s = json.loads((out / "summary.json").read_text())
+    assert p.returncode == 1
+    assert "was stopped (SIGSTOP, or a debugger) for 10 s during start-up" in s["error"]
+    assert s["startup_s"] is None and s["sim_time_s"] == 0.0
