@@ -863,7 +863,7 @@ def _judge(summary: dict[str, Any], world_res: dict[str, Any], world_code: int |
             if interrupted else startup_error or
             f"the world process {_how_it_ended(world_code)}{_where_cut(summary)} without writing its result; see "
             f"{out / 'logs'}")
-    code = world_code if world_code is not None and world_code > 0 else 1  # a signal's death is a failure: 1
+    code = world_code if world_code is not None and world_code >= 0 else 1  # a death by a signal is a failure: 1
     robots_alive = [r["alive"] for r in summary["per_robot"]]
     if startup_error and world_res and not interrupted:  # the launcher stopped the start (a host's launch failed)
         summary["error"] = startup_error

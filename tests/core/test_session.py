@@ -114,9 +114,19 @@ def wait_gone(out: Path) -> None:
         time.sleep(0.1)
 
 
-def test_session_writes_summary_recording_and_plot(tmp_path: Path) -> None:
-    out = tmp_path / "run"
-    code, s = run(config(tmp_path), out)
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, int, dict]:
+    """One run of the default ``config`` (a session of its own, as ``run`` starts any), shared by the tests that only
+    read its outputs or compare other runs of the same config with it: ``(config, out, exit code, summary)``."""
+    tmp = tmp_path_factory.mktemp("small")
+    cfg = config(tmp)
+    out = tmp / "run"
+    code, s = run(cfg, out)
+    return cfg, out, code, s
+
+
+def test_session_writes_summary_recording_and_plot(small_run: tuple[Path, Path, int, dict]) -> None:
+    _cfg, out, code, s = small_run
     assert code == 0, s
     for key in ("seed", "robots", "processes", "sim_time_s", "wall_time_s", "rtf", "ticks", "messages", "digest"):
         assert s[key] is not None, key
@@ -160,16 +170,18 @@ def _check_messages_match_their_schemas(path: Path, expect: frozenset[str] = fro
     assert expect <= seen
 
 
-def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path) -> None:
-    cfg = config(tmp_path)
-    digests = {}
-    for name, extra in [("a", ()), ("b", ()), ("packed", ("--robots-per-process", "2")),
+def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path, small_run) -> None:
+    cfg, _out, code, a = small_run  # run "a": the shared one
+    assert code == 0, a
+    digests = {"a": a["digest"]}
+    for name, extra in [("b", ()), ("packed", ("--robots-per-process", "2")),
                         ("one-process", ("--robots-per-process", "4")), ("paced", ("--speed", "4"))]:
         code, s = run(cfg, tmp_path / name, *extra)
         assert code == 0, s
         digests[name] = s["digest"]
     assert len(set(digests.values())) == 1, digests
-    code, s = run(cfg, tmp_path / "other-seed", "--seed", "6")
+    # packed as "one-process" (whose digest is "a"'s): only the seed differs
+    code, s = run(cfg, tmp_path / "other-seed", "--seed", "6", "--robots-per-process", "4")
     assert code == 0 and s["digest"] != digests["a"]
 
 
@@ -327,9 +339,8 @@ def test_hanging_controller_never_hangs_the_session(tmp_path: Path) -> None:
     assert s["process_exits"]["lg1"] == -9  # the world killed it
 
 
-def test_two_sessions_at_once_do_not_see_each_other(tmp_path: Path) -> None:
-    cfg = config(tmp_path)
-    code, solo = run(cfg, tmp_path / "solo")
+def test_two_sessions_at_once_do_not_see_each_other(tmp_path: Path, small_run) -> None:
+    cfg, _out, code, solo = small_run  # the one session alone
     assert code == 0
     a = start(cfg, tmp_path / "a")
     b = start(cfg, tmp_path / "b")
@@ -339,14 +350,13 @@ def test_two_sessions_at_once_do_not_see_each_other(tmp_path: Path) -> None:
         assert (s["digest"], s["messages"]) == (solo["digest"], solo["messages"])
 
 
-def test_a_session_runs_from_a_thread_other_than_the_main_one(tmp_path: Path) -> None:
+def test_a_session_runs_from_a_thread_other_than_the_main_one(tmp_path: Path, small_run) -> None:
     """As an experiment's trial does on a Dask worker (whose tasks run in its threads): the same recording."""
     from concurrent.futures import ThreadPoolExecutor
 
     from bridge.core.launcher import run_session
 
-    cfg = config(tmp_path)
-    code, main = run(cfg, tmp_path / "main")
+    cfg, _out, code, main = small_run  # the same config run by the launcher from its main thread
     assert code == 0
     with ThreadPoolExecutor(1) as pool:
         res = pool.submit(run_session, str(cfg), None, str(tmp_path / "thread"), None).result()

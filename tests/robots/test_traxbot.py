@@ -35,6 +35,11 @@ carried_by = 0
 """
 
 
+# the sessions pack three robots a process (the ranger with scouts 1-2, scouts 3-5 in another): the same recording as
+# one robot a process (packing never changes a session's digest), the ranger still reaching scouts in another process
+PACKED = ("--robots-per-process", "3")
+
+
 def ranger_config(tmp_path: Path, duration: float = 20, rangers: int = 1, scouts: int = 5) -> Path:
     poses = [[2.0, 1.5 + 3.0 * i, 90.0] for i in range(rangers)]
     p = tmp_path / "rangers.toml"
@@ -67,7 +72,7 @@ def test_a_ranger_unloads_its_scouts_one_by_one(tmp_path: Path) -> None:
     """The ranger asks for 2 slots at 1 s and 3 more at 8 s; the belt (0.15 m a slot at 0.05 m/s) drops a scout
     every 3 s behind the ranger, which keeps driving; on board the scouts ride along, then each drives off."""
     cfg = ranger_config(tmp_path)
-    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run"), *PACKED), cwd=ROOT, capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
@@ -107,7 +112,7 @@ def test_a_ranger_unloads_its_scouts_one_by_one(tmp_path: Path) -> None:
 def test_a_dead_ranger_keeps_its_scouts_on_board(tmp_path: Path) -> None:
     cfg = ranger_config(tmp_path, duration=10)
     cfg.write_text(cfg.read_text() + "[[faults]]\nrobot = 0\nat_s = 5.0\n")
-    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run"), *PACKED), cwd=ROOT, capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
@@ -141,7 +146,7 @@ def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: 
     cfg = tmp_path / "est.toml"
     cfg.write_text(EST.format(duration=100, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="est")
                    .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14"))
-    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run"), *PACKED), cwd=ROOT, capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
@@ -175,7 +180,7 @@ def test_the_random_baseline_drops_each_scout_within_d_max_of_the_last(tmp_path:
     cfg.write_text(EST.format(duration=100, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="random")
                    .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14")
                    .replace('mode = "random" }', 'mode = "random", d_max_m = 2.0 }'))
-    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run"), *PACKED), cwd=ROOT, capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())

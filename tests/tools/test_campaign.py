@@ -19,11 +19,11 @@ def _campaign(tmp_path: Path, body: str, runs: int) -> subprocess.CompletedProce
 
 
 def test_a_clean_selection_passes_every_run(tmp_path: Path) -> None:
-    p = _campaign(tmp_path, "def test_a():\n    assert True\n\ndef test_b():\n    assert 1 + 1 == 2\n", 2)
+    p = _campaign(tmp_path, "def test_a():\n    assert True\n\ndef test_b():\n    assert 1 + 1 == 2\n", 1)
     assert p.returncode == 0, p.stderr
-    assert "| 1 | no | 0 | 2 | 0 |" in p.stdout and "| 2 | yes | 0 | 2 | 0 |" in p.stdout
-    assert "2 runs (1 beside a busy core): 2 passed, 0 failed" in p.stdout
-    assert sorted(x.name for x in (tmp_path / "logs").iterdir()) == ["run-001.log", "run-002.log"]
+    assert "| 1 | no | 0 | 2 | 0 |" in p.stdout
+    assert "1 runs (0 beside a busy core): 1 passed, 0 failed" in p.stdout
+    assert sorted(x.name for x in (tmp_path / "logs").iterdir()) == ["run-001.log"]
 
 
 def test_a_failing_run_fails_the_campaign_and_is_named(tmp_path: Path) -> None:
@@ -32,6 +32,7 @@ def test_a_failing_run_fails_the_campaign_and_is_named(tmp_path: Path) -> None:
     p = _campaign(tmp_path, f"from pathlib import Path\n\ndef test_once():\n    m = Path({str(mark)!r})\n"
                             "    seen = m.exists()\n    m.touch()\n    assert not seen\n", 2)
     assert p.returncode == 1
+    assert "| 1 | no | 0 | 1 | 0 |" in p.stdout
     assert "2 runs (1 beside a busy core): 1 passed, 1 failed (runs 2)" in p.stdout
     assert "| 2 | yes | 1 | 0 | 1 |" in p.stdout and "run-002.log" in p.stdout
 

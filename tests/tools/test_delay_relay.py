@@ -56,9 +56,11 @@ def test_the_relay_delays_each_direction_keeps_order_and_passes_the_close() -> N
 
 @pytest.mark.session
 def test_the_hosts_benchmark_runs(tmp_path) -> None:
+    # the two robots packed in one firmware and one logic process: still two processes of the remote host, each
+    # reaching the world over the (relayed) link, and two robots whose radios hear each other in every case
     r = subprocess.run(
         [sys.executable, "-m", "bridge.tools.cli", "bench", "--hosts", "1", "--link-delay-ms", "0.5", "--robots", "2",
-         "--robots-per-process", "1", "--duration", "0.5", "--out", str(tmp_path)],
+         "--robots-per-process", "2", "--duration", "0.5", "--out", str(tmp_path)],
         cwd=ROOT, capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr

@@ -216,8 +216,9 @@ q_min_dbm = -70.0
 def test_a_deployment_only_session_ends_after_the_start_and_reports_links(tmp_path: Path) -> None:
     cfg = tmp_path / "dep.toml"
     cfg.write_text(SESSION)
-    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run")), cwd=ROOT, capture_output=True,
-                       text=True, timeout=600)
+    # two robots a process: the same recording as one a process (packing never changes a session's digest)
+    r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run"), "--robots-per-process", "2"), cwd=ROOT,
+                       capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     dep = s["deployment"]

@@ -16,6 +16,10 @@ from tests.core.test_session import run
 
 pytestmark = pytest.mark.session
 
+# several robots a process: the same recording as one robot a process (packing never changes a session's digest), in
+# fewer processes; a crashed robot shares its firmware process with robots that must go on
+PACKED = ("--robots-per-process", "4")
+
 
 def test_two_firmware_crashes_are_noticed_within_three_hellos_and_the_swarm_goes_on(tmp_path: Path) -> None:
     cfg = arena_variant(tmp_path / "arena.toml", 8, seed=21, duration=36.0)
@@ -24,7 +28,7 @@ def test_two_firmware_crashes_are_noticed_within_three_hellos_and_the_swarm_goes
     raw["faults"] = [{"robot": 1, "at_s": crash_s}, {"robot": 6, "at_s": crash_s}]
     cfg.write_text(to_toml(raw))
     out = tmp_path / "run"
-    code, s = run(cfg, out, timeout=600)
+    code, s = run(cfg, out, *PACKED, timeout=600)
     assert code == 0, s.get("error")
     assert sorted((f["robot"], f["kind"]) for f in s["failures"]) == [(1, "raised"), (6, "raised")]
     assert all("injected fault" in f["detail"] for f in s["failures"])
@@ -49,7 +53,7 @@ def test_two_firmware_crashes_are_noticed_within_three_hellos_and_the_swarm_goes
 def test_the_arena_swarm_climbs_the_light(tmp_path: Path) -> None:
     cfg = arena_variant(tmp_path / "arena.toml", 6, seed=4, duration=40.0)
     out = tmp_path / "run"
-    code, s = run(cfg, out, timeout=600)
+    code, s = run(cfg, out, "--robots-per-process", "3", timeout=600)
     assert code == 0, s.get("error")
     res = score_arena(out, cfg, 6, 40.0)
     curve = res.curves["best_light"]
