@@ -5,6 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 BROWSER := $(VENV)/.browser
 OUT    ?= runs/demo
+PYTEST_ARGS ?=
 
 .PHONY: setup demo test lint screenshots bench bench-smoke survey survey-smoke experiments experiments-smoke clean
 
@@ -28,7 +29,7 @@ demo: $(STAMP)
 test: $(STAMP) $(BROWSER)
 	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
 	$(BIN)/lint-imports
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 -q $(PYTEST_ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
