@@ -29,7 +29,7 @@ demo: $(STAMP)
 test: $(STAMP) $(BROWSER)
 	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
 	$(BIN)/lint-imports
-	$(BIN)/python -m pytest -n 2 -q $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n 2 --dist worksteal -q $(PYTEST_ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples

@@ -170,6 +170,7 @@ def _check_messages_match_their_schemas(path: Path, expect: frozenset[str] = fro
     assert expect <= seen
 
 
+@pytest.mark.long
 def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path, small_run) -> None:
     cfg, _out, code, a = small_run  # run "a": the shared one
     assert code == 0, a

@@ -23,6 +23,7 @@ from tests.core.test_session import config, session_procs, start, wait_gone, wai
 pytestmark = pytest.mark.session
 
 
+@pytest.mark.long
 def test_a_world_paused_longer_than_the_hang_timeout_kills_no_healthy_robot(tmp_path: Path) -> None:
     out = tmp_path / "run"
     p = start(config(tmp_path, duration=3600), out, "--speed", "2")  # hang_timeout_s = 10

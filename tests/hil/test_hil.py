@@ -69,6 +69,7 @@ def _neighbour_logs_from_recording(path: Path) -> dict[int, list[dict]]:
     return out
 
 
+@pytest.mark.long
 @pytest.mark.session
 def test_mixed_swarm_with_a_real_robot_on_ptys(tmp_path: Path) -> None:
     """Acceptance: 5 simulated eSwarBots and 1 whose XBee and CAN are reached only through pseudo-terminals run the

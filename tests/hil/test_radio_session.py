@@ -65,6 +65,7 @@ def test_radio_session_reports_and_records(tmp_path: Path) -> None:
     assert file_digest(s["_out"] / "session.mcap") == (s["digest"], s["messages"])
 
 
+@pytest.mark.long
 def test_radio_session_is_deterministic_across_packing(tmp_path: Path) -> None:
     a = run(tmp_path, "a", duration=6)
     b = run(tmp_path, "b", "--robots-per-process", "2", duration=6)

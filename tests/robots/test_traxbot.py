@@ -139,6 +139,7 @@ EST = EST.replace('behaviour = "random_walk"\ncarried_by = 0', 'behaviour = "rdp
                   'subgroups_init = 1, subgroups_max = 1, link_mode = "rssi", q_min_dbm = -70.0 }}')
 
 
+@pytest.mark.long
 @pytest.mark.session
 def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: Path) -> None:
     """Algorithm 5.1 end to end: the ranger drops its 5 scouts one by one, each told its pose (the ranger's
@@ -174,6 +175,7 @@ def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: 
     assert [e["scout"] for e in dropped] == [1, 2, 3, 4, 5]
 
 
+@pytest.mark.long
 @pytest.mark.session
 def test_the_random_baseline_drops_each_scout_within_d_max_of_the_last(tmp_path: Path) -> None:
     cfg = tmp_path / "random.toml"

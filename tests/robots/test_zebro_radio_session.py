@@ -86,6 +86,7 @@ def test_zebros_exchange_messages_and_see_their_neighbours(tmp_path: Path) -> No
     assert file_digest(s["_out"] / "session.mcap") == (s["digest"], s["messages"])
 
 
+@pytest.mark.long
 def test_the_digest_holds_at_any_packing_and_speed(tmp_path: Path) -> None:
     a = run(tmp_path, "a")
     b = run(tmp_path, "b", "--robots-per-process", "4")

@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "hil_configs" / "sonpi" / "regions_ch5.toml"
 
 
+@pytest.mark.long
 @pytest.mark.session
 def test_three_sonpis_follow_the_ch5_regions_to_the_target(tmp_path: Path) -> None:
     cfg = tmp_path / "ch5.toml"

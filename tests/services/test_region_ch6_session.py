@@ -34,6 +34,7 @@ def _polygon_area(pts: np.ndarray) -> float:
     return float(0.5 * abs(np.dot(pts[:, 0], np.roll(pts[:, 1], 1)) - np.dot(pts[:, 1], np.roll(pts[:, 0], 1))))
 
 
+@pytest.mark.long
 @pytest.mark.session
 def test_six_sonpis_split_through_two_lanes_merge_and_reach_the_target(tmp_path: Path) -> None:
     out = tmp_path / "out"

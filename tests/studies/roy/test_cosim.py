@@ -110,6 +110,7 @@ def test_d2_is_judged_on_the_thesis_figures_and_a_reversed_one_fails() -> None:
     assert text.count("| 7.") == 5 and "ch7-open N=3 hardware, trial 3" in text
 
 
+@pytest.mark.long
 @pytest.mark.session
 def test_a_short_session_of_each_profile_is_scored(tmp_path: Path) -> None:
     """10 s of the moving-obstacle case in both profiles: the loop functions score the formation from the true

@@ -89,6 +89,7 @@ def test_the_report_tables_show_thesis_and_ours() -> None:
     assert c7.sections([]) == []
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("method", [c7.PROPOSED, c7.CG, c7.BINARY_BAT])
 def test_a_short_session_of_each_method(tmp_path: Path, method: str) -> None:
     cell = {"kind": c7.KIND, "scenario": LOW, "agents": 3, "method": method}

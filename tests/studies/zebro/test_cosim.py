@@ -77,6 +77,7 @@ def test_a13_split_is_pieces_for_split_s_in_a_row_or_at_the_end() -> None:
     assert end.report()["split"] and not end.split
 
 
+@pytest.mark.long
 @pytest.mark.session
 def test_a_zebro_session_records_its_decision_the_same_at_any_packing_and_speed(tmp_path: Path) -> None:
     raw = scenario_config("E4", "mature", "faithful", 1)
