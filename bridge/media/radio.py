@@ -49,6 +49,7 @@ from bridge.core import foxglove as fx
 from bridge.core.entities import entity
 from bridge.core.medium import Medium
 from bridge.core.rng import stream
+from bridge.media.impairments import Impairments
 from firmware_sim.modules.xbee import valid_air_frame
 from swarm_logic.graph import components
 
@@ -359,6 +360,7 @@ class RadioMedium:
         self._travel = np.zeros(n)  # distance each robot moved, as seen by the medium
         self._last_pos: np.ndarray | None = None
         self._rng_decode = stream(seed, "radio", "decode")
+        self.impairments = Impairments(seed, "radio")  # partitions and burst loss a fault puts on the channel
         self._rng_csma = [stream(seed, "radio", "csma", r) for r in range(n)]
         # node settings (channel -1: radio off)
         self._chan = np.full(n, -1, dtype=np.int64)
@@ -708,6 +710,8 @@ class RadioMedium:
 
     def _tx_end(self, t: int, tx: _Tx) -> None:
         rs, ok, interfered = self._decode(tx)
+        if len(rs) and (self.impairments.partitions or self.impairments.bursts):  # a fault's: lost, as corrupt
+            ok = ok & ~self.impairments.lost(tx.t0, tx.src, rs)
         for r in rs:
             if self._lock[int(r)] is tx:
                 self._lock[int(r)] = None
