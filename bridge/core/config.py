@@ -29,6 +29,7 @@ from pydantic import (
 
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import SERVICES, STUDIES, PluginError, default_robot, robot_profile, robot_spec
+from bridge.media.impairments import AIR_FAULTS
 from bridge.media.radio import RadioCfg
 from bridge.media.uwb import UwbCfg
 from bridge.media.wifi import WifiCfg
@@ -653,24 +654,61 @@ class FaultCfg(_Model):
     ``unplugged``: the robot's ``device`` module (its XBee or UWB module on a USB serial adapter) is pulled out, for
     good: the module is gone from the air, and its serial port raises ``SerialException`` in the robot program, as
     pyserial's does for a disconnected device.
+
+    Faults of the swarm's air, given without ``robot``: ``partition``: the robots split into ``groups`` (a robot in
+    none hears all), a frame of one group lost at every receiver of another, for ``duration_s``. ``burst_loss``:
+    Gilbert-Elliott loss on every link of the ``medium``, or on those of ``robots``: each directed link goes bad with
+    ``p_gb`` and recovers with ``p_bg`` per frame it carries, losing a frame with ``loss_bad`` when bad and
+    ``loss_good`` when good, for ``duration_s`` (seeded: the same seed, the same losses).
     """
 
-    robot: int = Field(ge=0, description="robot id")
+    robot: int | None = Field(None, ge=0, description="robot id (a fault of the air: none)")
     at_s: float = Field(gt=0, description="simulated time the fault starts")
-    kind: Literal["firmware_crash", "battery_depleted", "can_bus_off", "can_noise", "unplugged"] = "firmware_crash"
+    kind: Literal["firmware_crash", "battery_depleted", "can_bus_off", "can_noise", "unplugged", "partition",
+                  "burst_loss"] = "firmware_crash"
     node: Literal["host", "llc", "slcan"] = Field(
         "host", description="can_bus_off: whose transmissions fail: host (the companion computer's CAN adapter), llc "
                             "or slcan")
     duration_s: float | None = Field(None, gt=0, description="can faults: how long it lasts (none: to the end)")
     probability: float = Field(0.01, gt=0, le=1, description="can_noise: share of frames destroyed")
     device: Literal["xbee", "uwb"] = Field("xbee", description="unplugged: which module is pulled out")
+    medium: Literal["radio"] = Field("radio", description="partition, burst_loss: the XBees' 2.4 GHz channel")
+    groups: list[list[Annotated[int, Field(ge=0)]]] | None = Field(
+        None, description="partition: the groups of robot ids that hear nothing of each other")
+    robots: list[Annotated[int, Field(ge=0)]] | None = Field(
+        None, description="burst_loss: the robots whose links it takes (none: every link)")
+    p_gb: float | None = Field(None, gt=0, le=1, description="burst_loss: chance per frame that a good link goes bad")
+    p_bg: float | None = Field(None, gt=0, le=1, description="burst_loss: chance per frame that a bad link recovers")
+    loss_good: float = Field(0.0, ge=0, le=1, description="burst_loss: chance a good link loses a frame")
+    loss_bad: float = Field(1.0, ge=0, le=1, description="burst_loss: chance a bad link loses a frame")
 
     @model_validator(mode="after")
     def _fields_fit_kind(self) -> FaultCfg:
         applies = {"firmware_crash": set(), "battery_depleted": set(), "can_bus_off": {"node", "duration_s"},
-                   "can_noise": {"duration_s", "probability"}, "unplugged": {"device"}}[self.kind]
+                   "can_noise": {"duration_s", "probability"}, "unplugged": {"device"},
+                   "partition": {"groups", "duration_s", "medium"},
+                   "burst_loss": {"duration_s", "medium", "robots", "p_gb", "p_bg", "loss_good", "loss_bad"},
+                   }[self.kind]
         self._only_for_kind(self.kind, applies, {"robot", "at_s", "kind"})
+        if self.kind in AIR_FAULTS:
+            if self.robot is not None:
+                raise ValueError(f"robot: a {self.kind} is a fault of the air, not of one robot (give "
+                                 f"{'groups' if self.kind == 'partition' else 'robots'} instead)")
+            if self.kind == "partition":
+                ids = [r for g in self.groups or [] for r in g]
+                if len(self.groups or []) < 2 or not all(self.groups or []) or len(ids) != len(set(ids)):
+                    raise ValueError("groups: a partition needs two or more non-empty groups, no robot in two")
+            elif self.p_gb is None or self.p_bg is None:
+                raise ValueError("p_gb, p_bg: a burst_loss needs both (its chances per frame of going bad and back)")
+        elif self.robot is None:
+            raise ValueError(f"robot: a {self.kind} fault needs the robot it strikes")
         return self
+
+    def robot_ids(self) -> list[int]:
+        """The robots the fault names: its robot, a partition's groups, a burst loss's robots."""
+        if self.robot is not None:
+            return [self.robot]
+        return [r for g in self.groups or [] for r in g] + list(self.robots or [])
 
 
 class CanCfg(_Model):
@@ -1248,8 +1286,14 @@ def _check_geometry(path: str, cfg: Config) -> None:
             raise ConfigError(f"{path}: obstacles[{i}]: centre ({ob.x}, {ob.y}) is outside the {w} x {length} m arena")
     groups = [g for g in cfg.robots for _ in range(g.count)]
     for i, f in enumerate(cfg.faults):
-        if f.robot >= cfg.robot_count:
-            raise ConfigError(f"{path}: faults[{i}].robot: no robot {f.robot} (the session has {cfg.robot_count})")
+        where = "robot" if f.robot is not None else "groups" if f.groups else "robots"
+        for r in f.robot_ids():
+            if r >= cfg.robot_count:
+                raise ConfigError(f"{path}: faults[{i}].{where}: no robot {r} (the session has {cfg.robot_count})")
+        if f.robot is None:
+            if not any(g.xbee is not None for g in cfg.robots):
+                raise ConfigError(f"{path}: faults[{i}].medium: no robot has an XBee, so nothing carries a {f.kind}")
+            continue
         if f.kind == "can_bus_off" and f.node == "slcan" and not groups[f.robot].can.slcan_pty:
             raise ConfigError(f"{path}: faults[{i}].node: robot {f.robot} has no slcan adapter (can.slcan_pty)")
         if f.kind == "unplugged" and not (groups[f.robot].xbee if f.device == "xbee" else groups[f.robot].uwb):

@@ -622,19 +622,19 @@ class Hub:
         earlier than the next quantum, recorded as an event."""
         _, fields = item
         f = FaultCfg.model_validate(fields)  # a pydantic ValidationError is a ValueError: counted, dropped
-        if f.robot >= self.n or round(f.at_s * 1e9) < t + self.q_ns:
+        if any(r >= self.n for r in f.robot_ids()) or round(f.at_s * 1e9) < t + self.q_ns:
             raise ValueError
         self.inject_fault(f, t)
         detail = json.dumps({**f.model_dump(exclude_defaults=True), "kind": f.kind})
-        self.event(t, {"kind": "fault_injected", "robot": f.robot,
-                                                                   "service": e.removeprefix("svc/"), "detail": detail})
+        who = {} if f.robot is None else {"robot": f.robot}
+        self.event(t, {"kind": "fault_injected", **who, "service": e.removeprefix("svc/"), "detail": detail})
 
     def inject_fault(self, f: FaultCfg, t: int) -> None:
         """Fault ``f`` from ``f.at_s`` on, as if the config had listed it: a battery death, a firmware crash (its
         firmware raises at its first run from then on), or a fault a medium carries (CAN bus-off, CAN noise).
         ValueError if nothing in this session can carry it."""
         at = round(f.at_s * 1e9)
-        if why := self.plan.robots[f.robot].fault_problem(f.kind, f.node, f.device):
+        if f.robot is not None and (why := self.plan.robots[f.robot].fault_problem(f.kind, f.node, f.device)):
             raise ValueError(why)
         if f.kind == "battery_depleted":
             bisect.insort(self.battery_deaths, (at, f.robot))
@@ -648,7 +648,8 @@ class Hub:
         elif f.kind == "unplugged":
             self.deliver_at(-(-at // self.q_ns) * self.q_ns, self._unplug, f.robot, f.device)
         elif not any(m.inject_fault(f, t) for m in self._media):
-            raise ValueError(f"nothing in this session carries a {f.kind} fault on robot {f.robot}")
+            on = "" if f.robot is None else f" on robot {f.robot}"
+            raise ValueError(f"nothing in this session carries a {f.kind} fault{on}")
 
     def _unplug(self, t: int, r: int, device: str) -> None:
         """A delivery: robot ``r``'s ``device`` module is pulled out. It runs and hears no more (gone from the air and

@@ -567,7 +567,8 @@ class CanBuses(Medium):
 
     def inject_fault(self, f: Any, t: int) -> bool:
         """A CAN fault injected while the session runs (from ``f.at_s`` on), as one from the config."""
-        return f.robot < len(self.buses) and self._fault(self.buses[f.robot], f.robot, self.hub.plan.robots[f.robot], f)
+        return (f.robot is not None and f.robot < len(self.buses)
+                and self._fault(self.buses[f.robot], f.robot, self.hub.plan.robots[f.robot], f))
 
     def frame(self, e: str, r: int, t: int, item: list) -> None:
         """``[bus, id, data, extended]`` (a fifth element ``True`` asks for the echo) offered by node ``e``."""

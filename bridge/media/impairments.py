@@ -21,6 +21,9 @@ import numpy as np
 
 from bridge.core.rng import stream
 
+#: Fault kinds of the swarm's air rather than of one robot (``[[faults]]`` given without ``robot``)
+AIR_FAULTS = ("partition", "burst_loss")
+
 
 @dataclass
 class Partition:

@@ -49,7 +49,7 @@ from bridge.core import foxglove as fx
 from bridge.core.entities import entity
 from bridge.core.medium import Medium
 from bridge.core.rng import stream
-from bridge.media.impairments import Impairments
+from bridge.media.impairments import AIR_FAULTS, Impairments
 from firmware_sim.modules.xbee import valid_air_frame
 from swarm_logic.graph import components
 
@@ -802,6 +802,9 @@ class RadioChannel(Medium):
         for r in range(hub.n):  # the LLC samples its XBee's RSSI PWM output on a pin
             if "xbee" in hub.roles[r]:
                 hub.pin_inputs[r]["rssi_pwm"] = 0.0
+        for f in hub.cfg.faults:  # the config's faults of the air
+            if f.kind in AIR_FAULTS and f.medium == "radio":
+                self._air_fault(f)
 
     def air(self, e: str, r: int, t: int, item: list) -> None:
         if not valid_air_frame(item[1]):
@@ -823,6 +826,33 @@ class RadioChannel(Medium):
         self.node_sens[r] = float(node["sensitivity_dbm"])
         self.node_net[r] = (node["channel"], node["pan_id"])
 
+    def inject_fault(self, f: Any, t: int) -> bool:
+        """A fault of the air on the 2.4 GHz channel (a partition, burst loss), injected while the session runs."""
+        if f.kind not in AIR_FAULTS or f.medium != "radio":
+            return False
+        self._air_fault(f)
+        return True
+
+    def _air_fault(self, f: Any) -> None:
+        """Put fault ``f`` on the channel from ``f.at_s`` for ``f.duration_s``; its start and end become events."""
+        t0 = round(f.at_s * 1e9)
+        t1 = None if f.duration_s is None else t0 + round(f.duration_s * 1e9)
+        imp = self.medium.impairments
+        if f.kind == "partition":
+            imp.partition(t0, t1, f.groups)
+            what = f"the robots split into {f.groups}"
+        else:
+            imp.burst_loss(t0, t1, f.p_gb, f.p_bg, f.loss_good, f.loss_bad, f.robots)
+            what = (f"Gilbert-Elliott loss on {'every link' if f.robots is None else f'the links of robots {f.robots}'}"
+                    f" (p_gb {f.p_gb}, p_bg {f.p_bg}, loss {f.loss_good}/{f.loss_bad})")
+        q = self.hub.q_ns
+        self.hub.deliver_at(-(-t0 // q) * q, self._fault_event, f.kind, f"{what} on the radio channel")
+        if t1 is not None:
+            self.hub.deliver_at(-(-t1 // q) * q, self._fault_event, f"{f.kind}_end", f"{f.kind} over")
+
+    def _fault_event(self, t: int, kind: str, detail: str) -> None:
+        self.hub.event(t, {"kind": kind, "detail": detail})
+
     def unplug(self, r: int, device: str) -> None:
         """Robot ``r``'s XBee was pulled out: its radio is off (its queued frames dropped, what it was receiving
         aborted), it hears and acknowledges nothing, and it has no link in the radio graph."""
@@ -841,17 +871,17 @@ class RadioChannel(Medium):
         for t_ev, r, ev in self.medium.advance(t + 2 * q):
             self._event(t_ev, r, ev)
         if t % CONNECTIVITY_EVERY_NS < q and all(r in self.node_net for r in self.swarm_radios if r not in hub.dead):
-            lam = self.algebraic_connectivity()
+            lam = self.algebraic_connectivity(t)
             self.connectivity.append((t / 1e9, lam))
-            live, adj = self.radio_graph()
+            live, adj = self.radio_graph(t)
             self.pieces.append(components(adj))
             for lf in hub.loop_functions:
                 lf.on_radio_sample(t, live, adj)
             hub.rec.write(t, "/radio/connectivity", "swarm_sitl.Connectivity", {"lambda2": round(lam, 6)})
 
-    def radio_graph(self) -> tuple[list[int], np.ndarray]:
-        """The live robots' radio graph: a link where the mean link budget (no fast fading) clears the receiver's
-        sensitivity both ways, on the same channel and PAN."""
+    def radio_graph(self, t: int) -> tuple[list[int], np.ndarray]:
+        """The live robots' radio graph at ``t``: a link where the mean link budget (no fast fading) clears the
+        receiver's sensitivity both ways, on the same channel and PAN, and no partition fault cuts it."""
         live = [r for r in self.swarm_radios if r not in self.hub.dead]
         rssi = self.medium.mean_rssi()[np.ix_(live, live)]  # row: sender, column: receiver
         sens = np.array([self.node_sens.get(r, -94.0) for r in live])
@@ -860,11 +890,15 @@ class RadioChannel(Medium):
         up = rssi >= sens[None, :]
         adj = (up & up.T & same).astype(float)
         np.fill_diagonal(adj, 0.0)
+        for p in self.medium.impairments.partitions:  # a partition fault cuts the links across its groups
+            if p.active(t):
+                grp = np.array([p.group_of(r) for r in live])
+                adj[(grp[:, None] >= 0) & (grp[None, :] >= 0) & (grp[:, None] != grp[None, :])] = 0.0
         return live, adj
 
-    def algebraic_connectivity(self) -> float:
-        """lambda2 of the radio graph: above zero exactly when the radio network is connected."""
-        live, adj = self.radio_graph()
+    def algebraic_connectivity(self, t: int) -> float:
+        """lambda2 of the radio graph at ``t``: above zero exactly when the radio network is connected."""
+        live, adj = self.radio_graph(t)
         if len(live) < 2:
             return 0.0
         lap = np.diag(adj.sum(axis=1)) - adj
@@ -932,6 +966,8 @@ class RadioChannel(Medium):
         for lf in hub.loop_functions:
             lf.radio_report(out["connectivity"])
         out["totals"] = stats.get("totals", {})
+        if self.medium.impairments.partitions or self.medium.impairments.bursts:
+            out["impairments"] = self.medium.impairments.report()
         out["rssi_hist_bins_dbm"] = [stats.get("rssi_hist_lo_dbm"), stats.get("rssi_hist_bin_db")]
         for r in range(hub.n):
             if "xbee" in hub.roles[r]:

@@ -191,27 +191,31 @@ class SwarmSession:
         return self._mavlink
 
     # -- faults -------------------------------------------------------------------------------------------------
-    def fault(self, kind: str, robot: int, **fields: Any) -> None:
+    def fault(self, kind: str, robot: int | None = None, **fields: Any) -> None:
         """Inject a fault of any kind a config's ``[[faults]]`` knows, from the next quantum on (the world applies what
         the test does at simulated time t from t + one quantum, as any entity's output): ``firmware_crash``,
         ``battery_depleted``, ``can_bus_off`` (``node``, ``duration_s``), ``can_noise`` (``probability``,
-        ``duration_s``), ``unplugged`` (``device``: its ``xbee`` or ``uwb`` module pulled out). A fault this session
-        cannot carry is refused here (ConfigError naming the field)."""
+        ``duration_s``), ``unplugged`` (``device``: its ``xbee`` or ``uwb`` module pulled out); and, with no robot,
+        the air's: ``partition`` (``groups``, ``duration_s``), ``burst_loss`` (``p_gb``, ``p_bg``, ``loss_good``,
+        ``loss_bad``, ``robots``, ``duration_s``). A fault this session cannot carry is refused here (ConfigError
+        naming the field)."""
         from pydantic import ValidationError
 
         from bridge.core.config import ConfigError, FaultCfg
 
         at_s = (self.t_ns + self._q_ns) / 1e9
+        on = "" if robot is None else f" on robot {robot}"
         try:
             f = FaultCfg.model_validate({"kind": kind, "robot": robot, "at_s": at_s, **fields})
         except ValidationError as e:
-            raise ConfigError(f"fault {kind} on robot {robot}: {e.errors()[0]['loc']}: {e.errors()[0]['msg']}"
-                              ) from None
-        if robot not in self._ids:
-            raise ConfigError(f"fault {kind}: no robot {robot} in this session (robots {self._ids})")
-        if why := self._plan.robots[robot].fault_problem(f.kind, f.node, f.device):
+            raise ConfigError(f"fault {kind}{on}: {e.errors()[0]['loc']}: {e.errors()[0]['msg']}") from None
+        if missing := [r for r in f.robot_ids() if r not in self._ids]:
+            raise ConfigError(f"fault {kind}: no robot {missing[0]} in this session (robots {self._ids})")
+        if robot is not None and (why := self._plan.robots[robot].fault_problem(f.kind, f.node, f.device)):
             raise ConfigError(f"fault {kind}: {why}")
-        self.touched.add(robot)
+        if robot is None and not any(rp.sim_xbee for rp in self._plan.robots):
+            raise ConfigError(f"fault {kind}: no robot has a simulated XBee, so nothing carries it")
+        self.touched.update(f.robot_ids())
         self._pending.append(["fault", {**f.model_dump(exclude_defaults=True), "kind": f.kind}])
 
     # -- the robots ---------------------------------------------------------------------------------------------

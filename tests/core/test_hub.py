@@ -125,11 +125,11 @@ def test_an_unplugged_module_is_off_the_air_and_its_port_cannot_be_opened_again(
             radio.node(entity(r, "xbee"), r, 0, ["node", {"channel": 12, "pan_id": 0x3332, "addr64": 100 + r,
                                                           "addr16": 0xFFFE, "tx_power_dbm": 3.0,
                                                           "sensitivity_dbm": -96.0, "series": 2}])
-        assert radio.radio_graph()[1].sum() == 6  # three robots a few metres apart: all linked
+        assert radio.radio_graph(0)[1].sum() == 6  # three robots a few metres apart: all linked
         assert uwb.medium.exchange(0, 0, 2)[-1][2]["peer"] == 2
         h._unplug(0, 1, "xbee")
         h._unplug(0, 2, "uwb")
-        assert radio.medium._chan[1] < 0 and radio.radio_graph()[1][1].sum() == 0
+        assert radio.medium._chan[1] < 0 and radio.radio_graph(0)[1][1].sum() == 0
         assert uwb.medium.exchange(0, 0, 2)[0][2]["cause"] == "no_response" and uwb.medium.exchange(0, 2, 0) == []
         assert h.inbox[entity(1, "logic")] == [["uart:xbee", None]] and h.next_wake[entity(1, "xbee")] is None
     finally:
