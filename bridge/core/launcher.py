@@ -37,7 +37,7 @@ from typing import Any, TextIO
 from bridge.core import transport
 from bridge.core.config import ConfigError, config_warnings, load_config
 from bridge.core.plan import Plan, make_plan
-from bridge.core.recorder import NotARecording, Recovered, is_complete, recover
+from bridge.core.recorder import NotARecording, Recovered, recover_in_place
 from bridge.core.registry import PREFLIGHT, STUDIES
 
 # One worker thread per zenoh runtime: a session runs tens of processes on a few cores, and fewer
@@ -220,7 +220,8 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         raise ConfigError(f"{config_path}: session.listen: cannot listen on {cfg.session.listen}: {why}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    for stale in ("session.mcap", "summary.json", "world_result.json", "trajectories.png", "plan.json"):
+    for stale in ("session.mcap", "session.mcap.damaged", "summary.json", "world_result.json", "trajectories.png",
+                  "plan.json"):
         (out / stale).unlink(missing_ok=True)
     logs = out / "logs"
     shutil.rmtree(logs, ignore_errors=True)
@@ -376,8 +377,7 @@ def _await_endpoint(cfg, w: _Watch, sock: Path, t_launch: float, logs: Path, sto
             return f"the world process did not open its endpoint; see {logs / 'world.log'}"
         if _frozen_at_startup(w, cfg) is not None:
             world.popen.kill()
-            return (f"the world process was stopped (SIGSTOP, or a debugger) for {cfg.session.hang_timeout_s:g} s "
-                    "during start-up (session.hang_timeout_s), so it was killed")
+            return f"{_frozen_note(world, cfg)}; see {logs / 'world.log'}"
         if stops.asked():
             break
         time.sleep(0.01)
@@ -403,9 +403,7 @@ def _watch(cfg, w: _Watch, status_q: queue.SimpleQueue, control, logs: Path, sto
                                         "detail": f"its host in the launcher stopped: {why}"}))
             control.put(transport.pack({"op": "stop", "reason": f"{proc}, served by the launcher, stopped"}))
         if w.t_started is None and not w.startup_error and (frozen := _frozen_at_startup(w, cfg)):
-            w.startup_error = (f"process {frozen.name} was stopped (SIGSTOP, or a debugger) for "
-                               f"{cfg.session.hang_timeout_s:g} s during start-up (session.hang_timeout_s), so "
-                               f"it was killed; see {logs / frozen.name}.log")
+            w.startup_error = f"{_frozen_note(frozen, cfg)}; see {logs / frozen.name}.log"
             prog.note(f"[{cfg.session.name}] {w.startup_error}")
             control.put(transport.pack({"op": "stop", "reason": w.startup_error}))
             frozen.popen.kill()
@@ -454,6 +452,11 @@ def _on_status(cfg, w: _Watch, msg: dict[str, Any], prog: _Progress, ports: list
     elif op == "event":
         prog.note(f"robot {msg['robot']} failed at sim t={msg['t_s']:.2f} s: {msg['kind']} "
                   f"({msg['detail'].strip().splitlines()[-1] if msg['detail'].strip() else ''})")
+
+
+def _frozen_note(c: Child, cfg) -> str:
+    return (f"process {c.name} was stopped (SIGSTOP, or a debugger) for {cfg.session.hang_timeout_s:g} s during "
+            "start-up (session.hang_timeout_s), so it was killed")
 
 
 def _frozen_at_startup(w: _Watch, cfg) -> Child | None:
@@ -735,17 +738,10 @@ def _finish(cfg, plan, out: Path, children: list[Child], world_code: int | None,
 
 
 def _recover_recording(out: Path) -> Recovered | None:
-    """The world ended without its result: rewrite its recording, up to where it was cut, as a finished MCAP file
-    (the cut one kept beside it, as ``session.mcap.damaged``). None: no recording, or a finished one."""
-    rec = out / "session.mcap"
+    """The world ended without its result: its recording rewritten up to the cut (``recover_in_place``). None: no
+    recording, or a finished one."""
     try:
-        if not rec.exists() or is_complete(rec):
-            return None
-        damaged = out / "session.mcap.damaged"
-        rec.replace(damaged)
-        fixed = recover(damaged, out / "session.mcap.part")
-        (out / "session.mcap.part").replace(rec)
-        return fixed
+        return recover_in_place(out / "session.mcap")
     except (OSError, NotARecording):
         return None
 

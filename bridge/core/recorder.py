@@ -293,3 +293,27 @@ def recover(src: str | Path, dst: str | Path) -> Recovered:
             w.start(profile="", library="swarm-sitl")
         w.finish()
     return Recovered(n, last, h.hexdigest(), complete)
+
+
+def recover_in_place(path: str | Path) -> Recovered | None:
+    """Rewrite the recording at ``path``, cut by a writer that died, as a finished one up to the cut, keeping the cut
+    file beside it as ``<name>.damaged``. None if it was already finished. FileExistsError if ``<name>.damaged``
+    exists (it may be the only copy of an earlier one); on any failure the file is left as it was."""
+    rec = Path(path)
+    with open(rec, "rb") as f:
+        if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise NotARecording(f"{rec}: not an MCAP recording (no MCAP magic at its start)")
+    if is_complete(rec):
+        return None
+    damaged, part = rec.with_name(rec.name + ".damaged"), rec.with_name(rec.name + ".part")
+    if damaged.exists():
+        raise FileExistsError(f"{damaged} exists: move it away first (it may be the only copy)")
+    rec.replace(damaged)
+    try:
+        fixed = recover(damaged, part)
+    except BaseException:
+        damaged.replace(rec)  # as it was
+        part.unlink(missing_ok=True)
+        raise
+    part.replace(rec)
+    return fixed

@@ -126,7 +126,7 @@ def cmd_digest(a: argparse.Namespace) -> int:
 
 
 def cmd_recover(a: argparse.Namespace) -> int:
-    from bridge.core.recorder import NotARecording, is_complete, recover
+    from bridge.core.recorder import NotARecording, recover_in_place
 
     rec = Path(a.recording)
     if rec.is_dir():
@@ -134,28 +134,15 @@ def cmd_recover(a: argparse.Namespace) -> int:
     try:
         if not rec.is_file():
             raise NotARecording(f"{rec}: no such recording")
-        if is_complete(rec):
-            print(f"{rec}: a finished recording, nothing to recover")
-            return 0
-        damaged = rec.with_name(rec.name + ".damaged")
-        if damaged.exists():
-            print(f"swarm-sitl recover: {damaged} exists: move it away first (it may be the only copy)",
-                  file=sys.stderr)
-            return 2
-        rec.replace(damaged)
-        part = rec.with_name(rec.name + ".part")
-        try:
-            r = recover(damaged, part)
-        except BaseException:
-            damaged.replace(rec)  # as it was
-            part.unlink(missing_ok=True)
-            raise
-        part.replace(rec)
-    except NotARecording as e:
+        r = recover_in_place(rec)
+    except (NotARecording, FileExistsError) as e:
         print(f"swarm-sitl recover: {e}", file=sys.stderr)
         return 2
-    print(f"{rec}: {r.messages} messages up to simulated t={r.last_time_ns / 1e9:.3f} s, digest {r.digest} "
-          f"(the cut file kept as {damaged.name})")
+    if r is None:
+        print(f"{rec}: a finished recording, nothing to recover")
+    else:
+        print(f"{rec}: {r.messages} messages up to simulated t={r.last_time_ns / 1e9:.3f} s, digest {r.digest} "
+              f"(the cut file kept as {rec.name}.damaged)")
     return 0
 
 
