@@ -659,20 +659,35 @@ class FaultCfg(_Model):
     none hears all), a frame of one group lost at every receiver of another, for ``duration_s``. ``burst_loss``:
     Gilbert-Elliott loss on every link of the ``medium``, or on those of ``robots``: each directed link goes bad with
     ``p_gb`` and recovers with ``p_bg`` per frame it carries, losing a frame with ``loss_bad`` when bad and
-    ``loss_good`` when good, for ``duration_s`` (seeded: the same seed, the same losses).
+    ``loss_good`` when good, for ``duration_s`` (seeded: the same seed, the same losses). On ``medium = "uwb"`` they
+    take the UWB radios' frames (ranging exchanges, a DWM1001's data) instead.
+
+    Faults a robot lives through (``docs/faults.md``): ``freeze``: its ``process`` (``logic`` or ``firmware``) stops
+    for ``duration_s`` and then goes on with what queued meanwhile (as after SIGSTOP, SIGCONT), or with
+    ``hung_after_s`` the world declares the robot hung once it has been frozen that long. ``firmware_reboot``: its
+    ``board`` (``llc``, or a robot model's own board) restarts: held in reset ``boot_s``, RAM lost, ``setup()`` again.
+    ``brown_out``: its battery sags by ``sag_v`` for ``duration_s``; below ``reset_v`` its boards reset and reboot
+    (``boot_s``) once it recovers. ``sensor``: its ``sensor`` (``sonar``, ``encoder``, ``light``, ``uwb``) goes
+    ``stuck``, ``noisy`` (``sigma``), ``dead`` or biased (``bias``), for ``duration_s``. ``wheel_slip``: its ``wheel``
+    loses ``slip`` of its grip (the encoder counts on, the robot moves less); ``motor_stall``: its ``wheel``'s motor
+    turns no more; both for ``duration_s``. ``clock_drift``: its ``board``'s clock (``millis()``) runs ``ppm`` parts
+    per million fast (slow when negative), for ``duration_s``.
     """
 
     robot: int | None = Field(None, ge=0, description="robot id (a fault of the air: none)")
     at_s: float = Field(gt=0, description="simulated time the fault starts")
     kind: Literal["firmware_crash", "battery_depleted", "can_bus_off", "can_noise", "unplugged", "partition",
-                  "burst_loss"] = "firmware_crash"
+                  "burst_loss", "freeze", "firmware_reboot", "brown_out", "sensor", "wheel_slip", "motor_stall",
+                  "clock_drift"] = "firmware_crash"
     node: Literal["host", "llc", "slcan"] = Field(
         "host", description="can_bus_off: whose transmissions fail: host (the companion computer's CAN adapter), llc "
                             "or slcan")
-    duration_s: float | None = Field(None, gt=0, description="can faults: how long it lasts (none: to the end)")
+    duration_s: float | None = Field(None, gt=0, description="how long it lasts (none: to the end; a freeze and a "
+                                                             "brown-out need one)")
     probability: float = Field(0.01, gt=0, le=1, description="can_noise: share of frames destroyed")
     device: Literal["xbee", "uwb"] = Field("xbee", description="unplugged: which module is pulled out")
-    medium: Literal["radio"] = Field("radio", description="partition, burst_loss: the XBees' 2.4 GHz channel")
+    medium: Literal["radio", "uwb"] = Field("radio", description="partition, burst_loss: the XBees' 2.4 GHz channel "
+                                                                 "(radio) or the UWB radios (uwb)")
     groups: list[list[Annotated[int, Field(ge=0)]]] | None = Field(
         None, description="partition: the groups of robot ids that hear nothing of each other")
     robots: list[Annotated[int, Field(ge=0)]] | None = Field(
@@ -681,6 +696,29 @@ class FaultCfg(_Model):
     p_bg: float | None = Field(None, gt=0, le=1, description="burst_loss: chance per frame that a bad link recovers")
     loss_good: float = Field(0.0, ge=0, le=1, description="burst_loss: chance a good link loses a frame")
     loss_bad: float = Field(1.0, ge=0, le=1, description="burst_loss: chance a bad link loses a frame")
+    process: Literal["logic", "firmware"] = Field(
+        "logic", description="freeze: which of the robot's processes stops: its swarm logic or its firmware")
+    hung_after_s: float | None = Field(None, gt=0, description="freeze: the world declares the robot hung once it "
+                                                               "has been frozen this long (none: it comes back)")
+    board: str = Field("llc", description="firmware_reboot, clock_drift: which board: llc, or a robot model's own "
+                                          "board role (a Zebro's leg1...)")
+    boot_s: float = Field(1.0, ge=0, le=60, description="firmware_reboot, brown_out: from reset to setup() (the "
+                                                        "bootloader's wait: Optiboot's is about 1 s)")
+    sag_v: float | None = Field(None, gt=0, description="brown_out: how far the battery's voltage sags (V)")
+    reset_v: float = Field(6.0, gt=0, description="brown_out: the battery voltage below which the robot's boards "
+                                                  "reset (its regulator's dropout, the MCU's brown-out detector)")
+    sensor: Literal["sonar", "encoder", "light", "uwb"] | None = Field(
+        None, description="sensor: which (sonar: every sonar; encoder: both; uwb: its ranges)")
+    mode: Literal["stuck", "noisy", "dead", "bias"] = Field(
+        "stuck", description="sensor: stuck (holds its reading), noisy (adds sigma), dead (reads nothing: 0 V, no "
+                             "pulses, no range), bias (adds bias)")
+    sigma: float | None = Field(None, gt=0, description="sensor, noisy: 1-sigma noise in the reading's unit (m, "
+                                                        "pulses, lux)")
+    bias: float | None = Field(None, description="sensor, bias: the offset in the reading's unit (m, pulses, lux)")
+    wheel: Literal["left", "right", "both"] = Field("left", description="wheel_slip, motor_stall: which wheel")
+    slip: float = Field(0.5, gt=0, le=1, description="wheel_slip: the share of the wheel's rim speed lost to slip")
+    ppm: float | None = Field(None, ge=-200_000, le=200_000, description="clock_drift: how fast the clock runs (parts "
+                                                                        "per million; negative: slow)")
 
     @model_validator(mode="after")
     def _fields_fit_kind(self) -> FaultCfg:
@@ -688,6 +726,11 @@ class FaultCfg(_Model):
                    "can_noise": {"duration_s", "probability"}, "unplugged": {"device"},
                    "partition": {"groups", "duration_s", "medium"},
                    "burst_loss": {"duration_s", "medium", "robots", "p_gb", "p_bg", "loss_good", "loss_bad"},
+                   "freeze": {"duration_s", "process", "hung_after_s"}, "firmware_reboot": {"board", "boot_s"},
+                   "brown_out": {"duration_s", "sag_v", "reset_v", "boot_s"},
+                   "sensor": {"duration_s", "sensor", "mode", "sigma", "bias"},
+                   "wheel_slip": {"duration_s", "wheel", "slip"}, "motor_stall": {"duration_s", "wheel"},
+                   "clock_drift": {"duration_s", "board", "ppm"},
                    }[self.kind]
         self._only_for_kind(self.kind, applies, {"robot", "at_s", "kind"})
         if self.kind in AIR_FAULTS:
@@ -702,6 +745,18 @@ class FaultCfg(_Model):
                 raise ValueError("p_gb, p_bg: a burst_loss needs both (its chances per frame of going bad and back)")
         elif self.robot is None:
             raise ValueError(f"robot: a {self.kind} fault needs the robot it strikes")
+        need = {"freeze": ("duration_s",), "brown_out": ("duration_s", "sag_v"), "sensor": ("sensor",),
+                "clock_drift": ("ppm",)}.get(self.kind, ())
+        if missing := [k for k in need if getattr(self, k) is None]:
+            raise ValueError(f"{', '.join(missing)}: a {self.kind} needs it")
+        if self.kind == "sensor" and self.mode in ("noisy", "bias") and getattr(
+                self, "sigma" if self.mode == "noisy" else "bias") is None:
+            raise ValueError(f"{'sigma' if self.mode == 'noisy' else 'bias'}: a {self.mode} sensor needs it")
+        if self.kind == "clock_drift" and self.ppm == 0:
+            raise ValueError("ppm: a clock that drifts runs fast or slow (not 0)")
+        if self.kind == "freeze" and self.hung_after_s is not None and self.hung_after_s >= (self.duration_s or 0):
+            raise ValueError("hung_after_s: the world can only declare the robot hung while it is frozen (less than "
+                             "duration_s)")
         return self
 
     def robot_ids(self) -> list[int]:
@@ -1291,7 +1346,10 @@ def _check_geometry(path: str, cfg: Config) -> None:
             if r >= cfg.robot_count:
                 raise ConfigError(f"{path}: faults[{i}].{where}: no robot {r} (the session has {cfg.robot_count})")
         if f.robot is None:
-            if not any(g.xbee is not None for g in cfg.robots):
+            if f.medium == "uwb" and not any(g.uwb for g in cfg.robots):
+                raise ConfigError(f"{path}: faults[{i}].medium: no robot has a UWB module, so nothing carries a "
+                                  f"{f.kind} on uwb")
+            if f.medium == "radio" and not any(g.xbee is not None for g in cfg.robots):
                 raise ConfigError(f"{path}: faults[{i}].medium: no robot has an XBee, so nothing carries a {f.kind}")
             continue
         if f.kind == "can_bus_off" and f.node == "slcan" and not groups[f.robot].can.slcan_pty:

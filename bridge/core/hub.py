@@ -40,6 +40,7 @@ from bridge.core import foxglove as fx
 from bridge.core import transport
 from bridge.core.config import Config, FaultCfg
 from bridge.core.entities import entity, robot_of
+from bridge.core.faults import ROBOT_FAULTS, RobotFaults
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.medium import Medium, route_table
 from bridge.core.plan import Plan, plan_offer
@@ -162,6 +163,7 @@ class Hub:
         # session.record_ticks: this quantum's inputs per entity (msgpack), recorded with its answer
         self._ticks_in: dict[str, bytes] | None = {} if cfg.session.record_ticks else None
         self.unplugged: set[str] = set()  # modules pulled out (unplugged faults): they run and hear no more
+        self.faults = RobotFaults(self)  # freezes, reboots, brown-outs, faulty sensors and wheels, drifting clocks
 
     def _wiring(self, plan: Plan) -> None:
         """Each LLC's wiring in the world, and the robots carried on board."""
@@ -202,8 +204,8 @@ class Hub:
         self.routes[("fault", SERVICE_ROLE)] = self._service_fault
         self._taps(cfg)
         for f in cfg.faults:
-            if f.kind == "unplugged":
-                self.inject_fault(f, 0)
+            if f.kind == "unplugged" or (f.kind in ROBOT_FAULTS and not (f.kind == "sensor" and f.sensor == "uwb")):
+                self.inject_fault(f, 0)  # (the media read the faults they carry from the config themselves)
         self._log_hooks = self._media + self.loop_functions
 
     def robot_spec(self, r: int) -> Any:
@@ -634,7 +636,7 @@ class Hub:
         firmware raises at its first run from then on), or a fault a medium carries (CAN bus-off, CAN noise).
         ValueError if nothing in this session can carry it."""
         at = round(f.at_s * 1e9)
-        if f.robot is not None and (why := self.plan.robots[f.robot].fault_problem(f.kind, f.node, f.device)):
+        if f.robot is not None and (why := self.plan.robots[f.robot].fault_problem(f)):
             raise ValueError(why)
         if f.kind == "battery_depleted":
             bisect.insort(self.battery_deaths, (at, f.robot))
@@ -647,6 +649,8 @@ class Hub:
                     self.next_wake[ent] = at if w is None else min(w, at)
         elif f.kind == "unplugged":
             self.deliver_at(-(-at // self.q_ns) * self.q_ns, self._unplug, f.robot, f.device)
+        elif f.kind in ROBOT_FAULTS and not (f.kind == "sensor" and f.sensor == "uwb"):
+            self.faults.inject(f, t)
         elif not any(m.inject_fault(f, t) for m in self._media):
             on = "" if f.robot is None else f" on robot {f.robot}"
             raise ValueError(f"nothing in this session carries a {f.kind} fault{on}")
@@ -730,7 +734,7 @@ class Hub:
                 lf.pre_step(t)
             for m in self._media:
                 m.start_quantum(t)
-            due = {p: ents for p, ents in self._due(t).items() if p in self.live_procs}
+            due = {p: ents for p, ents in self.faults.due_filter(t, self._due(t)).items() if p in self.live_procs}
             t_pub = time.perf_counter()
             sensed = self._publish_ticks(t, due)
             if self.k % poses_every == 0:
@@ -789,6 +793,8 @@ class Hub:
                 if senses:  # a service: the ground truth its kind is entitled to, at t
                     entry["sens"] = {k: SENSES[k](self.world, self._sensed_robots) if k in SENSES
                                      else self.radio_report() for k in senses}
+                if self.faults.to_firmware and (items := self.faults.take_for(e)):  # a reboot, a drifting clock
+                    entry["faults"] = items
                 if self.crashes:  # a firmware crash injected while running reaches the robot's boards
                     at = self.crashes.get(self.ent_robot[e])
                     if at is not None and t >= at and self.ent_role[e] != "logic":
@@ -910,6 +916,8 @@ class Hub:
                 for r in range(self.n)
             ],
         }
+        if self.faults.rows:
+            out["faults"] = self.faults.report()
         sections: list[str] = []
         for lf in self.loop_functions:
             part = lf.summary()

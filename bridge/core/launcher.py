@@ -803,7 +803,7 @@ def _summary(cfg, plan, children: list[Child], world_res: dict[str, Any], interr
         "per_robot": world_res.get("robots", []),
         "files": {},  # the outputs there are (below)
     }
-    for key in ("wifi", "services"):  # sessions with a Wi-Fi network and services (bridge.core.services)
+    for key in ("wifi", "services", "faults"):  # a Wi-Fi network, services (bridge.core.services), robot faults
         if world_res.get(key) is not None:
             summary[key] = world_res[key]
     return summary

@@ -57,6 +57,11 @@ class WorldModel:
     figures; ``local[r]`` is robot ``r``'s row in the model's arrays. Hooks do nothing unless overridden."""
 
     name: ClassVar[str]
+    #: the readings it makes that a ``sensor`` fault can take (``sonar``, ``encoder``, ``light``): it passes each
+    #: fresh one through ``world.sensor_faults.apply``
+    sensors: ClassVar[tuple[str, ...]] = ()
+    #: the robot fault kinds it carries out itself (a drive's ``wheel_slip``, ``motor_stall``: ``wheel_fault``)
+    faults: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, world: World, robots: list[int], parts: list[Any]) -> None:
         self.world = world

@@ -14,6 +14,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -80,11 +81,17 @@ class RobotPlan:
         """It carries an XBee the session simulates (not a real one on a device)."""
         return bool(self.xbee) and not self.xbee.get("device")
 
-    def fault_problem(self, kind: str, node: str = "host", device: str = "xbee") -> str | None:
-        """Why this robot cannot carry a fault of ``kind`` (a ``[[faults]]`` entry's), or None if it can."""
+    def fault_problem(self, f: Any) -> str | None:
+        """Why this robot cannot carry fault ``f`` (a ``[[faults]]`` entry, ``FaultCfg``), or None if it can: the
+        reason starts with the field at fault."""
+        from bridge.core.faults import ROBOT_FAULTS, robot_fault_problem
+
+        if f.kind in ROBOT_FAULTS:
+            return robot_fault_problem(self, f)
+        kind, node, device = f.kind, f.node, f.device
         nodes = self.can_nodes()
         if kind.startswith("can_") and not nodes:
-            return f"robot {self.id} has no CAN bus"
+            return f"kind: robot {self.id} has no CAN bus"
         if kind == "can_bus_off" and (self.host_node if node == "host" else node) not in nodes:
             return f"node: robot {self.id} has no {node} node on its CAN bus"
         if kind == "unplugged" and device not in self.modules():
@@ -205,6 +212,9 @@ def make_plan(cfg: Config, path: str = "config") -> Plan:
     procs += [ProcPlan(f"remote{r.id}", "logic", (r.id,), remote=True) for r in robots if r.logic == "remote"]
     procs += [ProcPlan(service_proc(s.name), "service", (), service=s.name, remote=s.host is not None, host=s.host)
               for s in cfg.services]
+    for i, f in enumerate(cfg.faults):
+        if f.robot is not None and f.robot < len(robots) and (why := robots[f.robot].fault_problem(f)):
+            raise ConfigError(f"{path}: faults[{i}].{why}")
     return Plan(cfg.model_dump(mode="json"), robots, procs)
 
 

@@ -19,6 +19,7 @@ import pybullet as pb
 
 from bridge.core.arena_map import occupancy
 from bridge.core.config import ArenaCfg, BoxObstacle, Config
+from bridge.core.faults import SensorFaults
 from bridge.core.parts import WorldModel
 from bridge.core.plan import RobotPlan
 from bridge.core.profile import RobotProfile
@@ -220,7 +221,9 @@ class World:
         self.capacity_as = np.array([q.battery_capacity_mah * 3.6 for q in p])
         self.r_int = np.array([q.battery_internal_ohm for q in p])
         self.i_idle = np.array([q.current_idle_ma for q in p]) / 1000.0
+        self.sag_v = np.zeros(self.n)  # a brown-out's sag on each battery (bridge.core.faults)
         self.battery_v = self._battery_voltage(np.zeros(self.n))
+        self.sensor_faults = SensorFaults()  # stuck, noisy, dead or biased sensors (bridge.core.faults)
 
     def _models(self) -> None:
         """One world model per kind of part, for every robot with one, in order of first appearance."""
@@ -273,7 +276,7 @@ class World:
     # -- stepping -----------------------------------------------------------------------------------
     def _battery_voltage(self, current: np.ndarray) -> np.ndarray:
         ocv = np.interp(self.soc, _OCV_SOC, _OCV_V) * self.cells
-        return ocv - current * self.r_int
+        return ocv - current * self.r_int - self.sag_v
 
     def step_quantum(self, t_ns: int, q_ns: int) -> None:
         """Advance physics from ``t_ns`` to ``t_ns + q_ns`` (whole 1/physics_hz steps, exact on average)."""

@@ -15,6 +15,7 @@ import contextlib
 import os
 import pty
 import tty
+from collections import defaultdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -127,6 +128,62 @@ class CanBridge:
             self.bus.shutdown()
 
 
+class BoardFaults:
+    """A board's reboots and drifting clock, as the world announced them (``bridge.core.faults``)."""
+
+    def __init__(self) -> None:
+        self.resets: list[tuple[int, int]] = []  # (reset at, setup() at), to come
+        self.up_ns = 0  # the end of the current reset
+        self.pins_off = False
+        self.drifts: list[tuple[int, int | None, float]] = []  # (from, until, ppm)
+        self.counters: dict[str, int] = defaultdict(int)
+
+    def add(self, item: dict[str, Any]) -> None:
+        if item["kind"] == "reboot":
+            self.resets.append((int(item["at"]), int(item["up"])))
+            self.resets.sort()
+        elif item["kind"] == "drift":
+            self.drifts.append((int(item["at"]), None if item["until"] is None else int(item["until"]),
+                                float(item["ppm"])))
+
+    def reset_due(self, t: int) -> bool:
+        """A reset starts by ``t`` (the board is to be built anew)."""
+        due = False
+        while self.resets and self.resets[0][0] <= t:
+            _, up = self.resets.pop(0)
+            self.up_ns = max(self.up_ns, up)
+            self.pins_off = False
+            self.counters["reboots"] += 1
+            due = True
+        return due
+
+    def in_reset(self, t: int) -> bool:
+        return t < self.up_ns
+
+    def local_ns(self, t: int) -> int:
+        """The board's own clock at world time ``t``: each drift adds ``ppm`` of the time it has run."""
+        return t + round(sum(self._gain(t, a, b, ppm) for a, b, ppm in self.drifts))
+
+    def world_ns(self, local: int) -> int:
+        """The world time at which the board's clock reads ``local`` (the first, rounded up)."""
+        t = local
+        for _ in range(40):  # a contraction by the drift's share (at most 0.2) per step
+            nxt = local - round(sum(self._gain(t, a, b, ppm) for a, b, ppm in self.drifts))
+            if nxt == t:
+                break
+            t = nxt
+        while self.local_ns(t) < local:
+            t += 1
+        while self.local_ns(t - 1) >= local:
+            t -= 1
+        return t
+
+    @staticmethod
+    def _gain(t: int, a: int, b: int | None, ppm: float) -> float:
+        end = t if b is None else min(t, b)
+        return max(0, end - a) * ppm * 1e-6
+
+
 class FirmwareHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
         cfg = Config.model_validate(plan.config)
@@ -141,6 +198,8 @@ class FirmwareHost:
         self.gateways: dict[int, XBeeGateway] = {}
         self.own: dict[int, dict[str, Any]] = {}  # each robot model's own firmware entities (RobotSpec.modules)
         self.crash_ns = {f.robot: round(f.at_s * 1e9) for f in cfg.faults if f.kind == "firmware_crash"}
+        self.plan, self.cfg = plan, cfg
+        self.board_faults: dict[str, BoardFaults] = {}  # boards that reboot or whose clock drifts
         uwb_team = [r.id for r in plan.robots if r.uwb]
         self.uwb_baud = cfg.uwb.uart_baud
         for r in robots:
@@ -180,6 +239,11 @@ class FirmwareHost:
         if t_ns >= self.crash_ns.get(r, t_ns + 1):
             raise RuntimeError(f"injected fault: robot {r}'s firmware crashed at {self.crash_ns[r] / 1e9:g} s")
         role = ent[ent.index("/") + 1:]
+        if "faults" in inputs or ent in self.board_faults:
+            return self._faulty(ent, r, role, t_ns, inputs)
+        return self._run(r, role, t_ns, inputs)
+
+    def _run(self, r: int, role: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         own = self.own.get(r)
         if own is not None and role in own:
             return own[role].run(t_ns, inputs)
@@ -192,6 +256,43 @@ class FirmwareHost:
         if role == "can_bridge":
             return self._can_bridge(r, t_ns, inputs)
         return self._uwb(r, t_ns, inputs)
+
+    def _faulty(self, ent: str, r: int, role: str, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
+        """A run of a board with a fault (``bridge.core.faults``): a reboot holds it in reset, then builds it anew (RAM
+        lost: ``setup()`` runs again); a drifting clock gives it its own time, and its wake-ups back in the world's."""
+        bf = self.board_faults.setdefault(ent, BoardFaults())
+        for item in inputs.get("faults", ()):
+            bf.add(item)
+        if bf.reset_due(t_ns):
+            self._rebuild(r, role)
+        if bf.in_reset(t_ns):
+            bf.counters["inputs_lost_in_reset"] += len(inputs.get("in", ()))
+            out: dict[str, Any] = {"out": [], "wake": bf.up_ns, "wom": False}
+            off = getattr(self._board(r, role), "off_pins", None)
+            if off is not None and not bf.pins_off:
+                bf.pins_off = True
+                out["pins"] = off()
+            return out
+        res = self._run(r, role, bf.local_ns(t_ns), inputs)
+        if res.get("wake") is not None:
+            res["wake"] = max(t_ns + 1, bf.world_ns(int(res["wake"])))
+        return res
+
+    def _board(self, r: int, role: str) -> Any:
+        return self.llcs[r] if role == "llc" else self.own[r][role]
+
+    def _rebuild(self, r: int, role: str) -> None:
+        """Robot ``r``'s board ``role`` powered up anew, as its robot plugin builds it."""
+        rp = self.plan.robots[r]
+        spec = robot_spec(rp.profile)
+        old = self._board(r, role)
+        if role == "llc":
+            self.llcs[r] = spec.make_board(rp)
+        else:
+            self.own[r][role] = spec.make_modules(rp, self.cfg)[role]
+        close = getattr(old, "close", None)
+        if close is not None:
+            close()
 
     def _llc(self, r: int, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         return self.llcs[r].run(t_ns, inputs)
@@ -278,6 +379,8 @@ class FirmwareHost:
             for role, m in own.items():
                 if getattr(m, "counters", None) is not None:
                     out[entity(r, role)] = dict(m.counters)
+        for e, bf in self.board_faults.items():
+            out.setdefault(e, {}).update(bf.counters)
         return out
 
     def stop(self) -> None:

@@ -38,6 +38,8 @@ class DriveParams(Part):
 
 class DifferentialDrive(WorldModel):
     name = "differential_drive"
+    sensors = ("encoder",)
+    faults = ("wheel_slip", "motor_stall")
 
     def __init__(self, world: Any, robots: list[int], parts: list[DriveParams]) -> None:
         super().__init__(world, robots, parts)
@@ -64,6 +66,22 @@ class DifferentialDrive(WorldModel):
         self._bodies = [world.bodies[r] for r in robots]
         self._yaw = np.zeros(n)
         self._counts: list | None = None
+        self._t_ns = 0
+        self.grip = np.ones((n, 2))  # the share of a wheel's rim speed that moves the robot (wheel_slip: less)
+        self.stalled = np.zeros((n, 2), dtype=bool)  # motors that turn no more (motor_stall)
+
+    def wheel_fault(self, r: int, wheels: tuple[int, ...], kind: str, slip: float, on: bool) -> None:
+        """A ``wheel_slip`` (the wheel loses ``slip`` of its rim speed to the floor; its encoder counts on) or a
+        ``motor_stall`` (the motor turns no more: the wheel stops, its encoder too) on robot ``r``'s ``wheels``
+        (0 left, 1 right), or its end (``on`` False)."""
+        k = self.local[r]
+        for i in wheels:
+            if kind == "wheel_slip":
+                self.grip[k, i] = 1.0 - slip if on else 1.0
+            else:
+                self.stalled[k, i] = on
+                if on:
+                    self.omega[k, i] = 0.0
 
     def set_pwm(self, r: int, left: int, right: int) -> None:
         """The board's signed 8-bit PWM per motor (a dead robot's motors stay off)."""
@@ -80,6 +98,8 @@ class DifferentialDrive(WorldModel):
         frac = np.clip((duty - self.deadband[:, None]) / (255.0 - self.deadband[:, None]), 0.0, 1.0)
         vscale = (w.battery_v[self.ids] / (V_NOMINAL_PER_CELL * w.cells[self.ids]))[:, None]
         self._w_ss = np.sign(self.pwm) * frac * self.w_max[:, None] * self.gain * vscale
+        self._w_ss[self.stalled] = 0.0
+        self._t_ns = t_ns + q_ns
         self._yaw = w.yaw[self.ids].copy()
         self._counts = None
 
@@ -91,7 +111,10 @@ class DifferentialDrive(WorldModel):
         dev = self.omega - w_ss
         self.angle += w_ss * dt + dev * self._tau_1ma
         self.omega = w_ss + dev * self._decay
-        rim = self.omega * self.wheel_r
+        if self.stalled.any():  # a stalled motor's wheel is held still
+            self.omega[self.stalled] = 0.0
+            self.angle[self.stalled] -= (w_ss * dt + dev * self._tau_1ma)[self.stalled]
+        rim = self.omega * self.wheel_r * self.grip
         v = 0.5 * (rim[:, 0] + rim[:, 1])
         self._w = w = (rim[:, 1] - rim[:, 0]) / (2 * self.half_track)
         # the true pose is read back once per quantum, so a collision's effect on the heading is picked up within one
@@ -118,6 +141,8 @@ class DifferentialDrive(WorldModel):
         if self._counts is None:  # once per physics state
             self._counts = np.floor(self.angle * (self.cpr / (2 * math.pi))[:, None]).astype(np.int64).tolist()
         left, right = self._counts[self.local[r]]
+        if (r, "encoder") in self.world.sensor_faults.faults:  # a faulty encoder (bridge.core.faults)
+            left, right = self.world.sensor_faults.apply(r, "encoder", (left, right), self._t_ns)
         return {"encoders": (left, right)}
 
 

@@ -15,14 +15,17 @@ class LightParams(Part):
 
 class LightSensor(WorldModel):
     name = "light"
+    sensors = ("light",)
 
     def __init__(self, world: Any, robots: list[int], parts: list[LightParams]) -> None:
         super().__init__(world, robots, parts)
         self._rng = [stream(world.seed, "robot", r, "light") for r in robots]
         self._lux: list[float] | None = None
+        self._t_ns = 0
 
     def start_quantum(self, t_ns: int, q_ns: int) -> None:
         self._lux = None
+        self._t_ns = t_ns + q_ns  # readings are taken at the quantum's end
 
     def sense(self, r: int) -> dict[str, Any]:
         """Illuminance (lux), never negative."""
@@ -32,8 +35,10 @@ class LightSensor(WorldModel):
             lux = w.lux_field.lux(x, y) if w.lux_field is not None else w.cfg.light.illuminance(x, y)
             self._lux = lux.tolist()
         k = self.local[r]
-        noisy = self._lux[r] * (1 + self.parts[k].noise_rel * self._rng[k].standard_normal())
-        return {"lux": max(noisy, 0.0)}
+        noisy = max(self._lux[r] * (1 + self.parts[k].noise_rel * self._rng[k].standard_normal()), 0.0)
+        if (r, "light") in w.sensor_faults.faults:  # a faulty light sensor (bridge.core.faults)
+            noisy = w.sensor_faults.apply(r, "light", noisy, self._t_ns)
+        return {"lux": noisy}
 
 
 LightParams.world_model = LightSensor

@@ -29,6 +29,7 @@ class SonarParams(Part):
 
 class Sonars(WorldModel):
     name = "sonar"
+    sensors = ("sonar",)
 
     def __init__(self, world: Any, robots: list[int], parts: list[SonarParams]) -> None:
         super().__init__(world, robots, parts)
@@ -81,11 +82,11 @@ class Sonars(WorldModel):
     def sample(self, t_end_ns: int) -> None:
         due = self._next_ns <= t_end_ns
         if due.any():
-            self._update(due)
+            self._update(due, t_end_ns)
             nxt, per = self._next_ns[due], self._period_ns[due]
             self._next_ns[due] = nxt + ((t_end_ns - nxt) // per + 1) * per
 
-    def _update(self, due: np.ndarray) -> None:
+    def _update(self, due: np.ndarray, t_ns: int) -> None:
         """One ray batch for the due sonar cones of every live robot."""
         w = self.world
         due = due & w.alive[self.ids][self._sonar_owner]
@@ -127,6 +128,8 @@ class Sonars(WorldModel):
                     r = spurious
                 # inside its blind zone the sensor reports its minimum range (as MaxBotix sensors do)
                 out[j] = float(min(max(r, q.min_range_m), q.max_range_m))
+            if (self.robots[k], "sonar") in w.sensor_faults.faults:  # a faulty sonar (bridge.core.faults)
+                out[:] = w.sensor_faults.apply(self.robots[k], "sonar", out.copy(), t_ns)
 
     def sense(self, r: int) -> dict[str, Any]:
         """The front sonar's range (m), and a robot with more sonars the others', left then right."""

@@ -197,8 +197,10 @@ class SwarmSession:
         ``battery_depleted``, ``can_bus_off`` (``node``, ``duration_s``), ``can_noise`` (``probability``,
         ``duration_s``), ``unplugged`` (``device``: its ``xbee`` or ``uwb`` module pulled out); and, with no robot,
         the air's: ``partition`` (``groups``, ``duration_s``), ``burst_loss`` (``p_gb``, ``p_bg``, ``loss_good``,
-        ``loss_bad``, ``robots``, ``duration_s``). A fault this session cannot carry is refused here (ConfigError
-        naming the field)."""
+        ``loss_bad``, ``robots``, ``duration_s``, ``medium``: ``radio`` or ``uwb``); and the faults a robot lives
+        through: ``freeze``, ``firmware_reboot``, ``brown_out``, ``sensor``, ``wheel_slip``, ``motor_stall``,
+        ``clock_drift`` (README, Faults). A fault this session cannot carry is refused here (ConfigError naming the
+        field)."""
         from pydantic import ValidationError
 
         from bridge.core.config import ConfigError, FaultCfg
@@ -211,9 +213,9 @@ class SwarmSession:
             raise ConfigError(f"fault {kind}{on}: {e.errors()[0]['loc']}: {e.errors()[0]['msg']}") from None
         if missing := [r for r in f.robot_ids() if r not in self._ids]:
             raise ConfigError(f"fault {kind}: no robot {missing[0]} in this session (robots {self._ids})")
-        if robot is not None and (why := self._plan.robots[robot].fault_problem(f.kind, f.node, f.device)):
+        if robot is not None and (why := self._plan.robots[robot].fault_problem(f)):
             raise ConfigError(f"fault {kind}: {why}")
-        if robot is None and not any(rp.sim_xbee for rp in self._plan.robots):
+        if robot is None and f.medium == "radio" and not any(rp.sim_xbee for rp in self._plan.robots):
             raise ConfigError(f"fault {kind}: no robot has a simulated XBee, so nothing carries it")
         self.touched.update(f.robot_ids())
         self._pending.append(["fault", {**f.model_dump(exclude_defaults=True), "kind": f.kind}])

@@ -142,7 +142,13 @@ class Uwb:
         while len(buf) < n:
             left = deadline - self.clock.now()
             if left <= 0:
-                raise UwbTimeout()
+                # what already arrived counts (the program may have been stopped, or slow, while it came): one
+                # look without waiting before the deadline is called missed
+                self.port.timeout = 0
+                buf += self.port.read(n - len(buf))
+                if len(buf) < n:
+                    raise UwbTimeout()
+                break
             self.port.timeout = left
             chunk = self.port.read(n - len(buf))
             if chunk:

@@ -75,6 +75,10 @@ class LlcBoard:
         self.nominal_ns: int | None = None  # the loop's own fixed-rate schedule (millis()-based, as on the board)
         self.last_pins: tuple | None = None
 
+    def off_pins(self) -> dict[str, Any]:
+        """Its outputs while it is held in reset (a reboot, a brown-out): the motor driver's inputs and the LEDs low."""
+        return {"pwm": [0, 0], "led": [0, 0, 0]}
+
     def run(self, t_ns: int, inputs: dict[str, Any]) -> dict[str, Any]:
         b, llc = self.board, self.llc
         b.time_us = t_ns // 1000

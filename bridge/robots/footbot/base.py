@@ -69,6 +69,10 @@ class BaseBoard:
         self.nominal_ns: int | None = None
         self.last_pins: tuple | None = None
 
+    def off_pins(self) -> dict[str, Any]:
+        """Its outputs while it is held in reset (a reboot, a brown-out): the motor driver's inputs and the LEDs low."""
+        return {"pwm": [0, 0], "led": [0, 0, 0]}
+
     @property
     def counters(self) -> dict[str, int]:
         c = self.board.can

@@ -560,15 +560,17 @@ def arena_variant(path: Path, n: int, seed: int, duration: float, faults: list[d
 
 def crash_figures(out: Path, crashed: list[int], iteration_s: float, crash_s: float = CRASH_AT_S) -> dict[str, Any]:
     """How many iterations each surviving mate of a crashed robot took to drop it (3-hello link break), counted from
-    the first hello the crashed robots missed; a mate that never drops it counts as the rest of the run plus one."""
+    the first hello the crashed robots missed; a mate that never drops it counts as the rest of the run plus one.
+    ``crashed`` may be robots that are only cut off (the other side of a partition starting at ``crash_s``): their
+    subgroups are the ones they had before it."""
     logs, *_ = read_rdpso_session(out)
     k_missed = int(crash_s // iteration_s) + 1  # the first iteration whose hello the crashed robots miss
     by_k: dict[int, dict[int, dict[str, Any]]] = {}
     for robot, recs in logs.items():
         for rec in recs:
             by_k.setdefault(rec["k"], {})[robot] = rec
-    dead_sids = {logs[d][-1]["sid"] for d in crashed if d in logs} - {0}
     before = by_k.get(k_missed - 1, {})
+    dead_sids = {(before.get(d) or logs[d][-1])["sid"] for d in crashed if d in logs} - {0}
     delays = []
     for r, rec in before.items():
         if r in crashed or rec["sid"] not in dead_sids:

@@ -46,10 +46,11 @@ class Bno055Imu:
         buf = bytearray()
         while len(buf) < n:
             left = deadline - self.clock.now()
-            if left <= 0:
+            self.port.timeout = max(left, 0)  # past the deadline: one look at what already arrived
+            got = self.port.read(n - len(buf))
+            if left <= 0 and len(buf) + len(got) < n:
                 raise Bno055Error("no answer from the IMU")
-            self.port.timeout = left
-            buf += self.port.read(n - len(buf))
+            buf += got
             if status and buf[:1] == b"\xee" and len(buf) >= 2:  # an error status instead of data
                 raise Bno055Error(f"IMU status 0x{buf[1]:02x}")
         self.port.timeout = 0

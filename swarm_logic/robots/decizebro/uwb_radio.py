@@ -148,11 +148,11 @@ class ZebroUwbRadio:
         deadline = self.clock.now() + timeout
         while not done():
             left = deadline - self.clock.now()
-            if left <= 0:
-                raise UwbRadioError(what)
-            self.port.timeout = left
+            self.port.timeout = max(left, 0)  # past the deadline: one look at what already arrived
             first = self.port.read(1)
             self.port.timeout = 0
+            if left <= 0 and not first:
+                raise UwbRadioError(what)
             if first:
                 self.parser.buf += first
             for typ, body in self._take():

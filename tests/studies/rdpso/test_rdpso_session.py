@@ -60,3 +60,29 @@ def test_the_arena_swarm_climbs_the_light(tmp_path: Path) -> None:
     assert curve[-1] > curve[3] + 50  # the swarm best reading rose (LDR counts)
     assert 0.05 < res.metrics["improvement_rate"] < 0.8
     assert json.loads((out / "summary.json").read_text())["radio"]["totals"]["tx"]["frames"] > 6 * 20  # hellos
+
+
+@pytest.mark.long
+def test_a_partition_and_a_board_reboot_the_swarm_rides_through(tmp_path: Path) -> None:
+    """The RDPSO's fault tolerance (thesis ch. 5): a partition that cuts both subgroups is noticed as a crash is
+    (each side drops the other within three missed hellos) and healed when it ends; a robot whose LLC reboots loses
+    its odometry (the board's RAM) and iterates on with its subgroup."""
+    cut_at, cut_s, reboot_at = 6.2, 8.0, 9.3
+    faults = [{"kind": "partition", "at_s": cut_at, "groups": [[0, 1, 3], [2, 4, 5]], "duration_s": cut_s},
+              {"kind": "firmware_reboot", "robot": 2, "at_s": reboot_at}]
+    cfg = arena_variant(tmp_path / "arena.toml", 6, seed=4, duration=26.0, faults=faults)
+    out = tmp_path / "run"
+    code, s = run(cfg, out, "--robots-per-process", "6", timeout=600)
+    assert code == 0 and not s["failures"], s.get("error")
+    assert s["radio"]["impairments"]["partitioned"] > 0 and s["faults"]["count"] == {"firmware_reboot": 1}
+    it = tomllib.loads(cfg.read_text())["robots"][0]["params"]["iteration_s"]
+    for side in ([2, 4, 5], [0, 1, 3]):
+        figures = crash_figures(out, side, it, cut_at)
+        assert figures["mates_of_crashed"] > 0 and figures["notice_max_iterations"] <= 3, (side, figures)
+    logs, *_ = read_rdpso_session(out)
+    healed = int((cut_at + cut_s) // it) + 4  # three hellos after the partition's end
+    sizes = {r: [rec["n_s"] for rec in recs if rec["k"] >= healed] for r, recs in logs.items()}
+    assert all(n and min(n) == 3 for n in sizes.values()), sizes  # both subgroups whole again
+    after = [rec for rec in logs[2] if reboot_at + 1.0 < rec["t"] < reboot_at + 1.0 + it]
+    assert after and abs(after[0]["x"]) < 0.2 and abs(after[0]["y"]) < 0.2  # dead reckoning restarted at 0
+    assert {recs[-1]["k"] for recs in logs.values()} == {logs[0][-1]["k"]}  # all iterate to the end
