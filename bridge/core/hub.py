@@ -76,6 +76,11 @@ class AwakeDeadline:
         return self._end - now
 
 LOGIC_BOOT_SPREAD_NS = 100_000_000  # companion computers start their programs within 100 ms of each other
+# What one participant may send before it is failed for flooding (it fails alone; the world and the others go on):
+# answers to one quantum that are not its answer (stale, malformed), the bytes of one answer, the items of one run
+MAX_WRONG_ANSWERS = 100  # a sound process sends one answer per tick
+MAX_ANSWER_BYTES = 16 << 20
+MAX_RUN_ITEMS = 10_000  # a run's outputs: frames, bytes written, logs (a busy controller: tens)
 
 
 class Hub:
@@ -401,7 +406,7 @@ class Hub:
             return
         self.live_procs.discard(proc)
         pid = self.pids.get(proc)
-        if pid and kind == "hung":
+        if pid and kind in ("hung", "flooding"):  # it may go on sending: stop it
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         for r in self.procs[proc].robots:
@@ -444,6 +449,7 @@ class Hub:
         hang = self.cfg.session.hang_timeout_s
         deadline = AwakeDeadline(hang)
         procs = self.procs
+        wrong: dict[str, int] = defaultdict(int)  # answers of this quantum that were not the process's answer
         while waiting:
             if self.abort or os.getppid() != self.parent_pid:
                 self.abort = True
@@ -469,12 +475,16 @@ class Hub:
                 p = key[5:]
                 if p not in waiting:
                     continue
-                msg = _unpack_dict(data)
-                if msg is None or not isinstance(msg.get("ents"), dict):
-                    self.counts["malformed_done"] += 1
-                    continue
-                if msg.get("k") != self.k:
-                    self.counts["stale_done"] += 1
+                msg = _unpack_dict(data) if len(data) <= MAX_ANSWER_BYTES else None
+                if msg is None or not isinstance(msg.get("ents"), dict) or msg.get("k") != self.k:
+                    self.counts["malformed_done" if msg is None or not isinstance(msg.get("ents"), dict)
+                                else "stale_done"] += 1
+                    wrong[p] += 1
+                    if wrong[p] > MAX_WRONG_ANSWERS or len(data) > MAX_ANSWER_BYTES:
+                        waiting.discard(p)
+                        why = (f"an answer of {len(data)} bytes" if len(data) > MAX_ANSWER_BYTES
+                               else f"{wrong[p]} answers to the quantum at t={t / 1e9:.3f} s that were not its own")
+                        self.proc_failed(p, t, "flooding", f"it sent {why}: failed alone, the others go on")
                     continue
                 results[p] = msg
                 waiting.discard(p)
@@ -544,6 +554,11 @@ class Hub:
                 self.rec.write(t, self._pins_topics[e], wiring.schema, pins_io)
             if res.get("err"):
                 self._entity_failed(e, r, t, "raised", res["err"])
+                continue
+            if len(res.get("out", ())) > MAX_RUN_ITEMS:
+                self.counts["flooded_runs"] += 1
+                self._entity_failed(e, r, t, "flooding", f"{len(res['out'])} outputs in one run (at most "
+                                                         f"{MAX_RUN_ITEMS}): failed alone, the others go on")
                 continue
             w = res.get("wake")
             self.next_wake[e] = None if w is None else max(t + q, -(-w // q) * q)

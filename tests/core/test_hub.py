@@ -61,6 +61,29 @@ def test_reply_for_an_entity_that_was_not_ticked_is_ignored(hub: Hub) -> None:
     assert hub.next_wake[entity(2, "llc")] != Q
 
 
+def test_a_participant_that_floods_or_answers_late_fails_alone(hub: Hub) -> None:
+    """What a misbehaving participant can do is bounded: wrong answers (stale, garbage) beyond a cap, or one huge
+    answer, fail its process alone; a late answer before the right one costs nothing; the others' answers stand."""
+    from bridge.core import hub as hub_mod
+    from bridge.core import transport
+
+    good = {"out": [], "wake": Q}
+    for _ in range(hub_mod.MAX_WRONG_ANSWERS + 1):
+        hub.q.put(("done/fw0", transport.pack({"k": 7, "ents": {}})))  # answers to another quantum
+    hub.q.put(("done/fw1", transport.pack({"k": 3, "ents": {}})))  # one late answer, then its own
+    hub.q.put(("done/fw1", transport.pack(reply(**{entity(1, "llc"): good}))))
+    hub.q.put(("done/fw2", b"\x92" + b"\x00" * (hub_mod.MAX_ANSWER_BYTES + 1)))  # one huge answer
+    results = hub._collect({"fw0", "fw1", "fw2"}, 0)
+    assert set(results) == {"fw1"} and hub.dead == {0, 2}
+    assert [(f["robot"], f["kind"]) for f in hub.failures] == [(0, "flooding"), (2, "flooding")]
+    assert "answers to the quantum at t=0.000 s that were not its own" in hub.failures[0]["detail"]
+    assert hub.counts["stale_done"] == hub_mod.MAX_WRONG_ANSWERS + 2
+    # a run with more outputs than any sound firmware or logic writes in a quantum fails its entity alone
+    flood = {"out": [["can0", 0x181, bytes(8), False]] * (hub_mod.MAX_RUN_ITEMS + 1), "wake": Q}
+    hub._outputs(0, {"fw1": reply(**{entity(1, "llc"): flood})}, {}, {"fw1": [entity(1, "llc")]})
+    assert hub.dead == {0, 1, 2} and hub.counts["flooded_runs"] == 1 and hub.medium("can").buses[1].frames == 0
+
+
 def test_malformed_control_messages_are_counted(hub: Hub) -> None:
     from bridge.core import transport
 
