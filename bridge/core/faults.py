@@ -120,6 +120,7 @@ class _Row:
     until_s: float | None
     detail: str
     effect: dict[str, Any] = field(default_factory=dict)
+    ended: bool = False
 
 
 class RobotFaults:
@@ -133,6 +134,7 @@ class RobotFaults:
         self.rows: list[_Row] = []
         self.sensor_faults: list[tuple[_Row, SensorFault]] = []
         self.count = 0
+        self._live: dict[int, tuple[_Row, SensorFault | None]] = {}  # id(fault entry) -> what ends it early
 
     # -- what a robot can carry ----------------------------------------------------------------------
     def problem(self, f: FaultCfg) -> str | None:
@@ -175,15 +177,35 @@ class RobotFaults:
                              rng=stream(hub.cfg.session.seed, "fault", self.count, r, f.sensor))
             hub.world.sensor_faults.add(r, sf)
             self.sensor_faults.append((row, sf))
+            self._live[id(f)] = (row, sf)
             hub.deliver_at(k0, self._event, row, "")
         else:  # wheel_slip, motor_stall
             row = self._row(f, t0, t1, f"its {f.wheel} wheel" + (
                 f" slips ({f.slip:g} of its rim speed lost)" if f.kind == "wheel_slip" else "'s motor stalls"))
             hub.deliver_at(k0, self._wheel, row, f, True)
+            self._live[id(f)] = (row, None)
         if t1 is not None and f.kind in ("sensor", "clock_drift"):
             hub.deliver_at(-(-t1 // q) * q, self._event_end, row)
         if t1 is not None and f.kind in ("wheel_slip", "motor_stall"):
             hub.deliver_at(-(-t1 // q) * q, self._wheel, row, f, False)
+
+    def end(self, f: FaultCfg, t: int) -> None:
+        """End fault ``f`` (the entry given to ``inject``) at ``t`` (ns) if it would last longer: a sensor's or a
+        wheel's (a ground station's FAILURE_TYPE_OK). ValueError for a fault that cannot end early."""
+        live = self._live.get(id(f))
+        if live is None:
+            raise ValueError(f"a {f.kind} fault cannot be ended early")
+        row, sf = live
+        q = self.hub.q_ns
+        k = -(-t // q) * q
+        if row.ended or (row.until_s is not None and row.until_s * 1e9 <= t):
+            return
+        row.until_s = t / 1e9
+        if sf is not None:
+            sf.t1 = t
+            self.hub.deliver_at(k, self._event_end, row)
+        else:
+            self.hub.deliver_at(k, self._wheel, row, f, False)
 
     def _row(self, f: FaultCfg, t0: int, t1: int | None, detail: str) -> _Row:
         row = _Row(f.kind, int(f.robot), t0 / 1e9, None if t1 is None else t1 / 1e9, detail)
@@ -215,6 +237,9 @@ class RobotFaults:
         self.hub.event(t, {"kind": row.kind, "robot": row.robot, "detail": row.detail + extra})
 
     def _event_end(self, t: int, row: _Row) -> None:
+        if row.ended:  # (ended early)
+            return
+        row.ended = True
         self.hub.event(t, {"kind": f"{row.kind}_end", "robot": row.robot, "detail": f"{row.kind} over"})
 
     def _freeze(self, t: int, row: _Row, ents: list[str], t_end: int | None) -> None:
@@ -300,7 +325,7 @@ class RobotFaults:
 
     def _wheel(self, t: int, row: _Row, f: FaultCfg, on: bool) -> None:
         hub = self.hub
-        if row.robot in hub.dead:
+        if row.robot in hub.dead or (not on and row.ended):
             return
         wheels = {"left": (0,), "right": (1,), "both": (0, 1)}[f.wheel]
         drive = next(m for m in hub.world.models.values() if f.kind in m.faults)

@@ -670,6 +670,15 @@ class Hub:
             on = "" if f.robot is None else f" on robot {f.robot}"
             raise ValueError(f"nothing in this session carries a {f.kind} fault{on}")
 
+    def end_fault(self, f: FaultCfg, t: int) -> None:
+        """End fault ``f`` (an entry given to ``inject_fault``) at ``t`` (ns) if it would last longer (a ground
+        station's FAILURE_TYPE_OK): a robot's faulty sensor or wheel, or a fault a medium can end. ValueError if
+        nothing can end it early."""
+        if f.kind in ROBOT_FAULTS and not (f.kind == "sensor" and f.sensor == "uwb"):
+            self.faults.end(f, t)
+        elif not any(m.end_fault(f, t) for m in self._media):
+            raise ValueError(f"a {f.kind} fault cannot be ended early")
+
     def _unplug(self, t: int, r: int, device: str) -> None:
         """A delivery: robot ``r``'s ``device`` module is pulled out. It runs and hears no more (gone from the air and
         from its line), and its robot program's port learns the device is gone (``["uart:DEVICE", None]``: the

@@ -60,6 +60,11 @@ class Medium:
         medium carries it (a CAN fault into a robot's bus)."""
         return False
 
+    def end_fault(self, f: Any, t: int) -> bool:
+        """End fault ``f`` (the entry given to ``inject_fault``) at ``t`` if it would last longer (a ground station's
+        FAILURE_TYPE_OK): True if this medium carries it."""
+        return False
+
     def unplug(self, r: int, device: str) -> None:
         """Robot ``r``'s ``device`` module (``xbee``, ``uwb``) was pulled out (an ``unplugged`` fault): a medium that
         carries it takes it off (the radio, the UWB ranging)."""
