@@ -29,7 +29,7 @@ from pydantic import (
 
 from bridge.core.profile import RobotProfile
 from bridge.core.registry import SERVICES, STUDIES, PluginError, default_robot, robot_profile, robot_spec
-from bridge.media.impairments import AIR_FAULTS
+from bridge.media.impairments import AIR_FAULTS, UWB_RADIO_ROLE
 from bridge.media.radio import RadioCfg
 from bridge.media.uwb import UwbCfg
 from bridge.media.wifi import WifiCfg
@@ -1346,7 +1346,8 @@ def _check_geometry(path: str, cfg: Config) -> None:
             if r >= cfg.robot_count:
                 raise ConfigError(f"{path}: faults[{i}].{where}: no robot {r} (the session has {cfg.robot_count})")
         if f.robot is None:
-            if f.medium == "uwb" and not any(g.uwb for g in cfg.robots):
+            if f.medium == "uwb" and not any(g.uwb or UWB_RADIO_ROLE in robot_spec(g.profile).ports
+                                             for g in cfg.robots):
                 raise ConfigError(f"{path}: faults[{i}].medium: no robot has a UWB module, so nothing carries a "
                                   f"{f.kind} on uwb")
             if f.medium == "radio" and not any(g.xbee is not None for g in cfg.robots):

@@ -368,7 +368,9 @@ def robot_fault_problem(rp: Any, f: FaultCfg) -> str | None:
             return f"robot: robot {rp.id} has no simulated board to brown out"
     elif f.kind in ("sensor", "wheel_slip", "motor_stall"):
         if f.kind == "sensor" and f.sensor == "uwb":
-            return None if rp.uwb else f"sensor: robot {rp.id} has no UWB module"
+            from bridge.media.impairments import UWB_RADIO_ROLE
+
+            return None if rp.uwb or UWB_RADIO_ROLE in rp.modules() else f"sensor: robot {rp.id} has no UWB module"
         parts = robot_spec(rp.profile).profile_with(rp.options).parts
         if f.kind == "sensor":
             if not any(f.sensor in type(p).world_model.sensors for p in parts):

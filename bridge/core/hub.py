@@ -666,7 +666,7 @@ class Hub:
             self.deliver_at(-(-at // self.q_ns) * self.q_ns, self._unplug, f.robot, f.device)
         elif f.kind in ROBOT_FAULTS and not (f.kind == "sensor" and f.sensor == "uwb"):
             self.faults.inject(f, t)
-        elif not any(m.inject_fault(f, t) for m in self._media):
+        elif not any([m.inject_fault(f, t) for m in self._media]):  # every medium that carries it (a list, not any)
             on = "" if f.robot is None else f" on robot {f.robot}"
             raise ValueError(f"nothing in this session carries a {f.kind} fault{on}")
 
@@ -676,7 +676,7 @@ class Hub:
         nothing can end it early."""
         if f.kind in ROBOT_FAULTS and not (f.kind == "sensor" and f.sensor == "uwb"):
             self.faults.end(f, t)
-        elif not any(m.end_fault(f, t) for m in self._media):
+        elif not any([m.end_fault(f, t) for m in self._media]):
             raise ValueError(f"a {f.kind} fault cannot be ended early")
 
     def _unplug(self, t: int, r: int, device: str) -> None:

@@ -1,7 +1,8 @@
 """The swarm's MAVLink endpoint as a medium of the session: ground stations' packets to the addressed robots' faces
 (``uart:mavlink``, recorded on ``/mavlink/from_gcs``) at the start of each quantum, and what a face writes to
-``sitl://mavlink`` to its ground station at once. Only a session with ``[mavlink] endpoint`` builds it (and loads
-pymavlink)."""
+``sitl://mavlink`` to its ground station at once. A ground station's MAV_CMD_INJECT_FAILURE is the world's, not the
+face's: it becomes an injected fault, answered from the robot's system id (``bridge.hil.mavlink_failures``). Only a
+session with ``[mavlink] endpoint`` builds it (and loads pymavlink)."""
 
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ class MavlinkLink(Medium):
 
     def __init__(self, hub: Hub) -> None:
         super().__init__(hub)
+        from bridge.hil.mavlink_failures import FailureInjector
         from bridge.hil.mavlink_gateway import MavlinkGateway
 
         m = hub.cfg.mavlink
@@ -37,6 +39,7 @@ class MavlinkLink(Medium):
                                                    if rp.has_logic and rp.vehicle is None}, m.per_robot)
         hub.medium("uart").links["mavlink"] = self.from_robot  # sitl://mavlink is a network port
         self.parsers: dict[str, Any] = {}  # a ground station service's own parser (its bytes may span packets)
+        self.failures = FailureInjector(hub, self.from_robot, self.gateway.system_ids)  # MAV_CMD_INJECT_FAILURE
 
     def from_robot(self, r: int, data: bytes) -> None:
         """Bytes robot ``r``'s face wrote: to its UDP ground station now, and to the services that hear them."""
@@ -67,12 +70,15 @@ class MavlinkLink(Medium):
         for r, data, kind in packets:
             if r in hub.dead:
                 continue
-            hub.inbox[entity(r, "logic")].append(["uart:mavlink", data])
+            if not self.failures.take(t, r, data, kind):  # a failure injection is the world's, as in PX4 SITL
+                hub.inbox[entity(r, "logic")].append(["uart:mavlink", data])
             hub.rec.write(t, "/mavlink/from_gcs", "swarm_sitl.MavlinkIn",
                           {"robot": r, "type": kind, "data": data.hex()})
 
     def report(self, result: dict[str, Any]) -> None:
         result["mavlink"] = self.gateway.stats()
+        if self.failures.counts:
+            result["mavlink"]["inject_failure"] = self.failures.stats()
 
     def close(self) -> None:
         self.gateway.close()

@@ -23,6 +23,9 @@ from bridge.core.rng import stream
 
 #: Fault kinds of the swarm's air rather than of one robot (``[[faults]]`` given without ``robot``)
 AIR_FAULTS = ("partition", "burst_loss")
+#: the role of a robot model's own UWB radio that ranges and carries data (a DeciZebro's DWM1001), which
+#: ``medium = "uwb"`` faults take as they take an eSwarBot's ranging module
+UWB_RADIO_ROLE = "uwb_radio"
 
 
 @dataclass

@@ -8,10 +8,13 @@ third frame: in DS-TWR the responder computes the range). Event dicts::
 
     {"ev": "range", "peer": int, "ok": bool, "range_m": float, "rx_dbm": float, "fp_dbm": float, "t_ns": int,
      "responder": bool, "true_m": float, "nlos": bool, "walls": int, "cause": "ok"|"dropout"|"out_of_range"|
-     "no_response"}
+     "no_response"|"partitioned"|"burst_loss"|"sensor_dead"}
 
 (``range_m``, ``rx_dbm`` and ``fp_dbm`` are 0.0 when ``ok`` is false; ``true_m``, ``nlos``, ``walls`` and
-``cause`` are ground truth for statistics and recording, not for the module.)
+``cause`` are ground truth for statistics and recording, not for the module.) The last three causes are injected
+faults' (``faults``, ``bridge.media.uwb_faults``): a partition or burst loss took one of the exchange's frames, or a
+module's ranging is dead; a fault takes only an exchange that would otherwise have got through, and a stuck, noisy
+or biased module changes the ranges reported (``range_m``; ``true_m`` stays the truth).
 
 Noise model (defaults and sources in ``UwbCfg``; docs/uwb.md has the derivations):
 
@@ -45,6 +48,7 @@ from bridge.core.entities import entity, uwb_addr16
 from bridge.core.medium import Medium
 from bridge.core.rng import stream
 from bridge.media.radio import Geometry
+from bridge.media.uwb_faults import UwbFaultCarrier, UwbFaults
 from firmware_sim.modules.uwb import tdma_budget
 
 if TYPE_CHECKING:
@@ -150,10 +154,12 @@ class UwbMedium:
         self.geometry = geometry
         self.frame_ns = 1_000_000_000 // cfg.frames_per_s  # nominal; slot edges use exact integer division
         self._links: dict[tuple[int, int], _Link] = {}
-        keys = ("exchanges", "ok", "dropout", "out_of_range", "no_response", "nlos", "responded")
+        keys = ("exchanges", "ok", "dropout", "out_of_range", "no_response", "nlos", "responded", "partitioned",
+                "burst_loss", "sensor_dead")
         self._count = [dict.fromkeys(keys, 0) for _ in range(n)]
         self._err = [{"los": _err_acc(), "nlos": _err_acc()} for _ in range(n)]
         self.off: set[int] = set()  # robots whose module was pulled out: they neither range nor answer
+        self.faults = UwbFaults(seed, "uwb")  # injected faults: the air's, and modules as faulty sensors
 
     def _frames_ns(self, k: int) -> int:
         return (k * 1_000_000_000) // self.cfg.frames_per_s
@@ -219,23 +225,41 @@ class UwbMedium:
             cause = "out_of_range"
         else:
             cause = "ok" if u_drop < self.p_ok(d, walls) else "dropout"
-        if cause != "ok":
+        arrived = 4 if cause == "ok" else 0  # of its frames: poll, response, final, report
+        if arrived and self.faults.any:
+            cause, arrived = self._faulted(t_ns, i, j)
+        fail = {**base, "peer": j, "ok": False, "range_m": 0.0, "rx_dbm": 0.0, "fp_dbm": 0.0, "t_ns": t_init,
+                "responder": False, "cause": cause}
+        if arrived < 3:  # the responder never got the final: nobody has a range
             c[cause] += 1
-            ev = {**base, "peer": j, "ok": False, "range_m": 0.0, "rx_dbm": 0.0, "fp_dbm": 0.0, "t_ns": t_init,
-                  "responder": False, "cause": cause}
-            return [(t_init, i, ev)]
+            return [(t_init, i, fail)]
 
-        c["ok"] += 1
         self._count[j]["responded"] += 1
+        common = {**base, "ok": True, "range_m": meas, "rx_dbm": rx, "fp_dbm": fp, "cause": "ok"}
+        out = [(t_resp, j, {**common, "range_m": self.faults.reading(j, i, meas, t_ns), "peer": i, "t_ns": t_resp,
+                            "responder": True})]
+        if arrived < 4:  # the report was lost: the responder has its range, the initiator none
+            c[cause] += 1
+            return [*out, (t_init, i, fail)]
+        c["ok"] += 1
+        got = self.faults.reading(i, j, meas, t_ns)
         acc = self._err[i]["nlos" if nlos else "los"]
         acc["n"] += 1
-        acc["sum"] += meas - d
-        acc["sumsq"] += (meas - d) ** 2
-        common = {**base, "ok": True, "range_m": meas, "rx_dbm": rx, "fp_dbm": fp, "cause": "ok"}
-        return [
-            (t_resp, j, {**common, "peer": i, "t_ns": t_resp, "responder": True}),
-            (t_init, i, {**common, "peer": j, "t_ns": t_init, "responder": False}),
-        ]
+        acc["sum"] += got - d
+        acc["sumsq"] += (got - d) ** 2
+        return [*out, (t_init, i, {**common, "range_m": got, "peer": j, "t_ns": t_init, "responder": False})]
+
+    def _faulted(self, t_ns: int, i: int, j: int) -> tuple[str, int]:
+        """An injected fault's say on an exchange that would get through: its cause and how many of its four frames
+        arrived (a dead module's exchanges fail from the first; a frame lost to the air ends the exchange)."""
+        for r in (i, j):
+            if (sf := self.faults.dead(r, t_ns)) is not None:
+                sf.failed += 1
+                return "sensor_dead", 0
+        for k, (src, dst) in enumerate(((i, j), (j, i), (i, j), (j, i))):
+            if (lost := self.faults.air(t_ns + self._frames_ns(k), src, dst)) is not None:
+                return lost, k
+        return "ok", 4
 
     def stats(self) -> dict[str, Any]:
         """Per robot (as initiator) counts and raw range errors (LOS and NLOS), plus the swarm totals."""
@@ -272,6 +296,16 @@ class UwbRanging(Medium):
         self.medium = UwbMedium(hub.cfg.uwb, hub.n, hub.cfg.session.seed, hub.geometry)
         self.robot_of = {uwb_addr16(r): r for r, rp in enumerate(hub.plan.robots) if rp.uwb}
         self.log_err: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+        # the config's UWB faults (partition, burst_loss with medium = "uwb"; sensor = "uwb"), and injected ones
+        self.carrier = UwbFaultCarrier(hub, self.medium.faults, self.robot_of.values(), "UWB ranging")
+
+    def inject_fault(self, f: Any, t: int) -> bool:
+        """A fault of the UWB air, or a module's sensor fault, injected while the session runs."""
+        return self.carrier.take(f)
+
+    def end_fault(self, f: Any, t: int) -> bool:
+        """End fault ``f`` (as injected) at ``t``, if this medium carries it."""
+        return self.carrier.end(f, t)
 
     def unplug(self, r: int, device: str) -> None:
         """Robot ``r``'s UWB module was pulled out: it answers nobody from now on."""
@@ -321,6 +355,8 @@ class UwbRanging(Medium):
         hub = self.hub
         ustats = self.medium.stats()
         out["uwb_medium"] = ustats.get("all", {})
+        if (faults := self.carrier.report()) is not None:
+            out["uwb_faults"] = faults
         for r in range(hub.n):
             if "uwb" not in hub.roles[r]:
                 continue

@@ -20,6 +20,11 @@ quantum boundary after that; geometry of the quantum in which the frame was sent
 - faithful (the robot option ``sensing = "faithful"``, per receiving robot): the true range and bearing (all round)
   and every frame within range delivered, as the thesis assumes (section 3.1: communication and sensing error-free).
 
+Faults (``bridge.media.uwb_faults``): a partition or burst loss on ``medium = "uwb"`` takes beacons and data frames
+(counted per sender: ``beacons_impaired``, ``data_impaired``); a receiver's sensor fault (``sensor = "uwb"``) changes
+the ranges it measures (stuck, noisy; a biased module's ranges are off whoever measures them) or, dead, leaves it
+hearing no beacon. In the faithful mode too: a fault is injected on purpose.
+
 Each link direction draws from streams of its own (``rng.stream(seed, "uwb_radio", ...)``; the range draws from the
 ranging medium's per-pair stream), a fixed number per frame, so nothing else shifts another link's noise.
 
@@ -39,12 +44,14 @@ from bridge.core.entities import entity
 from bridge.core.medium import Medium
 from bridge.core.recorder import register_schema
 from bridge.core.rng import stream
+from bridge.media.impairments import UWB_RADIO_ROLE
 from bridge.media.uwb import UwbMedium
+from bridge.media.uwb_faults import UwbFaultCarrier, UwbFaults
 
 if TYPE_CHECKING:
     from bridge.core.hub import Hub
 
-ROLE = "uwb_radio"
+ROLE = UWB_RADIO_ROLE
 HEADING_UNKNOWN = 0xFFFF
 
 register_schema("swarm_sitl.UwbRadioTx", {
@@ -89,12 +96,23 @@ class UwbRadioAir(Medium):
         self._rng: dict[tuple[str, int, int], np.random.Generator] = {}
         self.last_slot: dict[int, int] = {}
         keys = ("beacons", "data", "off_slot", "beacons_heard", "beacons_lost", "data_heard", "data_lost",
-                "out_of_range")
+                "out_of_range", "beacons_impaired", "data_impaired")
         self.count: dict[int, dict[str, int]] = {r: dict.fromkeys(keys, 0) for r in self.team}
         self.received: dict[int, dict[str, int]] = defaultdict(lambda: {"beacons": 0, "data": 0})
         self.per_second: dict[int, dict[int, int]] = {r: {} for r in self.team}  # frames sent in each whole second
         # data frames and their payload bytes by the payload's first byte (a protocol's frame type, if it has one)
         self.first_bytes: dict[int, list[int]] = defaultdict(lambda: [0, 0])
+        # the config's UWB faults (partition, burst_loss with medium = "uwb"; sensor = "uwb"), and injected ones
+        self.faults = UwbFaults(self.seed, "uwb_radio")
+        self.carrier = UwbFaultCarrier(hub, self.faults, self.team, "UWB data radios")
+
+    def inject_fault(self, f: Any, t: int) -> bool:
+        """A fault of the UWB air, or a radio's sensor fault, injected while the session runs."""
+        return self.carrier.take(f)
+
+    def end_fault(self, f: Any, t: int) -> bool:
+        """End fault ``f`` (as injected) at ``t``, if this medium carries it."""
+        return self.carrier.end(f, t)
 
     def _stream(self, what: str, rx: int, tx: int) -> np.random.Generator:
         key = (what, rx, tx)
@@ -190,6 +208,9 @@ class UwbRadioAir(Medium):
             if not ideal and u >= self.errors.p_ok(d, walls):
                 c["data_lost"] += 1
                 return {}
+            if self.faults.any and self.faults.air(t_ns, r, i) is not None:
+                c["data_impaired"] += 1
+                return {}
             c["data_heard"] += 1
             return {"ev": "data", "src": r, "t_ns": t_rx, "seq": req["seq"], "data": req["data"]}
         bearing = math.remainder(math.atan2(dy, dx) - yaw_i, math.tau)  # + = left of the receiver's heading
@@ -198,12 +219,20 @@ class UwbRadioAir(Medium):
         if not ideal and u >= self.errors.p_ok(d, walls):
             c["beacons_lost"] += 1
             return {}
+        if self.faults.any:
+            if self.faults.air(t_ns, r, i) is not None:
+                c["beacons_impaired"] += 1
+                return {}
+            if (dead := self.faults.dead(i, t_ns)) is not None:  # its ranging is dead: the beacon gives it nothing
+                dead.failed += 1
+                return {}
         c["beacons_heard"] += 1
         ev: dict[str, Any] = {"ev": "beacon", "src": r, "t_ns": t_rx, "heading_cdeg": req["heading_cdeg"]}
+        got = self.faults.reading(i, r, d if ideal else meas, t_ns)  # a faulty module's, a biased peer's
         if ideal:
-            return {**ev, "range_m": d, "rx_dbm": rx, "fp_dbm": rx, "bearing_rad": bearing}
+            return {**ev, "range_m": got, "rx_dbm": rx, "fp_dbm": rx, "bearing_rad": bearing}
         sigma = math.sin(math.radians(cfg.pdoa_sigma_deg + (cfg.pdoa_nlos_sigma_deg if walls else 0.0)))
-        return {**ev, "range_m": meas, "rx_dbm": rx, "fp_dbm": fp, "aoa_sin": math.sin(bearing) + sigma * z}
+        return {**ev, "range_m": got, "rx_dbm": rx, "fp_dbm": fp, "aoa_sin": math.sin(bearing) + sigma * z}
 
     def radio_report(self, out: dict[str, Any]) -> None:
         """Z-H1: the frames each robot put on the air per second, against the budget share (``summary.json``:
@@ -227,6 +256,8 @@ class UwbRadioAir(Medium):
             # data frames sent, by their payload's first byte: [frames, payload bytes]
             "data_by_first_byte": {f"0x{b:02x}": v for b, v in sorted(self.first_bytes.items())},
         }
+        if (faults := self.carrier.report()) is not None:
+            out["uwb_radio"]["faults"] = faults
         for r, c in self.count.items():
             out["per_robot"].setdefault(r, {})["uwb_radio"] = {**c, "frames_per_s": round(rates[r], 3),
                                                                "received": dict(self.received[r])}

@@ -204,6 +204,7 @@ class SwarmSession:
         from pydantic import ValidationError
 
         from bridge.core.config import ConfigError, FaultCfg
+        from bridge.media.impairments import UWB_RADIO_ROLE
 
         at_s = (self.t_ns + self._q_ns) / 1e9
         on = "" if robot is None else f" on robot {robot}"
@@ -217,6 +218,9 @@ class SwarmSession:
             raise ConfigError(f"fault {kind}: {why}")
         if robot is None and f.medium == "radio" and not any(rp.sim_xbee for rp in self._plan.robots):
             raise ConfigError(f"fault {kind}: no robot has a simulated XBee, so nothing carries it")
+        if robot is None and f.medium == "uwb" and not any(rp.uwb or UWB_RADIO_ROLE in rp.modules()
+                                                           for rp in self._plan.robots):
+            raise ConfigError(f"fault {kind}: no robot has a UWB module, so nothing carries it")
         self.touched.update(f.robot_ids())
         self._pending.append(["fault", {**f.model_dump(exclude_defaults=True), "kind": f.kind}])
 

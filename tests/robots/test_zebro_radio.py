@@ -126,7 +126,8 @@ class Swarm:
         self.deliveries: dict[int, list] = defaultdict(list)
         self.inbox: dict[str, list] = defaultdict(list)
         hub = SimpleNamespace(
-            cfg=SimpleNamespace(uwb=UwbCfg(), session=SimpleNamespace(seed=seed)), n=n, q_ns=Q, dead=set(),
+            cfg=SimpleNamespace(uwb=UwbCfg(), session=SimpleNamespace(seed=seed), faults=[]), n=n, q_ns=Q,
+            dead=set(),
             roles={r: (ROLE,) for r in range(n)},
             plan=SimpleNamespace(robots=[SimpleNamespace(options={"sensing": "faithful"} if ideal else {})] * n),
             world=self.world, geometry=None, deliver_at=lambda t, h, *a: self.deliveries[t].append((h, a)),
