@@ -868,6 +868,10 @@ def _judge(summary: dict[str, Any], world_res: dict[str, Any], world_code: int |
         code = 130
     elif not world_res or world_res.get("error"):
         code = code or 1
+    elif str(world_res.get("stop_reason") or "").startswith("signal "):  # not the launcher's: it signals only when
+        summary["error"] = (f"the world process got {world_res['stop_reason'].removeprefix('signal ')} from outside "
+                            f"the session at simulated t={summary.get('sim_time_s') or 0:.3f} s and stopped there")
+        code = code or 1  # interrupted (Ctrl-C twice), handled above
     elif robots_alive and not any(robots_alive):
         code = code or 1
         summary["error"] = summary["error"] or "every robot failed"

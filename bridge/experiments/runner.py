@@ -228,7 +228,7 @@ def _worker_init() -> None:
     # the parent owns Ctrl-C: it cancels what is pending and terminates the workers; and should the parent die
     # without that (SIGKILL), the kernel stops the worker, whose session then stops its own processes
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from bridge.hosts.participant import die_with_parent
+    from bridge.hosts.parent import die_with_parent
 
     die_with_parent(signal.SIGTERM)
 

@@ -8,10 +8,8 @@ launcher parent) instead when it is interrupted or loses the world (``watch``).
 
 from __future__ import annotations
 
-import ctypes
 import os
 import queue
-import signal
 import sys
 import traceback
 from collections.abc import Callable
@@ -20,17 +18,6 @@ from typing import Any, Protocol
 import zenoh
 
 from bridge.core import transport
-
-PR_SET_PDEATHSIG = 1
-
-
-def die_with_parent(sig: int = signal.SIGKILL) -> None:
-    """Ask the kernel to send ``sig`` to this process when its parent dies (Linux); no orphans, ever."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, sig, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
 
 
 class Host(Protocol):

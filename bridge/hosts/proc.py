@@ -16,13 +16,14 @@ import sys
 import traceback
 from pathlib import Path
 
+from bridge.hosts.parent import die_with_parent
+
 
 def _world(args: argparse.Namespace, plan) -> int:
     from bridge.core.hub import Hub
-    from bridge.hosts.participant import die_with_parent
 
-    die_with_parent(signal.SIGTERM)  # finish the recording if the launcher vanishes
     hub = Hub(plan, args.session_dir, args.out, args.namespace)
+    hub.parent_pid = args.parent_pid  # (the launcher may have died meanwhile: its pid, not whoever adopted us)
 
     def on_term(signum, frame):
         hub.stop_reason = hub.stop_reason or f"signal {signal.Signals(signum).name}"
@@ -72,9 +73,8 @@ def _world(args: argparse.Namespace, plan) -> int:
 
 def _participant(args: argparse.Namespace, plan) -> int:
     from bridge.core.transport import endpoint_for
-    from bridge.hosts.participant import die_with_parent, serve
+    from bridge.hosts.participant import serve
 
-    die_with_parent(signal.SIGKILL)
     proc = next(p for p in plan.procs if p.name == args.proc)
     if proc.kind == "firmware":
         from bridge.hosts.firmware import FirmwareHost
@@ -106,6 +106,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--parent-pid", type=int, required=True)
     args = ap.parse_args(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # first of all (before seconds of imports): die with the launcher, then check it was still there when asked
+    die_with_parent(signal.SIGTERM if args.role == "world" else signal.SIGKILL)
     if os.getppid() != args.parent_pid:  # the launcher is already gone
         os._exit(3)
     from bridge.core.plan import Plan

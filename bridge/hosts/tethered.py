@@ -15,7 +15,7 @@ import signal
 import subprocess
 import sys
 
-from bridge.hosts.participant import die_with_parent
+from bridge.hosts.parent import die_with_parent
 
 
 def _end_group(signum: int, frame: object) -> None:

@@ -166,7 +166,8 @@ class _EchoHost:
 
 
 def _echo_main(proc: str, endpoint: str, namespace: str, parent_pid: int, mode: str = "peer") -> None:
-    from bridge.hosts.participant import die_with_parent, serve
+    from bridge.hosts.parent import die_with_parent
+    from bridge.hosts.participant import serve
 
     die_with_parent()
     session = None

@@ -140,3 +140,39 @@ def test_a_world_stopped_during_start_up_is_noticed_within_the_hang_timeout(tmp_
     assert p.returncode == 1
     assert "was stopped (SIGSTOP, or a debugger) for 10 s during start-up" in s["error"]
     assert s["startup_s"] is None and s["sim_time_s"] == 0.0
+
+
+def test_a_launcher_killed_as_its_world_starts_leaves_no_orphan(tmp_path: Path) -> None:
+    """The world asks for its parent-death signal before its seconds of imports: a launcher killed the moment the
+    world process exists takes the world with it (found by the orphan campaign: it lived on for 124 s)."""
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=3600), out)
+    try:
+        while not (worlds := [q for q in session_procs(out) if "world" in q.cmdline()]):
+            time.sleep(0.01)  # until the world process exists (pytest's timeout bounds a hang)
+        p.kill()
+        p.wait()
+        # gone within seconds of the launcher; an orphan waited for its participants until its 120-s start-up
+        # timeout (psutil.TimeoutExpired: the bound of a hang, far from either)
+        worlds[0].wait(timeout=60)
+        wait_gone(out)
+    finally:
+        if p.poll() is None:
+            p.kill()
+
+
+def test_a_world_stopped_by_a_signal_from_outside_is_an_error(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    p = start(config(tmp_path, duration=3600), out, "--speed", "2")
+    try:
+        wait_started(p)
+        wait_running(p)
+        (world,) = [q for q in session_procs(out) if "world" in q.cmdline()]
+        world.send_signal(signal.SIGTERM)  # not the launcher's: it signals its world only after a second Ctrl-C
+        p.wait(timeout=240)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    s = json.loads((out / "summary.json").read_text())
+    assert p.returncode == 1 and not s["interrupted"]
+    assert "the world process got SIGTERM from outside the session at simulated t=" in s["error"]
