@@ -26,10 +26,11 @@ $(BROWSER): $(STAMP) requirements-browser.lock
 demo: $(STAMP)
 	$(BIN)/swarm-sitl run hil_configs/demo.toml --out $(OUT)
 
+# three workers on two cores: a third keeps them busy while the paced (wall-clock) HIL tests wait
 test: $(STAMP) $(BROWSER)
 	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
 	$(BIN)/lint-imports
-	$(BIN)/python -m pytest -n 2 --dist worksteal -q $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n 3 --dist worksteal -q $(PYTEST_ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
