@@ -24,10 +24,10 @@ import bisect
 import contextlib
 import fnmatch
 import json
+import math
 import os
 import queue
 import signal
-import statistics
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -153,7 +153,7 @@ class Hub:
         self.failed_stop = False
         self.parent_pid = os.getppid()
         self.counts: dict[str, int] = defaultdict(int)
-        self.barrier_us: list[float] = []
+        self.barrier = LogHistogram()  # each quantum's barrier time (us), in bounded memory for any session length
         self.lag_s: list[float] = []  # paced sessions: how far the simulated clock is behind wall time, per quantum
         self.wakeups: dict[str, int] = defaultdict(int)  # entity runs by role (llc, xbee, uwb, logic)
         self.ticks = 0
@@ -769,7 +769,7 @@ class Hub:
             self._take_releases()
             if due:
                 results = self._collect(set(due), t)
-                self.barrier_us.append((time.perf_counter() - t_pub) * 1e6)
+                self.barrier.add((time.perf_counter() - t_pub) * 1e6)
                 self._outputs(t, results, sensed, due)
                 self._apply_deaths(t)
                 self.ticks += 1
@@ -908,7 +908,6 @@ class Hub:
         return out
 
     def result(self) -> dict[str, Any]:
-        lat = sorted(self.barrier_us)
         out = {
             "sim_time_s": self.sim_end_ns / 1e9,
             "world_wall_s": self.wall_s,
@@ -919,8 +918,8 @@ class Hub:
             "wakeups": dict(self.wakeups),
             "process_ticks": self.proc_ticks,
             "digest": self.rec.digest,
-            "barrier_us_median": statistics.median(lat) if lat else None,
-            "barrier_us_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
+            "barrier_us_median": self.barrier.quantile(0.5),
+            "barrier_us_p99": self.barrier.quantile(0.99),
             "wall_lag": _lag_summary(self.lag_s),
             "releases": self.releases if self.carriers else None,
             "startup_s": getattr(self, "startup_wall_s", None),
@@ -978,6 +977,29 @@ class _Geometry:
 
     def walls(self, src: int, dsts: np.ndarray) -> np.ndarray:
         return self.world.walls(src, dsts)
+
+
+class LogHistogram:
+    """Quantiles of a long series of positive values (barrier times in us) in fixed memory: 200 bins a decade from 1
+    to 10^8 (a value is known to 1.2 %), so a soak of hours keeps 1600 counters, not a float per quantum."""
+
+    PER_DECADE = 200
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(8 * self.PER_DECADE + 1, dtype=np.int64)
+        self.n = 0
+
+    def add(self, v: float) -> None:
+        k = int(math.log10(v) * self.PER_DECADE) if v > 1.0 else 0
+        self.counts[min(k, len(self.counts) - 1)] += 1
+        self.n += 1
+
+    def quantile(self, q: float) -> float | None:
+        """The ``q`` quantile (the middle of its bin, in the value's unit), None with no value."""
+        if not self.n:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.counts), q * self.n))
+        return round(10 ** ((k + 0.5) / self.PER_DECADE), 1)
 
 
 def _lag_summary(lag_s: list[float]) -> dict[str, Any] | None:
