@@ -340,17 +340,6 @@ def test_hanging_controller_never_hangs_the_session(tmp_path: Path) -> None:
     assert s["process_exits"]["lg1"] == -9  # the world killed it
 
 
-def test_two_sessions_at_once_do_not_see_each_other(tmp_path: Path, small_run) -> None:
-    cfg, _out, code, solo = small_run  # the one session alone
-    assert code == 0
-    a = start(cfg, tmp_path / "a")
-    b = start(cfg, tmp_path / "b")
-    assert a.wait(timeout=180) == 0 and b.wait(timeout=180) == 0
-    for name in ("a", "b"):
-        s = json.loads((tmp_path / name / "summary.json").read_text())
-        assert (s["digest"], s["messages"]) == (solo["digest"], solo["messages"])
-
-
 def test_a_session_runs_from_a_thread_other_than_the_main_one(tmp_path: Path, small_run) -> None:
     """As an experiment's trial does on a Dask worker (whose tasks run in its threads): the same recording."""
     from concurrent.futures import ThreadPoolExecutor

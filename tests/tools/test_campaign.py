@@ -212,6 +212,8 @@ def test_a_launcher_killed_while_its_session_runs_takes_every_process_with_it(tm
 
 @pytest.mark.session
 def test_two_sessions_at_once_record_what_one_alone_does(tmp_path: Path) -> None:
+    """Sessions at once do not see each other (each its own namespace and socket): each records the solo run's
+    digest. The suite's one test of it, through the campaign that checks it at scale."""
     p = _cli("campaign", "concurrency", "--sessions", "2", "--config", str(SMALL), "--duration", "3", "--out",
              str(tmp_path))
     assert p.returncode == 0, p.stdout + p.stderr
