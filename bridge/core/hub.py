@@ -24,7 +24,6 @@ import bisect
 import contextlib
 import fnmatch
 import json
-import math
 import os
 import queue
 import signal
@@ -48,6 +47,7 @@ from bridge.core.recorder import SCHEMAS, Recorder
 from bridge.core.registry import MEDIA, SERVICES, STUDIES, robot_spec
 from bridge.core.scene import Scene
 from bridge.core.services import SENSES, SERVICE_ROLE
+from bridge.core.stats import LogHistogram, Moments
 from bridge.core.world import World
 
 
@@ -154,7 +154,7 @@ class Hub:
         self.parent_pid = os.getppid()
         self.counts: dict[str, int] = defaultdict(int)
         self.barrier = LogHistogram()  # each quantum's barrier time (us), in bounded memory for any session length
-        self.lag_s: list[float] = []  # paced sessions: how far the simulated clock is behind wall time, per quantum
+        self.lag = WallLag()  # paced sessions: how far the simulated clock is behind wall time, per quantum
         self.wakeups: dict[str, int] = defaultdict(int)  # entity runs by role (llc, xbee, uwb, logic)
         self.ticks = 0
         self.proc_ticks = 0  # tick messages sent (one per due process per quantum)
@@ -782,7 +782,7 @@ class Hub:
             if speed != "max":
                 ahead = (t + q) / 1e9 / float(speed) - (time.monotonic() - wall0)
                 lag = max(0.0, -ahead)
-                self.lag_s.append(lag)
+                self.lag.add(lag)
             if t >= next_status:
                 next_status += 1_000_000_000
                 self.status(op="progress", t=(t + q) / 1e9, alive=self.n - len(self.dead), ticks=self.k, lag_s=lag)
@@ -918,9 +918,9 @@ class Hub:
             "wakeups": dict(self.wakeups),
             "process_ticks": self.proc_ticks,
             "digest": self.rec.digest,
-            "barrier_us_median": self.barrier.quantile(0.5),
-            "barrier_us_p99": self.barrier.quantile(0.99),
-            "wall_lag": _lag_summary(self.lag_s),
+            "barrier_us_median": _round1(self.barrier.quantile(0.5)),
+            "barrier_us_p99": _round1(self.barrier.quantile(0.99)),
+            "wall_lag": self.lag.summary(),
             "releases": self.releases if self.carriers else None,
             "startup_s": getattr(self, "startup_wall_s", None),
             "failures": self.failures,
@@ -979,37 +979,32 @@ class _Geometry:
         return self.world.walls(src, dsts)
 
 
-class LogHistogram:
-    """Quantiles of a long series of positive values (barrier times in us) in fixed memory: 200 bins a decade from 1
-    to 10^8 (a value is known to 1.2 %), so a soak of hours keeps 1600 counters, not a float per quantum."""
+def _round1(v: float | None) -> float | None:
+    return None if v is None else round(v, 1)
 
-    PER_DECADE = 200
+
+class WallLag:
+    """How far a paced session's simulated clock fell behind wall time, per quantum, in fixed memory."""
 
     def __init__(self) -> None:
-        self.counts = np.zeros(8 * self.PER_DECADE + 1, dtype=np.int64)
-        self.n = 0
+        self.moments = Moments()
+        self.late = 0
+        self.hist = LogHistogram(lo=1e-6, decades=8)  # 1 us to 100 s
 
-    def add(self, v: float) -> None:
-        k = int(math.log10(v) * self.PER_DECADE) if v > 1.0 else 0
-        self.counts[min(k, len(self.counts) - 1)] += 1
-        self.n += 1
+    def add(self, lag: float) -> None:
+        self.moments.add(lag)
+        self.late += lag > 0
+        self.hist.add(lag)
 
-    def quantile(self, q: float) -> float | None:
-        """The ``q`` quantile (the middle of its bin, in the value's unit), None with no value."""
-        if not self.n:
+    def summary(self) -> dict[str, Any] | None:
+        """Quanta that ended late, and by how much (None for an unpaced session)."""
+        m = self.moments
+        if not m.n:
             return None
-        k = int(np.searchsorted(np.cumsum(self.counts), q * self.n))
-        return round(10 ** ((k + 0.5) / self.PER_DECADE), 1)
-
-
-def _lag_summary(lag_s: list[float]) -> dict[str, Any] | None:
-    """How far a paced session's simulated clock fell behind wall time: quanta that ended late, and by how much."""
-    if not lag_s:
-        return None
-    a = np.asarray(lag_s)
-    return {"quanta": len(a), "late_share": round(float(np.mean(a > 0)), 4), "max_ms": round(float(a.max()) * 1e3, 2),
-            "p99_ms": round(float(np.quantile(a, 0.99)) * 1e3, 2), "mean_ms": round(float(a.mean()) * 1e3, 3),
-            "final_ms": round(float(a[-1]) * 1e3, 2)}
+        p99 = self.hist.quantile(0.99) if self.late > m.n * 0.01 else 0.0
+        return {"quanta": m.n, "late_share": round(self.late / m.n, 4), "max_ms": round(m.max * 1e3, 2),
+                "p99_ms": round(float(p99 or 0.0) * 1e3, 2), "mean_ms": round(m.mean * 1e3, 3),
+                "final_ms": round(m.last * 1e3, 2)}
 
 
 def _unpack_dict(data: bytes) -> dict | None:

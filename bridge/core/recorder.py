@@ -138,11 +138,24 @@ def _digest_update(h: Any, log_time: int, topic: str, data: bytes) -> None:
     h.update(b"".join((_TIME.pack(log_time), topic.encode(), b"\0", _TIME.pack(len(data)), data)))
 
 
+CHUNK_BYTES = 1 << 20  # a chunk ends at 1 MiB of messages (the mcap library's default) ...
+CHUNK_NS = 2_000_000_000  # ... or 2 simulated seconds after its first message, whichever comes first
+
+
 class Recorder:
-    def __init__(self, path: str | Path, metadata: dict[str, str] | None = None) -> None:
+    """The session's MCAP recording, written as it goes, and the digest of its messages.
+
+    A chunk ends at ``chunk_bytes`` of messages or ``chunk_ns`` of simulated time, whichever comes first: a writer
+    killed outright loses at most its last chunk (``recover`` saves the rest), and the writer's in-memory index (one
+    entry a chunk, kept for the summary section) grows by a few MiB an hour at 10 robots, not tens."""
+
+    def __init__(self, path: str | Path, metadata: dict[str, str] | None = None, *, chunk_bytes: int = CHUNK_BYTES,
+                 chunk_ns: int = CHUNK_NS) -> None:
         self.path = Path(path)
         self._f: BinaryIO = open(self.path, "wb")  # noqa: SIM115 - closed in finish()
-        self._w = Writer(self._f, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
+        self._w = Writer(self._f, chunk_size=chunk_bytes, compression=CompressionType.ZSTD)
+        self._chunk_ns = chunk_ns
+        self._chunk_t0: int | None = None  # the simulated time of the open chunk's first message
         self._w.start(profile="", library="swarm-sitl")
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -172,6 +185,11 @@ class Recorder:
         if t_ns < self.last_time:
             raise ValueError(f"recording must be in sim-time order: {t_ns} after {self.last_time} on {topic}")
         cid = self.channel(topic, schema)
+        if self._chunk_t0 is None:
+            self._chunk_t0 = t_ns
+        elif t_ns - self._chunk_t0 >= self._chunk_ns:  # the open chunk is old enough: to the file with it
+            self._w.flush()
+            self._chunk_t0 = t_ns
         self._w.add_message(cid, log_time=t_ns, data=data, publish_time=t_ns, sequence=self.count)
         _digest_update(self._hash, t_ns, topic, data)
         self.count += 1
@@ -263,7 +281,7 @@ def recover(src: str | Path, dst: str | Path) -> Recovered:
     h = hashlib.sha256()
     n = last = 0
     with open(src, "rb") as f, open(dst, "wb") as g:
-        w = Writer(g, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
+        w = Writer(g, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD)
         started = False
         schemas: dict[int, int] = {}
         channels: dict[int, tuple[int, str]] = {}

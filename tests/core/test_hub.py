@@ -170,7 +170,7 @@ def test_barrier_quantiles_are_kept_in_fixed_memory_to_a_bin() -> None:
     """A soak's hours of quanta keep 1601 counters, not a float each (the world's memory stayed flat but for it)."""
     import numpy as np
 
-    from bridge.core.hub import LogHistogram
+    from bridge.core.stats import LogHistogram
 
     h = LogHistogram()
     assert h.quantile(0.5) is None
@@ -180,3 +180,24 @@ def test_barrier_quantiles_are_kept_in_fixed_memory_to_a_bin() -> None:
     assert h.counts.size == 1601 and h.n == 20_000
     for q in (0.5, 0.99):
         assert abs(h.quantile(q) / float(np.quantile(values, q)) - 1) < 0.015
+
+
+def test_a_paced_session_s_lag_is_summarised_in_fixed_memory() -> None:
+    """The wall-clock lag of every quantum of a paced session: counters, not a float per quantum."""
+    import numpy as np
+
+    from bridge.core.hub import WallLag
+
+    assert WallLag().summary() is None
+    lags = np.where(np.arange(10_000) % 10 == 0, np.linspace(0.001, 0.05, 10_000), 0.0)
+    w = WallLag()
+    for v in lags:
+        w.add(float(v))
+    s = w.summary()
+    assert s["quanta"] == 10_000 and s["late_share"] == 0.1 and s["final_ms"] == 0.0
+    assert s["max_ms"] == round(float(lags.max()) * 1e3, 2) and s["mean_ms"] == round(float(lags.mean()) * 1e3, 3)
+    assert abs(s["p99_ms"] / (float(np.quantile(lags, 0.99)) * 1e3) - 1) < 0.015
+    calm = WallLag()
+    for v in [0.0] * 999 + [0.2]:
+        calm.add(v)
+    assert calm.summary()["p99_ms"] == 0.0 and calm.summary()["max_ms"] == 200.0

@@ -81,3 +81,31 @@ def test_digest_of_a_file_that_is_no_recording_is_an_error(tmp_path: Path,
         main_code = e.value.code
         assert main_code == 0
         assert json.loads(capsys.readouterr().out) == {"digest": rec.digest, "messages": 50}
+
+
+def test_a_chunk_ends_at_its_size_or_its_age_in_simulated_time(tmp_path: Path) -> None:
+    """A killed writer loses at most its open chunk, and the writer's index keeps one entry a chunk: a chunk ends at
+    1 MiB of messages or 2 simulated seconds, whichever comes first."""
+    from bridge.core.recorder import CHUNK_BYTES, CHUNK_NS, recover
+
+    slow = Recorder(tmp_path / "slow.mcap")  # 10 s of small messages, 100 a second: five chunks of 2 s
+    for i in range(1000):
+        slow.write(i * 10_000_000, "/r000/log", "swarm_sitl.Log", {"i": i})
+    slow.finish()
+    with open(tmp_path / "slow.mcap", "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert len(chunks) == 5
+    assert all(c.message_end_time - c.message_start_time < CHUNK_NS for c in chunks)
+    data = (tmp_path / "slow.mcap").read_bytes()  # killed: the file is cut where the last chunk would have begun
+    (tmp_path / "cut.mcap").write_bytes(data[: chunks[-1].chunk_start_offset + 10])
+    saved = recover(tmp_path / "cut.mcap", tmp_path / "saved.mcap")
+    assert saved.messages == 800 and saved.last_time_ns == 7_990_000_000
+
+    fast = Recorder(tmp_path / "fast.mcap")  # over 3 MiB within 1 simulated second: ended by size
+    payload = "x" * 1000
+    for i in range(3 * 1024):
+        fast.write(i * 100_000, "/r000/log", "swarm_sitl.Log", {"p": payload})
+    fast.finish()
+    with open(tmp_path / "fast.mcap", "rb") as f:
+        sizes = [c.uncompressed_size for c in make_reader(f).get_summary().chunk_indexes]
+    assert len(sizes) == 4 and all(CHUNK_BYTES < s < CHUNK_BYTES + 2048 for s in sizes[:3])

@@ -123,7 +123,7 @@ def test_processes_are_named_by_their_command_line() -> None:
 def _recording(out: Path, n: int = 4000) -> tuple[str, int]:
     """A finished recording of ``n`` messages in ``out`` (several chunks: the payloads do not compress)."""
     out.mkdir(parents=True, exist_ok=True)
-    rec = Recorder(out / "session.mcap", {"config": "{}"})
+    rec = Recorder(out / "session.mcap", {"config": "{}"}, chunk_bytes=64 * 1024)
     for i in range(n):
         rec.write(i * 1000, "/r000/can0", "swarm_sitl.CanFrame",
                   {"id": i, "data": os.urandom(64).hex(), "src": "x", "name": ""})
