@@ -193,8 +193,8 @@ class Hub:
         """The studies' loop functions and the media this session uses, and the route table."""
         # the studies' loop functions first (a medium may call them), then the media the session uses, in order
         self.loop_functions: list[LoopFunctions] = [
-            study.loop_functions(self) for _, study in STUDIES.items()
-            if study.loop_functions is not None and study.loop_functions.wanted(cfg)]
+            lf(self) for lf in (study.loop_functions_class() for _, study in STUDIES.items())
+            if lf is not None and lf.wanted(cfg)]
         self.media: dict[str, Medium] = {}
         for name, cls in sorted(MEDIA.items(), key=lambda kv: (kv[1].order, kv[0])):
             if cls.wanted(self):

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel
 
-from swarm_logic.plugins import PluginError, Registry
+from swarm_logic.plugins import PluginError, Registry, load_ref
 
 if TYPE_CHECKING:
     from bridge.core.loop_functions import LoopFunctions
@@ -144,7 +144,9 @@ class Study:
     name: str
     title: str
     experiments: tuple[str, ...] = ()
-    loop_functions: type[LoopFunctions] | None = None
+    # its loop functions: the class, or "module:Class" (imported by the world only, when it builds them: the other
+    # processes of a session read the study's config sections, not its metrics)
+    loop_functions: type[LoopFunctions] | str | None = None
     configs: str = ""  # its session configs, relative to the repository
     sections: tuple[str, ...] = field(default=())  # the summary.json sections its loop functions write
     # its own top-level config sections: name -> their type (a pydantic model, or e.g. list[Model] for [[name]])
@@ -157,6 +159,11 @@ class Study:
     # its speed figures for ``swarm-sitl bench --study NAME``: "module:function", called as
     # function(quick=bool, duration=float | None, out_dir=str) -> exit code (imported only when asked for)
     bench: str = ""
+
+    def loop_functions_class(self) -> type[LoopFunctions] | None:
+        """The study's loop functions class, importing it if named by reference."""
+        lf = self.loop_functions
+        return load_ref(lf) if isinstance(lf, str) else lf
 
 
 def _is_medium(obj: Any) -> bool:

@@ -311,3 +311,19 @@ def test_a_robot_model_names_the_hal_table_its_program_opens_its_can_bus_with() 
         assert hal["other_can"] == SITL_CAN and "llc_can" not in hal
     finally:
         ROBOTS.unregister("otherbot")
+
+
+def test_a_session_s_other_processes_do_not_import_the_studies_loop_functions() -> None:
+    """Every process of a session reads the config (and so every study's config sections); only the world runs loop
+    functions. Named by reference ("module:Class"), they and their metrics (scipy) stay out of the participants,
+    which start a quarter faster for it."""
+    code = ("import sys, bridge.core.plan, bridge.hosts.logic, bridge.hosts.firmware; "
+            "print(sorted(m for m in sys.modules if m.endswith('.loop_functions') or m == 'scipy'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+    from bridge.core.loop_functions import LoopFunctions
+    from bridge.core.registry import STUDIES
+
+    for name, study in STUDIES.items():
+        lf = study.loop_functions_class()
+        assert lf is not None and issubclass(lf, LoopFunctions), name

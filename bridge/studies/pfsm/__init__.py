@@ -11,10 +11,11 @@ their loop functions (``loop_functions``) score them as the numerical model does
 from __future__ import annotations
 
 from bridge.core.registry import Study
-from bridge.studies.pfsm.loop_functions import PfsmLoopFunctions, SearchCfg
+from bridge.studies.pfsm.config import SearchCfg
 
 STUDY = Study("pfsm", "Khan: multi-robot search with a probabilistic state machine and Lennard-Jones spacing",
               experiments=("bridge.studies.pfsm.experiments", "bridge.studies.pfsm.cosim_experiments",
                            "bridge.studies.pfsm.benchmark"),
-              loop_functions=PfsmLoopFunctions, configs="hil_configs/pfsm", sections=("search",),
+              loop_functions="bridge.studies.pfsm.loop_functions:PfsmLoopFunctions",
+              configs="hil_configs/pfsm", sections=("search",),
               config={"search": SearchCfg}, bench="bridge.studies.pfsm.bench:bench")

@@ -14,12 +14,10 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from pydantic import Field
-
 from bridge.core import foxglove as fx
-from bridge.core.config import Section
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.recorder import register_schema
+from bridge.studies.pfsm.config import SearchCfg
 from bridge.studies.pfsm.numerical import p_sta
 
 if TYPE_CHECKING:
@@ -33,15 +31,6 @@ register_schema("swarm_sitl.PfsmFound", {
     "description": "A target was given energy by a searcher (it left its waiting state)",
     "properties": {"target": {"type": "integer"}, "t_s": {"type": "number"}},
 })
-
-
-class SearchCfg(Section):
-    """``[search]``: how a PFSM session is scored and when it ends."""
-
-    tick_s: float = Field(0.1, gt=0, le=10, description="the energy's sampling step (ARGoS's control step)")
-    end_after_found_s: float | None = Field(0.0, ge=0, description="end the session this long after the last "
-                                                                    "target is found (none: run to duration_s)")
-    area_m2: float | None = Field(None, gt=0, description="A of eq. 2 (default: the arena's width x length)")
 
 
 def _roles(cfg: Config) -> tuple[list[int], list[int]]:

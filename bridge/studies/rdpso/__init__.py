@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from bridge.core.registry import Study
 from bridge.studies.rdpso.config import ObjectiveCfg
-from bridge.studies.rdpso.loop_functions import RdpsoLoopFunctions
 
 STUDY = Study(
     "rdpso", "Couceiro 2013: RDPSO search, marsupial deployment, routing and mapping with eSwarBots and TraxBots",
     experiments=("bridge.studies.rdpso.experiments", "bridge.studies.rdpso.field_experiments",
                  "bridge.studies.rdpso.benchmark_experiments", "bridge.studies.rdpso.comm_experiments"),
-    loop_functions=RdpsoLoopFunctions, configs="hil_configs/rdpso", sections=("deployment", "comm", "mapping"),
+    loop_functions="bridge.studies.rdpso.loop_functions:RdpsoLoopFunctions",
+    configs="hil_configs/rdpso", sections=("deployment", "comm", "mapping"),
     config={"objective": ObjectiveCfg}, bench="bridge.studies.rdpso.bench:bench")

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from bridge.core.registry import Study
 from bridge.studies.roy.checks import BEHAVIOURS, check
-from bridge.studies.roy.loop_functions import FormationCfg, RoyLoopFunctions
+from bridge.studies.roy.config import FormationCfg
 
 STUDY = Study(
     "roy",
     "Roy: formation control with attraction-repulsion potentials and metaheuristic gain tuning",
     experiments=("bridge.studies.roy.experiments", "bridge.studies.roy.regions_experiments"),
-    loop_functions=RoyLoopFunctions,
+    loop_functions="bridge.studies.roy.loop_functions:RoyLoopFunctions",
     sections=("formation",),
     config={"formation": FormationCfg},
     bench="bridge.studies.roy.bench:bench",

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 from bridge.core.registry import Study
 from bridge.studies.zebro.decision import DecisionCfg
-from bridge.studies.zebro.loop_functions import ZebroLoopFunctions
 from bridge.studies.zebro.particles import ParticleCfg, check
 
 STUDY = Study(
     "zebro", "Agrawal 2019: silent, immature and mature collective decisions of DeciZebro hexapods",
     experiments=("bridge.studies.zebro.experiments", "bridge.studies.zebro.cosim_experiments"),
-    loop_functions=ZebroLoopFunctions, configs="hil_configs/zebro", sections=("particles", "decision"),
+    loop_functions="bridge.studies.zebro.loop_functions:ZebroLoopFunctions",
+    configs="hil_configs/zebro", sections=("particles", "decision"),
     config={"particles": list[ParticleCfg], "decision": DecisionCfg}, check=check,
     bench="bridge.studies.zebro.bench:bench")
