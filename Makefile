@@ -4,10 +4,12 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 BROWSER := $(VENV)/.browser
+FUZZ   := $(VENV)/.fuzz
 OUT    ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test lint screenshots bench bench-smoke survey survey-smoke experiments experiments-smoke clean
+.PHONY: setup demo test lint screenshots bench bench-smoke survey survey-smoke experiments experiments-smoke fuzz \
+        fuzz-smoke clean
 
 setup: $(STAMP)
 
@@ -23,17 +25,22 @@ $(BROWSER): $(STAMP) requirements-browser.lock
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --only-binary :all: -r requirements-browser.lock
 	@touch $(BROWSER)
 
+# atheris (libFuzzer for Python, a cp311 wheel), for the fuzz targets only: `make demo` and `make test` skip it
+$(FUZZ): $(STAMP) requirements-fuzz.lock
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --only-binary :all: -r requirements-fuzz.lock
+	@touch $(FUZZ)
+
 demo: $(STAMP)
 	$(BIN)/swarm-sitl run hil_configs/demo.toml --out $(OUT)
 
 # three workers on two cores: a third keeps them busy while the paced (wall-clock) HIL tests wait
 test: $(STAMP) $(BROWSER)
-	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
+	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples fuzz
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n 3 --dist worksteal -q $(PYTEST_ARGS)
 
 lint: $(STAMP)
-	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples
+	$(BIN)/ruff check bridge firmware_sim swarm_logic tests examples fuzz
 	$(BIN)/lint-imports
 
 bench: $(STAMP)
@@ -54,6 +61,14 @@ survey: $(STAMP)
 
 survey-smoke: $(STAMP)
 	$(BIN)/swarm-sitl radio-survey hil_configs/demo.toml --duration 300 --out runs/radio-survey-smoke --quiet
+
+# every parser a byte from outside reaches (fuzz/), each 10^5 inputs or 10 minutes under atheris; what reached new code
+# is merged into fuzz/corpus/ (commit it); fails naming the reproducer if any input crashed or hung a parser
+fuzz: $(STAMP) $(FUZZ)
+	$(BIN)/swarm-sitl fuzz --runs 100000 --max-time 600 --merge
+
+fuzz-smoke: $(STAMP) $(FUZZ)
+	$(BIN)/swarm-sitl fuzz --runs 2000 --max-time 10 --out runs/fuzz-smoke --quiet
 
 # `swarm-sitl experiment NAME $(1)` for every registered experiment; fails if any had a failed trial
 define each_experiment

@@ -535,12 +535,13 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``swarm-sitl`` command line: one parser per subcommand, each beside its ``cmd_*``."""
     from bridge.tools.campaign import add_parser as add_campaign
     from bridge.tools.catalogue import add_parser as add_list
+    from bridge.tools.fuzz import add_parser as add_fuzz
 
     ap = argparse.ArgumentParser(prog="swarm-sitl", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     for add in (_parser_run, _parser_join, _parser_validate, _parser_bench, _parser_radio_survey, _parser_radio_fit,
                 _parser_experiment, _parser_digest, _parser_devices, _parser_canlog, add_list, _parser_plot,
-                _parser_layout, _parser_replay, _parser_report, _parser_recover, add_campaign):
+                _parser_layout, _parser_replay, _parser_report, _parser_recover, add_campaign, add_fuzz):
         add(sub)
     return ap
 

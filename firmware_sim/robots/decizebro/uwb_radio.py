@@ -21,8 +21,9 @@ What it does, and where the behaviour comes from (docs/zebro-radio.md has the fi
   bearing, front or back.
 - **Data.** ``SEND`` queues a broadcast payload (at most ``MAX_PAYLOAD`` = 112 bytes, ``queue_frames`` deep); the
   turns that carry no beacon carry the queue's head, oldest first; a full queue refuses (``QUEUE_FULL``). Frames
-  the medium delivers go to the host as ``RX_DATA`` as they arrive; the neighbour table goes to the host once per
-  update period, with each own beacon (``NEIGHBOURS``).
+  the medium delivers go to the host as ``RX_DATA`` as they arrive (one longer than ``MAX_PAYLOAD``, which no DW1000
+  frame carries, is dropped and counted, ``rx_data_oversize``); the neighbour table goes to the host once per update
+  period, with each own beacon (``NEIGHBOURS``).
 - **UART** at 115200 baud, 8N1, paced (``PacedTx``); frames as ``swarm_logic.robots.decizebro.uwb_protocol`` defines
   them. A malformed frame (bad CRC, truncated, unknown type, wrong length, bad value) is counted, dropped and
   answered with a NACK; nothing the host sends raises. Bytes the host cannot take fast enough (a module hearing
@@ -94,7 +95,8 @@ class UwbRadio:
         self._k: int | None = None  # the next turn not yet decided
         self._last_beacon: int | None = None
         self.counters: dict[str, int] = dict.fromkeys((*P.STATUS_FIELDS, "uart_rx_bytes", "uart_tx_bytes",
-                                                        "uart_tx_dropped", "neighbour_reports", "events_unknown"), 0)
+                                                        "uart_tx_dropped", "neighbour_reports", "events_unknown",
+                                                        "rx_data_oversize"), 0)
 
     # -- host UART ----------------------------------------------------------------------------------------
     def _send(self, t: int, typ: int, body: bytes = b"") -> None:
@@ -180,8 +182,12 @@ class UwbRadio:
             return
         t_ev = int(ev.get("t_ns", t))
         if kind == "data":
+            data = bytes(ev["data"])
+            if len(data) > P.MAX_PAYLOAD:  # no DW1000 frame carries it (an item no module sent): counted, dropped
+                self.counters["rx_data_oversize"] += 1
+                return
             self.counters["rx_data"] += 1
-            self._send(t, P.RX_DATA, struct.pack("<HB", src & 0xFFFF, int(ev["seq"]) & 0xFF) + bytes(ev["data"]))
+            self._send(t, P.RX_DATA, struct.pack("<HB", src & 0xFFFF, int(ev["seq"]) & 0xFF) + data)
         elif kind == "beacon":
             self.counters["rx_beacons"] += 1
             flags = 0

@@ -4,8 +4,11 @@ the latest plan's law to its own row, with the overhead camera's broadcast poses
 own sonar points, in the plan's units, and commands that velocity through the tracking layer.
 
 It holds still, logging why (topic ``hold``, once per change of reason), when it has no plan, when the plan is older
-than ``stale_s`` (by its own clock since it arrived), when it has no pose, when the plan does not name it, or when
-the plan's length unit is not its own ``unit_m`` (no guess at a conversion).
+than ``stale_s`` (by its own clock since it arrived), when it has no pose, when the plan does not name it, when
+the plan's length unit is not its own ``unit_m`` (no guess at a conversion), or when the plan's law refuses the plan's
+parameters (``bad_plan``: a datagram that decodes but names parameters its law does not take, or values it cannot
+use; checked once per plan, ``plan_error``, the error logged under topic ``bad_plan``), so no datagram stops the
+robot's program.
 
 When the plan names a heading to face (``Plan.face``: chapter 6's region held before a wall) and ``face_tol_deg``
 is above 0, a robot turned more than that from it turns in place toward it (its point ahead sent across its heading:
@@ -32,7 +35,7 @@ from swarm_logic.robots.sonpi import pose_packet as pp
 from swarm_logic.robots.sonpi.interfaces import SonarReading
 from swarm_logic.robots.sonpi.wifi import PLAN, PlanOrder
 
-HOLD_REASONS = ("no_plan", "stale_plan", "no_pose", "not_in_plan", "unit")
+HOLD_REASONS = ("no_plan", "stale_plan", "no_pose", "not_in_plan", "unit", "bad_plan")
 
 
 def to_packet(plan: Plan, unit_m: float) -> pp.PlanPacket:
@@ -61,6 +64,18 @@ def from_packet(packet: pp.PlanPacket, t: float) -> Plan:
         done=packet.done,
         face=packet.face_rad,
     )
+
+
+def plan_error(packet: pp.PlanPacket) -> str | None:
+    """Why a robot cannot follow the plan ``packet`` carries (its law refuses the plan's parameters: missing, unknown,
+    of the wrong type or shape), or None: the plan, cut as a robot cuts it, with its law run once at its goals."""
+    try:
+        plan = restrict(from_packet(packet, 0.0), np.ones(len(packet.agents), bool))
+        with np.errstate(all="ignore"):  # agents sharing a goal are at distance 0 here: only a refusal counts
+            velocities(plan, np.asarray(plan.goals, float))
+    except (TypeError, ValueError, IndexError, KeyError, ArithmeticError) as e:
+        return f"{type(e).__name__}: {e}"[:300]
+    return None
 
 
 def window_ranges(readings: list[SonarReading]) -> tuple[list[float | None], int]:
@@ -141,6 +156,8 @@ class RegionAgent(SonpiAgent):
         self.v = np.zeros(2)
         self.turning = False
         self.turns = 0  # turns toward the plan's face heading begun
+        self.checked: PlanOrder | None = None  # the last plan checked (plan_error), and what was wrong with it
+        self.check_error: str | None = None
 
     def face(self, plan: Plan, yaw: float) -> bool:
         """Whether to turn in place toward the plan's face heading this step (and, if so, the command sent)."""
@@ -199,6 +216,14 @@ class RegionAgent(SonpiAgent):
             self.robot.log("hold", **detail)
             self.reason = reason
 
+    def bad_plan(self, now: float, order: PlanOrder) -> bool:
+        """Whether the robot cannot follow ``order``'s plan (``plan_error``), checked once per plan; logged once."""
+        if order is not self.checked:
+            self.checked, self.check_error = order, plan_error(order.plan)
+            if self.check_error is not None:
+                self.robot.log("bad_plan", t=now, plan_t=order.t_s, law=order.plan.law, error=self.check_error)
+        return self.check_error is not None
+
     def step(self) -> None:
         now = self.robot.clock.now()
         me = self.read_pose()
@@ -207,6 +232,8 @@ class RegionAgent(SonpiAgent):
         if order is not self.order:
             self.order, self.order_at = order, now
         reason = self.why_hold(now, order, me)
+        if reason is None and order is not None and self.bad_plan(now, order):
+            reason = "bad_plan"
         if reason is not None:
             self.hold_for(reason, now, order)
             return
