@@ -50,7 +50,7 @@ def cmd_run(a: argparse.Namespace) -> int:
     out = a.out or f"runs/{Path(a.config).stem}"
     res = run_session(a.config, {**_overrides(a), "session.live": a.live,
                                  "session.record_ticks": True if a.record_ticks else None}, out,
-                      progress=None if a.quiet else sys.stderr)
+                      progress=None if a.quiet else sys.stderr, plot=not a.no_plot)
     if res.summary.get("error"):
         say(sys.stderr, res.summary["error"].strip().splitlines()[-1] + "\n")
     return res.code
@@ -306,6 +306,8 @@ def _parser_run(sub: Any) -> None:
                    help="record every run of the robots' processes, for swarm-sitl replay (session.record_ticks)")
     p.add_argument("--out", help="output directory (default runs/<config name>)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument("--no-plot", action="store_true",
+                   help="do not draw trajectories.png (about a CPU-second a session, for scripts and CI)")
     p.set_defaults(fn=cmd_run)
 
 

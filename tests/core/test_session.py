@@ -67,9 +67,10 @@ def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "bridge.tools.cli", *args]
 
 
-def run(cfg: Path, out: Path, *extra: str, timeout: float = 600) -> tuple[int, dict]:
-    r = subprocess.run(cli("run", str(cfg), "--out", str(out), "--quiet", *extra), cwd=ROOT,
-                       capture_output=True, text=True, timeout=timeout)
+def run(cfg: Path, out: Path, *extra: str, timeout: float = 600, plot: bool = False) -> tuple[int, dict]:
+    """``swarm-sitl run`` to its end: its exit code and summary (no trajectories.png unless ``plot``)."""
+    r = subprocess.run(cli("run", str(cfg), "--out", str(out), "--quiet", *extra, *(() if plot else ("--no-plot",))),
+                       cwd=ROOT, capture_output=True, text=True, timeout=timeout)
     summary = json.loads((out / "summary.json").read_text())
     return r.returncode, summary
 
@@ -121,7 +122,7 @@ def small_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, int
     tmp = tmp_path_factory.mktemp("small")
     cfg = config(tmp)
     out = tmp / "run"
-    code, s = run(cfg, out)
+    code, s = run(cfg, out, plot=True)
     return cfg, out, code, s
 
 
@@ -177,8 +178,9 @@ def test_digest_is_the_same_across_reruns_packing_and_speed(tmp_path: Path, smal
     digests = {"a": a["digest"]}
     for name, extra in [("b", ()), ("packed", ("--robots-per-process", "2")),
                         ("one-process", ("--robots-per-process", "4")), ("paced", ("--speed", "4"))]:
-        code, s = run(cfg, tmp_path / name, *extra)
+        code, s = run(cfg, tmp_path / name, *extra)  # (--no-plot: no trajectories.png, none listed)
         assert code == 0, s
+        assert "plot" not in s["files"] and not (tmp_path / name / "trajectories.png").exists()
         digests[name] = s["digest"]
     assert len(set(digests.values())) == 1, digests
     # packed as "one-process" (whose digest is "a"'s): only the seed differs

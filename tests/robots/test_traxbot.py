@@ -145,7 +145,8 @@ def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: 
     """Algorithm 5.1 end to end: the ranger drops its 5 scouts one by one, each told its pose (the ranger's
     dead reckoning), each beaconing; then START, which every scout relays before its first RDPSO iteration."""
     cfg = tmp_path / "est.toml"
-    cfg.write_text(EST.format(duration=100, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="est")
+    # (the last scout lands at 70.7 s, START at 71.4 s, the first RDPSO iterations at 72.3 s: 80 s leaves room)
+    cfg.write_text(EST.format(duration=80, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="est")
                    .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14"))
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run"), *PACKED), cwd=ROOT, capture_output=True,
                        text=True, timeout=600)
@@ -179,7 +180,9 @@ def test_a_ranger_deploys_its_subgroup_along_the_spiral_and_starts_it(tmp_path: 
 @pytest.mark.session
 def test_the_random_baseline_drops_each_scout_within_d_max_of_the_last(tmp_path: Path) -> None:
     cfg = tmp_path / "random.toml"
+    # the session ends 1 s after the ranger's START (the last drop came at 62.3 s of the 100 s cap)
     cfg.write_text(EST.format(duration=100, rangers=1, scouts=5, poses=[[5.0, 7.0, 90.0]], mode="random")
+                   .replace("seed = 4", "seed = 4\nend_after_deployment = true")
                    .replace("width_m = 5", "width_m = 10").replace("length_m = 8", "length_m = 14")
                    .replace('mode = "random" }', 'mode = "random", d_max_m = 2.0 }'))
     r = subprocess.run(cli("run", str(cfg), "--out", str(tmp_path / "run"), *PACKED), cwd=ROOT, capture_output=True,

@@ -25,13 +25,13 @@ def neighbours(s, robot: int) -> set[int]:
     return known
 
 
-def test_the_swarm_stays_connected_for_120_s(swarm_session):
+def test_the_swarm_stays_connected_for_a_minute(swarm_session):
     s = swarm_session(SWARM)
-    for _ in range(12):
+    for _ in range(6):
         s.run_for(10.0)
         assert all(neighbours(s, r) for r in s.robots), f"a robot heard nobody at t={s.t:.0f} s"
     radio = s.radio()["connectivity"]
-    assert s.t == 120.0 and radio["samples"] >= 100
+    assert s.t == 60.0 and radio["samples"] >= 50
     assert radio["connected_share"] == 1.0 and radio["partition_events"] == 0
     assert all(s.alive(r) for r in s.robots)
 
