@@ -327,3 +327,8 @@ def test_a_session_s_other_processes_do_not_import_the_studies_loop_functions() 
     for name, study in STUDIES.items():
         lf = study.loop_functions_class()
         assert lf is not None and issubclass(lf, LoopFunctions), name
+    # the world imports every study's loop functions to ask each whether it is wanted: none imports scipy for that
+    code = ("import sys; from bridge.core.registry import STUDIES; "
+            "[st.loop_functions_class() for _, st in STUDIES.items()]; print('scipy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -21,7 +21,6 @@ import numpy as np
 from bridge.core.loop_functions import LoopFunctions
 from bridge.core.recorder import register_schema
 from bridge.studies.roy.config import FormationCfg
-from bridge.studies.roy.metrics import pair_shares
 
 if TYPE_CHECKING:
     from bridge.core.config import Config
@@ -51,6 +50,9 @@ class RoyLoopFunctions(LoopFunctions):
         return "formation" in (cfg.model_extra or {})
 
     def __init__(self, hub: Hub) -> None:
+        from bridge.studies.roy.metrics import pair_shares  # (scipy: imported only by a world that scores a formation)
+
+        self._pair_shares = pair_shares
         super().__init__(hub)
         self.cfg: FormationCfg = hub.cfg.section("formation")
         self.target = np.array(self.cfg.target, float)
@@ -75,7 +77,7 @@ class RoyLoopFunctions(LoopFunctions):
         self.next_tick += self.tick_ns
         w = self.hub.world
         xy = w.pos[w.alive]
-        close, far = pair_shares(xy, self.cfg.r_s_m)
+        close, far = self._pair_shares(xy, self.cfg.r_s_m)
         fe = close + far
         d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) if len(xy) > 1 else np.zeros((1, 1))
         np.fill_diagonal(d, math.inf)

@@ -96,5 +96,5 @@ def test_a_short_session_of_each_method(tmp_path: Path, method: str) -> None:
     res = c7.trial(cell, Trial("roy-regions", cell, 0, 11, True, str(tmp_path)))
     m = res.metrics
     assert m["sim_s"] == pytest.approx(c7.SMOKE_S, abs=0.05) and m["alive"] == 3 and m["path_m"] > 0.05
-    assert m["ph1_s"] is None and m["ph1_fe"] is not None  # still in the first phase after 20 s
+    assert m["ph1_s"] is None and m["ph1_fe"] is not None  # still in the first phase after SMOKE_S
     assert "rtf" not in m and "cpu_s" not in m and res.timings["cpu_s"] > 0
