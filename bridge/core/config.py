@@ -22,6 +22,7 @@ from pydantic import (
     Field,
     TypeAdapter,
     ValidationError,
+    ValidationInfo,
     create_model,
     field_validator,
     model_validator,
@@ -961,15 +962,16 @@ class Config(_Model):
         return self
 
     @model_validator(mode="after")
-    def _services(self) -> Config:
-        """Service names are unique (each is an address); each kind checks its options against the whole config."""
+    def _services(self, info: ValidationInfo) -> Config:
+        """Service names are unique (each is an address); each kind checks its options against the whole config
+        (not again in a session's processes: ``from_plan``)."""
         seen: set[str] = set()
         for i, sc in enumerate(self.services):
             if sc.name in seen:
                 raise ValueError(f"services[{i}].name: {sc.name!r} names another service already")
             seen.add(sc.name)
             spec = SERVICES.get(sc.kind)
-            if spec.check is not None:
+            if spec.check is not None and not _planned(info):
                 try:
                     spec.check(spec.options.model_validate(sc.options), self)
                 except ValueError as e:
@@ -1026,14 +1028,24 @@ class Config(_Model):
         return self
 
     @model_validator(mode="after")
-    def _study_sections(self) -> Config:
+    def _study_sections(self, info: ValidationInfo) -> Config:
         """Top-level sections beyond the core's are the studies' (``Study.config``): each study validates its own,
-        and a section no study declares is refused as an unknown field."""
+        and a section no study declares is refused as an unknown field; then the studies' checks across the config
+        (not again in a session's processes: ``from_plan``)."""
         extra = self.model_extra or {}
         if extra:
             _study_sections_model().model_validate(extra)
-        _study_checks(self)
+        if not _planned(info):
+            _study_checks(self)
         return self
+
+    @classmethod
+    def from_plan(cls, config: dict[str, Any]) -> Config:
+        """The config a session's plan carries, in one of the session's processes: validated again (it crossed a
+        process boundary), but without the services' and studies' checks across the whole config, which the launcher
+        ran on this very config before it wrote the plan; they load plugin classes (a region controller's planners,
+        scipy) that a process which does not run them should not pay for."""
+        return cls.model_validate(config, context={"planned": True})
 
     def section(self, name: str) -> Any:
         """A study's config section, validated (its defaults, or an empty list, if the file does not set it)."""
@@ -1050,6 +1062,11 @@ class Config(_Model):
     def profile(self, group: RobotGroup) -> RobotProfile:
         """The group's robot profile, as its robot model's options make it."""
         return robot_profile(group.profile, group.model_extra)
+
+
+def _planned(info: ValidationInfo) -> bool:
+    """Whether the config is validated from a session's plan (``Config.from_plan``)."""
+    return bool(info.context and info.context.get("planned"))
 
 
 def _study_checks(cfg: Config) -> None:

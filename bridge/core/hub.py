@@ -86,7 +86,7 @@ MAX_RUN_ITEMS = 10_000  # a run's outputs: frames, bytes written, logs (a busy c
 class Hub:
     def __init__(self, plan: Plan, session_dir: str, out_dir: str, namespace: str) -> None:
         self.plan = plan
-        self.cfg = cfg = Config.model_validate(plan.config)
+        self.cfg = cfg = Config.from_plan(plan.config)
         self.q_ns = cfg.session.quantum_ns
         self.end_ns = -(-round(cfg.session.duration_s * 1e9) // self.q_ns) * self.q_ns
         self.out = Path(out_dir)

@@ -34,7 +34,7 @@ def plot_session(mcap_path: str | Path, plan: Plan, png_path: str | Path) -> Non
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Rectangle
 
-    cfg = Config.model_validate(plan.config)
+    cfg = Config.from_plan(plan.config)
     a = cfg.arena
     t, x, y, alive = read_poses(mcap_path)
     aspect = a.length_m / a.width_m

@@ -186,7 +186,7 @@ class BoardFaults:
 
 class FirmwareHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
-        cfg = Config.model_validate(plan.config)
+        cfg = Config.from_plan(plan.config)
         seed = cfg.session.seed
         self.llcs: dict[int, Any] = {}  # each robot's LLC board, as its robot plugin builds it (RobotSpec.board)
         self.xbees: dict[int, XBeeModule] = {}

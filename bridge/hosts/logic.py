@@ -61,7 +61,7 @@ class LogicHost:
     def __init__(self, plan: Plan, robots: tuple[int, ...]) -> None:
         urlhandler.register()
         self.plan = plan
-        cfg = Config.model_validate(plan.config)
+        cfg = Config.from_plan(plan.config)
         seed = cfg.session.seed
         self.rts: dict[int, RobotRuntime] = {}
         self.reported: set[int] = set()

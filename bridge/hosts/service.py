@@ -37,7 +37,7 @@ class ServiceHost:
 
 def service_context(plan: Plan, name: str) -> tuple[ServiceSpec, ServiceContext]:
     """Service ``name``'s kind and the context it is built with, from the session's plan."""
-    cfg = Config.model_validate(plan.config)
+    cfg = Config.from_plan(plan.config)
     sc = next(s for s in cfg.services if s.name == name)
     spec = SERVICES.get(sc.kind)
     robots = []

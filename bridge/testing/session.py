@@ -93,7 +93,7 @@ class SwarmSession:
         channel = self._channel
         plan = self._plan = _plan(self.config, overrides)  # a wrong config or override is refused here, in the test
         self._ids = [r.id for r in plan.robots if r.gateway is None]
-        self._q_ns = Config.model_validate(plan.config).session.quantum_ns
+        self._q_ns = Config.from_plan(plan.config).session.quantum_ns
         hosted = {service_proc(PROBE_NAME): ProbeHost(plan, channel)}
 
         def launch() -> None:
@@ -183,7 +183,7 @@ class SwarmSession:
         ``target_system`` as the swarm's MAVLink endpoint routes a ground station's packets; what the faces send
         arrives as they send it. Deterministic: it goes through the lock-step, not a socket."""
         if self._mavlink is None:
-            cfg = Config.model_validate(self._plan.config) if self._plan is not None else None
+            cfg = Config.from_plan(self._plan.config) if self._plan is not None else None
             if cfg is None or not cfg.mavlink.endpoint:
                 raise RuntimeError("this session's robots have no MAVLink face: SwarmSession(..., mavlink=True), or "
                                    "swarm_session(..., mavlink=True)")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.core.config import ConfigError, load_config
+from bridge.core.config import Config, ConfigError, load_config
 from bridge.core.recorder import iter_messages
 from bridge.core.registry import (
     MEDIA,
@@ -332,3 +332,23 @@ def test_a_session_s_other_processes_do_not_import_the_studies_loop_functions() 
             "[st.loop_functions_class() for _, st in STUDIES.items()]; print('scipy' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_session_s_processes_do_not_run_the_launcher_s_checks_again(tmp_path: Path) -> None:
+    """The launcher checks the whole config (each service's and study's checks, which load plugin classes: a region
+    controller's planners, scipy); a session's processes validate the plan's copy without them (``from_plan``)."""
+    from bridge.core.plan import make_plan
+
+    cfg_path = Path(__file__).resolve().parents[2] / "hil_configs" / "sonpi" / "regions_ch6.toml"
+    plan = make_plan(load_config(cfg_path))
+    (tmp_path / "plan.json").write_text(json.dumps(plan.to_json()))
+    code = ("import json, sys; from bridge.core.config import Config; "
+            f"c = Config.from_plan(json.load(open({str(tmp_path / 'plan.json')!r}))['config']); "
+            "print(c.services[1].kind, 'scipy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["global_controller", "False"]
+    bad = json.loads((tmp_path / "plan.json").read_text())["config"]
+    bad["services"][1]["options"]["target"] = [99.0, 0.5]  # outside the arena: the launcher's check refuses it
+    with pytest.raises(ValueError, match=r"services\[1\]\.options\.target"):
+        Config.model_validate(bad)
+    assert Config.from_plan(bad).services[1].options["target"] == [99.0, 0.5]  # (the launcher's to refuse, not theirs)
