@@ -99,9 +99,10 @@ class Serial(SerialBase):
         device = parts.netloc or parts.path.lstrip("/")
         query = urllib.parse.parse_qs(parts.query, strict_parsing=False) if parts.query else {}
         real = query.get("device", [None])[0]
-        known = (*DEVICES, *model_ports())
-        if (parts.scheme != "sitl" or device not in known or set(query) - {"device"}
-                or (real is not None and device == "mavlink")):
+        # the common devices without loading every installed robot model (each imports its boards' firmware)
+        if (parts.scheme != "sitl" or (device not in DEVICES and device not in model_ports())
+                or set(query) - {"device"} or (real is not None and device == "mavlink")):
+            known = (*DEVICES, *model_ports())
             raise SerialException(f"expected sitl://DEVICE with DEVICE one of {', '.join(known)} (optionally "
                                   f"?device=PATH for a real module), got {url!r}")
         return device, real

@@ -109,8 +109,11 @@ def test_sitl_url_outside_a_session_is_a_clear_error() -> None:
     urlhandler.register()
     with pytest.raises(serial.SerialException, match="no SITL robot in this thread"):
         serial.serial_for_url("sitl://xbee", baudrate=9600)
-    with pytest.raises(serial.SerialException, match="expected sitl://DEVICE"):
+    with pytest.raises(serial.SerialException, match=r"expected sitl://DEVICE with DEVICE one of xbee, uwb, mavlink, "
+                                                     r".*uwb_radio"):  # a robot model's own port is named too
         serial.serial_for_url("sitl://gps", baudrate=9600)
+    with pytest.raises(serial.SerialException, match="no SITL robot in this thread"):  # a model's port is known
+        serial.serial_for_url("sitl://uwb_radio", baudrate=115200)
 
 
 def test_xbee_config_errors_name_the_field(tmp_path: Path) -> None:
