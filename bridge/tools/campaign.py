@@ -210,6 +210,17 @@ def _kill(procs: Iterable[Proc]) -> None:
                 psutil.Process(p.pid).kill()
 
 
+CAMPAIGN_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _default_signals() -> None:
+    """In a trial's launcher, before it runs: the signals a campaign sends with their default meaning, as a terminal's
+    session has them, whatever this campaign inherited (``nohup`` ignores SIGHUP, and an ignored signal stays ignored
+    across exec: a SIGHUP trial would test nothing)."""
+    for sig in CAMPAIGN_SIGNALS:
+        signal.signal(sig, signal.SIG_DFL)
+
+
 class Watched:
     """A ``swarm-sitl run`` this campaign started: its output read as it comes (the ``started:`` line, the simulated
     time of its progress lines), and every process it starts recorded while it runs, so that none may be left."""
@@ -220,7 +231,8 @@ class Watched:
         self.out = out
         self.t0 = time.monotonic()
         self.p = subprocess.Popen(_cli("run", *run_args, "--out", str(out)), stdin=subprocess.DEVNULL,
-                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
+                                  preexec_fn=_default_signals)
         assert self.p.stdout is not None
         self.pipe_open = True
         self.text = ""  # its output (the last TAIL characters)

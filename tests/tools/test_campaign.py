@@ -177,6 +177,20 @@ def test_hits_are_drawn_from_the_seed() -> None:
         plan_hits(1, 0, ["SIGFOO"])
 
 
+def test_a_trial_s_launcher_gets_the_campaign_s_signals_with_their_default_meaning() -> None:
+    """A campaign run under ``nohup`` inherits SIGHUP ignored, and so would every launcher it starts (an ignored
+    signal stays ignored across exec): its SIGHUP trials would test nothing. Each trial's launcher starts with the
+    default meaning of the signals the campaign sends."""
+    probe = "import signal; print(int(signal.getsignal(signal.SIGHUP)), int(signal.getsignal(signal.SIGTERM)))"
+    code = ("import signal, subprocess, sys; from bridge.tools.campaign import _default_signals; "
+            "signal.signal(signal.SIGHUP, signal.SIG_IGN); signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+            f"run = lambda **k: subprocess.run([sys.executable, '-c', {probe!r}], capture_output=True, text=True, "
+            "**k); "
+            "print(run().stdout.strip(), '/', run(preexec_fn=_default_signals).stdout.strip())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["1", "1", "/", "0", "0"]  # (SIG_IGN inherited; SIG_DFL in a trial's launcher)
+
+
 @pytest.mark.session
 def test_two_trials_leave_no_process_and_a_readable_recording(tmp_path: Path) -> None:
     # seed 4: SIGTERM to a child, then SIGSTOP and SIGCONT to the launcher, both while the session runs
