@@ -1,8 +1,9 @@
 """The launcher: starts one session's processes, supervises them, shows progress, writes the summary.
 
-It owns the terminal: Ctrl-C (or SIGTERM) asks the world to stop at the end of the current quantum and
-finish the recording; a second Ctrl-C kills everything at once (the world gets SIGTERM, so it still finishes the
-recording, as when the launcher dies) and skips the plot. A closed stdout or stderr never stops it. A child that
+It owns the terminal: Ctrl-C (or SIGTERM, or SIGHUP when the terminal closes, unless under ``nohup``) asks the world
+to stop at the end of the current quantum and finish the recording; a second Ctrl-C kills everything at once (the
+world gets SIGTERM, so it still finishes the recording, as when the launcher dies) and skips the plot. A closed
+stdout or stderr never stops it. A child that
 dies is reported to the world, which applies the failure policy. Children are in their own process groups and die
 with the launcher (PR_SET_PDEATHSIG), so no process of a session outlives it. A remote logic process
 (``logic = "remote"``) or a host's (``[[hosts]]``) is not its child: it joins from another computer (``swarm-sitl
@@ -183,6 +184,13 @@ def stopping_when(stop: Callable[[], bool]) -> Iterator[None]:
         _STOP_WHEN.reset(token)
 
 
+def _stop_signals() -> tuple[int, ...]:
+    """The signals that stop a session: Ctrl-C, SIGTERM, and SIGHUP unless it is ignored (``nohup``: the user asked
+    the session to outlive the terminal)."""
+    hup = () if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN else (signal.SIGHUP,)
+    return (signal.SIGINT, signal.SIGTERM, *hup)
+
+
 def on_main_thread() -> bool:
     """Whether this is the main thread: the only one that can take Ctrl-C and SIGTERM (install signal handlers)."""
     return threading.current_thread() is threading.main_thread()
@@ -257,9 +265,10 @@ def run_session(config_path: str, overrides: dict[str, Any] | None = None, out_d
         return p
 
     stops = _Stops(stop if stop is not None else _STOP_WHEN.get())
-    # Ctrl-C and SIGTERM stop the session; a session run from another thread (an experiment's trial on a Dask worker)
-    # cannot take them: it ends with the process it runs in, or when its stop hook says so
-    old = {s: signal.signal(s, stops) for s in (signal.SIGINT, signal.SIGTERM)} if on_main_thread() else {}
+    # Ctrl-C, SIGTERM and SIGHUP (its terminal closed; not under nohup, which ignores it) stop the session; a session
+    # run from another thread (an experiment's trial on a Dask worker) cannot take them: it ends with the process it
+    # runs in, or when its stop hook says so
+    old = {s: signal.signal(s, stops) for s in _stop_signals()} if on_main_thread() else {}
     try:
         res = _supervise(cfg, plan, out, logs, spawn, stops, endpoint, namespace, session_dir, prog, ports, remote,
                          plot, hosted)

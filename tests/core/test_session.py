@@ -280,11 +280,13 @@ def test_second_ctrl_c_never_leaves_a_traceback_or_a_wrong_summary(tmp_path: Pat
     check_stopped_cleanly(p, out)
 
 
-def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> None:
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGHUP], ids=["ctrl-c", "terminal-closed"])
+def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path, sig: int) -> None:
+    """Ctrl-C, or the terminal closing (SIGHUP), stops the session as asked: exit 130, its summary and recording."""
     def ctrl_c(launcher: subprocess.Popen, procs: list[psutil.Process]) -> None:
         for proc in procs:  # network hygiene: unix sockets only, nothing on inet
             assert proc.net_connections(kind="inet") == []
-        launcher.send_signal(signal.SIGINT)
+        launcher.send_signal(sig)
 
     out = tmp_path / "run"
     p = long_session_then(tmp_path, out, ctrl_c)
@@ -292,6 +294,14 @@ def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> No
     s = json.loads((out / "summary.json").read_text())
     assert s["interrupted"] and 0 < s["sim_time_s"] < 3600
     assert file_digest(out / "session.mcap") == (s["digest"], s["messages"])
+
+
+def test_under_nohup_a_closed_terminal_does_not_stop_the_session() -> None:
+    """``nohup swarm-sitl run ...``: SIGHUP ignored on purpose, the launcher leaves it so."""
+    code = ("import signal; from bridge.core.launcher import _stop_signals; a = _stop_signals(); "
+            "signal.signal(signal.SIGHUP, signal.SIG_IGN); print(signal.SIGHUP in a, signal.SIGHUP in _stop_signals())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", "False"]
 
 
 @pytest.mark.parametrize("policy", ["continue", "stop"])
