@@ -47,6 +47,7 @@ class Result:
     hangs: int = 0
     seconds: float = 0.0
     reproducer: str | None = None
+    slow: str | None = None  # libFuzzer's slowest input, when it reported one (not a failure)
     error: str | None = None  # the exception a crash raised (its last traceback line), or why the target did not run
     code: int = 0
 
@@ -93,6 +94,28 @@ def _last_exception(log: str) -> str | None:
     return None
 
 
+def read_output(res: Result, text: str, code: int, log_path: Path) -> None:
+    """Fill ``res`` from libFuzzer's output ``text`` and exit code: inputs run, coverage, and what failed."""
+    for m in _COV.finditer(text):
+        res.cov, res.ft = int(m[1]), int(m[2])
+    if (m := _EXECUTED.search(text)) or (m := _DONE.search(text)):
+        res.inputs = int(m[1])
+    # a crash-, timeout-, oom- or leak- file is a failure; a slow-unit- one is libFuzzer's report of its slowest input
+    # (over 10 s of wall time: a process stopped while it ran one, as a paused machine does), kept but not a failure
+    artifacts = [(Path(a).name.split("-", 1)[0], a) for a in _ARTIFACT.findall(text)]
+    failing = [(kind, a) for kind, a in artifacts if kind != "slow"]
+    res.slow = next((a for kind, a in artifacts if kind == "slow"), None)
+    if failing:
+        kind, res.reproducer = failing[0]
+        if kind == "timeout":
+            res.hangs = 1
+        else:
+            res.crashes = 1
+            res.error = _last_exception(text) or kind
+    elif code != 0:
+        res.error = f"exit code {code}, see {log_path}"
+
+
 def run_target(root: Path, name: str, out: Path, *, runs: int, max_time: int, timeout: int, seed: int,
                merge: bool) -> Result:
     """Fuzz ``name`` once (its scratch corpus under ``out/name/corpus``); with ``merge``, then merge new coverage into
@@ -115,22 +138,7 @@ def run_target(root: Path, name: str, out: Path, *, runs: int, max_time: int, ti
         proc = subprocess.run(args, cwd=root, stdout=log, stderr=subprocess.STDOUT, env=env, check=False)
     res.seconds = round(time.monotonic() - t0, 1)
     res.code = proc.returncode
-    text = log_path.read_text(errors="replace")
-    for m in _COV.finditer(text):
-        res.cov, res.ft = int(m[1]), int(m[2])
-    if (m := _EXECUTED.search(text)) or (m := _DONE.search(text)):
-        res.inputs = int(m[1])
-    artifact = _ARTIFACT.search(text)
-    if artifact:
-        res.reproducer = artifact[1]
-        kind = Path(artifact[1]).name.split("-", 1)[0]
-        if kind == "timeout":
-            res.hangs = 1
-        else:
-            res.crashes = 1
-            res.error = _last_exception(text) or kind
-    elif proc.returncode != 0:
-        res.error = f"exit code {proc.returncode}, see {log_path}"
+    read_output(res, log_path.read_text(errors="replace"), proc.returncode, log_path)
     if merge and not res.failed:
         env["SWARM_SITL_FUZZ_EXE"] = str(_wrapper(root, out, name))
         with open(log_path, "a") as log:
@@ -152,6 +160,9 @@ def table(results: list[Result]) -> str:
             lines.append(f"{r.target}: {what}; reproduce with: python -m fuzz replay {r.target} {r.reproducer}")
         elif r.error:
             lines.append(f"{r.target}: did not run: {r.error}")
+        if r.slow:
+            lines.append(f"{r.target}: libFuzzer reported a slow input (over 10 s of wall time; not a failure): "
+                         f"{r.slow}")
     return "\n".join(lines)
 
 

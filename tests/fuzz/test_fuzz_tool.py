@@ -38,3 +38,25 @@ def test_a_crash_is_read_from_libfuzzer_s_output_and_named_with_its_reproducer()
     assert ("zebro_radio: crash (ValueError: frame too long); reproduce with: python -m fuzz replay zebro_radio "
             "runs/fuzz/zebro_radio/crash-abc") in text
     assert not ok.failed and bad.failed
+
+
+def test_a_slow_unit_report_is_kept_but_is_not_a_failure(tmp_path) -> None:
+    """libFuzzer reports its slowest input (over 10 s of wall time) as a slow-unit file: a fuzzing process stopped
+    for a while (a paused machine) makes one. A timeout- file is a hang, a crash- file a crash."""
+    from pathlib import Path
+
+    from bridge.tools.fuzz import read_output
+
+    log = Path("x.log")
+    slow = ("#6707\tREDUCE cov: 1116 ft: 2839 corp: 271/50Kb\n === Timeout: 962s elapsed, timeout=10s ===\n"
+            "Slowest unit: 962 s:\nartifact_prefix='runs/fuzz/m/'; Test unit written to runs/fuzz/m/slow-unit-86f8\n"
+            "#6792\tDONE   cov: 1116 ft: 2839 corp: 271/50Kb\nDone 6792 runs in 970 second(s)\n"
+            "stat::number_of_executed_units: 6792\n")
+    r = Result("mavlink_world")
+    read_output(r, slow, 0, log)
+    assert (r.inputs, r.cov, r.ft, r.crashes, r.hangs, r.failed) == (6792, 1116, 2839, 0, 0, False)
+    assert r.slow == "runs/fuzz/m/slow-unit-86f8" and "slow input" in table([r])
+    hang = Result("xbee_at")
+    read_output(hang, "ALARM: working on the last Unit for 11 seconds\nTest unit written to runs/fuzz/x/timeout-ab\n",
+                70, log)
+    assert (hang.hangs, hang.crashes, hang.reproducer) == (1, 0, "runs/fuzz/x/timeout-ab")
