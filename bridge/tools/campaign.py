@@ -729,7 +729,7 @@ def _robot_fault(kind: str) -> FaultMaker:
 FAULT_MAKERS: dict[str, FaultMaker] = {"can_noise": _can_noise, "partition": _partition, "burst_loss": _burst_loss,
                                        "freeze": _freeze, "firmware_reboot": _firmware_reboot,
                                        "clock_drift": _clock_drift}
-SOAK_FAULTS = ("can_noise", "partition", "burst_loss")
+SOAK_FAULTS = ("can_noise", "partition", "burst_loss", "firmware_reboot", "freeze", "clock_drift")
 
 
 def fault_schedule(kinds: Iterable[str], robots: int, duration_s: float, every_s: float, seed: int
