@@ -23,7 +23,8 @@ def _speed(v: str) -> float | str:
     return f
 
 
-def _at_least_one(v: str) -> int:
+def at_least_one(v: str) -> int:
+    """An argparse type: a whole number >= 1 (counts: robots, trials, inputs)."""
     try:
         n = int(v)
     except ValueError:
@@ -360,8 +361,8 @@ def _parser_bench(sub: Any) -> None:
     p.add_argument("--link-delay-ms", type=_numbers(float, 0, "0.2,1"), default=[0.2, 1.0], metavar="D[,D...]",
                    help="with --hosts: one-way delays of the hosts' links (a delay relay each way; default 0.2,1), "
                         "besides loopback without a relay")
-    p.add_argument("--robots", type=_at_least_one, help="with --hosts: robot count (default 10)")
-    p.add_argument("--robots-per-process", type=_at_least_one, help="with --hosts: packing (default 5)")
+    p.add_argument("--robots", type=at_least_one, help="with --hosts: robot count (default 10)")
+    p.add_argument("--robots-per-process", type=at_least_one, help="with --hosts: packing (default 5)")
     p.set_defaults(fn=cmd_bench)
 
 
@@ -394,8 +395,8 @@ def _parser_experiment(sub: Any) -> None:
                                           "report against the thesis' figures")
     p.add_argument("name", nargs="?", help="experiment name (--list shows them)")
     p.add_argument("--list", action="store_true", help="list the experiments and exit")
-    p.add_argument("--trials", type=_at_least_one, help="trials per cell (default: the experiment's own)")
-    p.add_argument("--jobs", type=_at_least_one, help="worker processes (default: one per CPU; 1 runs in-process)")
+    p.add_argument("--trials", type=at_least_one, help="trials per cell (default: the experiment's own)")
+    p.add_argument("--jobs", type=at_least_one, help="worker processes (default: one per CPU; 1 runs in-process)")
     p.add_argument("--out", help="output directory (default runs/experiments/<name>, with --smoke <name>-smoke)")
     p.add_argument("--smoke", action="store_true", help="a few short trials per cell (for CI)")
     p.add_argument("--seed", type=int, default=0, help="base seed; each trial's seed derives from it (default 0)")

@@ -204,24 +204,16 @@ def cmd_fuzz(a: argparse.Namespace) -> int:
     return 2 if any(r.error for r in results) else 0
 
 
-def _positive_int(v: str) -> int:
-    try:
-        n = int(v)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {v!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
-    return n
-
-
 def add_parser(sub: Any) -> None:
+    from bridge.tools.cli import at_least_one
+
     p = sub.add_parser("fuzz", help="fuzz every parser a byte from outside reaches (atheris), each for a fixed budget; "
                                     "a table of inputs, coverage, crashes and hangs")
     p.add_argument("--target", action="append", metavar="NAME", help="only this target (repeatable; --list names "
                                                                      "them)")
-    p.add_argument("--runs", type=_positive_int, default=100_000, help="inputs per target (default 100000)")
-    p.add_argument("--max-time", type=_positive_int, default=600, help="seconds per target at most (default 600)")
-    p.add_argument("--timeout", type=_positive_int, default=10,
+    p.add_argument("--runs", type=at_least_one, default=100_000, help="inputs per target (default 100000)")
+    p.add_argument("--max-time", type=at_least_one, default=600, help="seconds per target at most (default 600)")
+    p.add_argument("--timeout", type=at_least_one, default=10,
                    help="seconds one input may take before it is a hang (10)")
     p.add_argument("--seed", type=int, default=1, help="libFuzzer's seed: the same seed and corpus, the same run (1)")
     p.add_argument("--merge", action="store_true", help="merge what reached new code into fuzz/corpus/<target>/")
