@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
@@ -72,6 +71,3 @@ class Moments:
     @property
     def rms(self) -> float:
         return math.sqrt(self.sumsq / self.n) if self.n else 0.0
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"n": self.n, "mean": self.mean, "rms": self.rms, "max": self.max, "last": self.last}
