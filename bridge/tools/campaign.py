@@ -44,6 +44,8 @@ from pathlib import Path
 from statistics import mean
 from typing import Any
 
+from bridge.tools.argtypes import at_least_one, positive
+
 _SUMMARY = re.compile(r"(\d+) (passed|failed|error|errors|skipped)")
 
 
@@ -1014,8 +1016,9 @@ def soak_verdict(r: Soak) -> str:
 
 def _session_flags(p: argparse.ArgumentParser, robots: int, duration: float | None) -> None:
     p.add_argument("--config", default="hil_configs/demo.toml", help="the session's config")
-    p.add_argument("--robots", type=int, default=robots, help="robot count (configs with one [[robots]] group)")
-    p.add_argument("--duration", type=float, default=duration, help="simulated seconds of each session")
+    p.add_argument("--robots", type=at_least_one, default=robots,
+                   help="robot count (configs with one [[robots]] group)")
+    p.add_argument("--duration", type=positive, default=duration, help="simulated seconds of each session")
 
 
 def _run_args(a: argparse.Namespace) -> list[str]:
@@ -1033,52 +1036,52 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     what = p.add_subparsers(dest="campaign", required=True)
     f = what.add_parser("flake", help="run a pytest selection N times, the second half beside a busy core")
     f.add_argument("selection", nargs="+", help="what pytest runs (paths, -k, -m ...: put them after --)")
-    f.add_argument("--runs", type=int, default=20)
-    f.add_argument("--workers", type=int, default=2, help="pytest -n (1: no xdist)")
+    f.add_argument("--runs", type=at_least_one, default=20)
+    f.add_argument("--workers", type=at_least_one, default=2, help="pytest -n (1: no xdist)")
     f.add_argument("--busy-share", type=float, default=0.5, help="share of the runs beside a busy core")
-    f.add_argument("--max-wall", type=float, default=None, help="start no run after this many seconds")
+    f.add_argument("--max-wall", type=positive, default=None, help="start no run after this many seconds")
     f.add_argument("--out", default="runs/campaign-flake", help="where each run's log goes")
     f.set_defaults(fn=cmd_campaign)
 
     o = what.add_parser("orphans", help="hit N short sessions with a random signal each (launcher or a child); "
                                         "check no process is left, the recording reads and its digest matches")
-    o.add_argument("--trials", type=int, default=20)
+    o.add_argument("--trials", type=at_least_one, default=20)
     o.add_argument("--seed", type=int, default=0, help="of the campaign's random draws (which signal, whom, when)")
     _session_flags(o, robots=2, duration=4.0)
-    o.add_argument("--speed", type=float, default=2.0, help="real-time factor of each session (paced, so that a "
+    o.add_argument("--speed", type=positive, default=2.0, help="real-time factor of each session (paced, so that a "
                                                              "signal can land while it runs)")
     o.add_argument("--signals", default=",".join(ACTIONS), help=f"the actions drawn from (of {', '.join(ACTIONS)})")
     o.add_argument("--target", choices=("any", "launcher", "child"), default="any")
-    o.add_argument("--max-wall", type=float, default=None, help="start no trial after this many seconds")
+    o.add_argument("--max-wall", type=positive, default=None, help="start no trial after this many seconds")
     o.add_argument("--out", default="runs/campaign-orphans", help="where each trial's session goes")
     o.set_defaults(fn=cmd_orphans)
 
     c = what.add_parser("concurrency", help="K sessions of one config at once: each must exit 0 and record the "
                                             "same digest as the config run alone")
-    c.add_argument("--sessions", type=int, default=4)
+    c.add_argument("--sessions", type=at_least_one, default=4)
     _session_flags(c, robots=2, duration=5.0)
-    c.add_argument("--max-wall", type=float, default=1800.0, help="stop the sessions after this many seconds")
+    c.add_argument("--max-wall", type=positive, default=1800.0, help="stop the sessions after this many seconds")
     c.add_argument("--out", default="runs/campaign-concurrency")
     c.set_defaults(fn=cmd_concurrency)
 
     s = what.add_parser("soak", help="one long session with faults that end; RSS and open fds of its processes "
                                      "must stay flat")
     s.add_argument("--config", default="hil_configs/demo.toml", help="the base config (one [[robots]] group)")
-    s.add_argument("--robots", type=int, default=10)
-    s.add_argument("--sim-hours", type=float, default=2.0)
-    s.add_argument("--fault-every-s", type=float, default=5.0, help="simulated seconds between faults")
+    s.add_argument("--robots", type=at_least_one, default=10)
+    s.add_argument("--sim-hours", type=positive, default=2.0)
+    s.add_argument("--fault-every-s", type=positive, default=5.0, help="simulated seconds between faults")
     s.add_argument("--faults", default=",".join(SOAK_FAULTS), help="the fault kinds drawn from (comma-separated)")
-    s.add_argument("--sample-every-s", type=float, default=60.0,
+    s.add_argument("--sample-every-s", type=positive, default=60.0,
                    help="simulated seconds between samples (taken at progress lines, every 10 simulated s)")
     s.add_argument("--seed", type=int, default=0, help="of the fault schedule")
-    s.add_argument("--max-wall", type=float, default=None, help="stop the session (Ctrl-C) after this many seconds")
+    s.add_argument("--max-wall", type=positive, default=None, help="stop the session (Ctrl-C) after this many seconds")
     s.add_argument("--out", default="runs/campaign-soak")
     s.set_defaults(fn=cmd_soak)
 
 
 def cmd_campaign(a: argparse.Namespace) -> int:
-    if a.runs < 1 or not 0 <= a.busy_share <= 1:
-        print("swarm-sitl campaign: --runs must be at least 1 and --busy-share within 0..1", file=sys.stderr)
+    if not 0 <= a.busy_share <= 1:
+        print("swarm-sitl campaign flake: --busy-share must be within 0..1", file=sys.stderr)
         return 2
     print("| run | busy core | exit | passed | failed | wall (s) |\n|---|---|---|---|---|---|", flush=True)
     runs = flake(a.selection, a.runs, Path(a.out), a.workers, a.max_wall, a.busy_share)
@@ -1088,9 +1091,9 @@ def cmd_campaign(a: argparse.Namespace) -> int:
 
 def cmd_orphans(a: argparse.Namespace) -> int:
     actions = [x.strip() for x in a.signals.split(",") if x.strip()]
-    if a.trials < 1 or not actions or set(actions) - set(ACTIONS) or a.duration <= 0 or a.speed <= 0:
-        print(f"swarm-sitl campaign orphans: --trials must be at least 1, --duration and --speed > 0, --signals of "
-              f"{', '.join(ACTIONS)}", file=sys.stderr)
+    if not actions or set(actions) - set(ACTIONS):
+        print(f"swarm-sitl campaign orphans: --signals must be some of {', '.join(ACTIONS)}, got {a.signals!r}",
+              file=sys.stderr)
         return 2
     validate(*_run_args(a))
     print(ORPHANS_HEADER, flush=True)
@@ -1113,9 +1116,6 @@ def validate(config: str, *args: str) -> None:
 
 
 def cmd_concurrency(a: argparse.Namespace) -> int:
-    if a.sessions < 1:
-        print("swarm-sitl campaign concurrency: --sessions must be at least 1", file=sys.stderr)
-        return 2
     validate(*_run_args(a))
     print("| session | exit | digest | messages | equal to solo |\n|---|---|---|---|---|", flush=True)
     solo, runs = concurrency(a.sessions, _run_args(a), Path(a.out), a.max_wall)
@@ -1128,9 +1128,8 @@ def cmd_concurrency(a: argparse.Namespace) -> int:
 
 def cmd_soak(a: argparse.Namespace) -> int:
     kinds = [x.strip() for x in a.faults.split(",") if x.strip()]
-    if a.robots < 1 or a.sim_hours <= 0 or a.fault_every_s <= 0 or a.sample_every_s <= 0 or not kinds:
-        print("swarm-sitl campaign soak: --robots >= 1, --sim-hours, --fault-every-s, --sample-every-s > 0, and "
-              "a fault kind", file=sys.stderr)
+    if not kinds:
+        print("swarm-sitl campaign soak: --faults names no fault kind", file=sys.stderr)
         return 2
     r = soak(Path(a.config), a.robots, a.sim_hours, a.fault_every_s, a.sample_every_s, Path(a.out), kinds, a.seed,
              a.max_wall)

@@ -9,29 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.config import ConfigError, load_config
-
-
-def _speed(v: str) -> float | str:
-    if v == "max":
-        return "max"
-    try:
-        f = float(v)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--speed: expected a positive number or 'max', got {v!r}") from None
-    if f <= 0:
-        raise argparse.ArgumentTypeError("--speed must be > 0")
-    return f
-
-
-def at_least_one(v: str) -> int:
-    """An argparse type: a whole number >= 1 (counts: robots, trials, inputs)."""
-    try:
-        n = int(v)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {v!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
-    return n
+from bridge.tools.argtypes import at_least_one, numbers, positive, speed
 
 
 def _overrides(a: argparse.Namespace) -> dict[str, Any]:
@@ -74,31 +52,6 @@ def cmd_join(a: argparse.Namespace) -> int:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)  # zenoh-python can hang in interpreter teardown
-
-
-def _numbers(cast: type, least: float, example: str) -> Any:
-    """An argparse type: comma-separated numbers, each at least ``least`` (e.g. ``1,2``)."""
-
-    def parse(v: str) -> list:
-        try:
-            out = [cast(x) for x in v.split(",")]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected numbers such as {example}, got {v!r}") from None
-        if not all(x >= least for x in out):
-            raise argparse.ArgumentTypeError(f"each must be >= {least}, got {v}")
-        return out
-
-    return parse
-
-
-def _positive(v: str) -> float:
-    try:
-        f = float(v)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {v!r}") from None
-    if not f > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {v}")
-    return f
 
 
 def cmd_validate(a: argparse.Namespace) -> int:
@@ -289,7 +242,7 @@ def _session_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robots", type=int, help="robot count (configs with one [[robots]] group)")
     p.add_argument("--duration", type=float, help="simulated seconds")
     p.add_argument("--seed", type=int)
-    p.add_argument("--speed", type=_speed, help="real-time factor to pace to, or 'max'")
+    p.add_argument("--speed", type=speed, help="real-time factor to pace to, or 'max'")
     p.add_argument("--robots-per-process", type=int, help="pack K robots into each firmware/logic process")
     p.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="ENDPOINT",
                    help="give every robot a MAVLink face behind one UDP endpoint (default udpout:127.0.0.1:14550, "
@@ -323,9 +276,9 @@ def _parser_join(sub: Any) -> None:
     which.add_argument("--robot", type=int, help="the robot whose logic to run (default: the session's only remote "
                                                  "robot)")
     which.add_argument("--host", help="run all the processes the session places on this host (its [[hosts]] name)")
-    p.add_argument("--timeout", type=_positive, default=10.0,
+    p.add_argument("--timeout", type=positive, default=10.0,
                    help="wall seconds to wait for the session to answer (default 10)")
-    p.add_argument("--world-timeout", type=_positive, default=10.0,
+    p.add_argument("--world-timeout", type=positive, default=10.0,
                    help="wall seconds the world may be unreachable before the join gives up (default 10)")
     p.set_defaults(fn=cmd_join)
 
@@ -355,10 +308,10 @@ def _parser_bench(sub: Any) -> None:
                                    "and runs/s, the SonPI camera sessions, chapter 6 with 1000 agents and the "
                                    "SonPIs under chapter 6's region planner)")
     p.add_argument("--rdpso", action="store_true", help="the same as --study rdpso")
-    p.add_argument("--hosts", type=_numbers(int, 1, "1,2"), metavar="N[,N...]",
+    p.add_argument("--hosts", type=numbers(int, 1, "1,2"), metavar="N[,N...]",
                    help="the robots' processes on N other hosts (joins on this machine over TCP), against all here: "
                         "RTF and barrier per case")
-    p.add_argument("--link-delay-ms", type=_numbers(float, 0, "0.2,1"), default=[0.2, 1.0], metavar="D[,D...]",
+    p.add_argument("--link-delay-ms", type=numbers(float, 0, "0.2,1"), default=[0.2, 1.0], metavar="D[,D...]",
                    help="with --hosts: one-way delays of the hosts' links (a delay relay each way; default 0.2,1), "
                         "besides loopback without a relay")
     p.add_argument("--robots", type=at_least_one, help="with --hosts: robot count (default 10)")
@@ -410,7 +363,7 @@ def _parser_experiment(sub: Any) -> None:
     p.add_argument("--cluster", metavar="ADDRESS",
                    help="run the trials on the Dask cluster whose scheduler is at ADDRESS (tcp://HOST:PORT; its "
                         "workers run this swarm-sitl) instead of local worker processes; the same outputs")
-    p.add_argument("--cluster-timeout", type=_positive, default=30.0, metavar="SECONDS",
+    p.add_argument("--cluster-timeout", type=positive, default=30.0, metavar="SECONDS",
                    help="how long to wait for the cluster's scheduler and a first worker (default 30)")
     p.set_defaults(fn=cmd_experiment)
 

@@ -205,7 +205,7 @@ def cmd_fuzz(a: argparse.Namespace) -> int:
 
 
 def add_parser(sub: Any) -> None:
-    from bridge.tools.cli import at_least_one
+    from bridge.tools.argtypes import at_least_one
 
     p = sub.add_parser("fuzz", help="fuzz every parser a byte from outside reaches (atheris), each for a fixed budget; "
                                     "a table of inputs, coverage, crashes and hangs")
