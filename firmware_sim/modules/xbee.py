@@ -33,13 +33,27 @@ buffer (a received packet that does not fit is dropped whole), UART output paced
 byte), duplicate suppression by source and sequence number, power-up modem status (Series 1: 0x00 at once;
 Series 2: 0x02 after the scan-time join delay), and the eSwarBot RSSI PWM hack.
 
+Series 2 also answers what digi-xbee and XCTU send beyond data ([ZB]; Digi's C library's DIN clusters; digi-xbee
+1.5.0's own code for what it expects, e.g. that ``open()`` reads the role of a module without CE from a node
+descriptor request to itself, waiting for a 0x8B of status 0x00 or 0x23 and a 0x91 from cluster 0x8002):
+explicit addressing (0x11 out; 0x91 in when AO is 1 or 3, AO accepting 0, 1, 3), a ZDO request to itself
+(self-addressed 0x23, answered by its own ZDO), the ZDO server of ``zigbee`` for requests from the air, remote AT
+commands (0x17/0x97: option 0x02 applies, else the change is queued; status 4 when the request is not acknowledged
+after its three attempts or its answer does not come within a unicast timeout; to itself, status 4 at once;
+a broadcast one collects every answer), node discovery (ND with or without an NI, DN: every joined module in range
+of that NI answers after a uniform random wait within the asker's NT; answers after NT are ignored; no closing
+empty frame, as on ZB; an ND for an NI nobody has, or a DN, ends in ERROR after NT; NO 0x01 appends DD, 0x02 puts
+the asker's own record first; BH is the discovery's radius), and the 2x7x AT commands NT, NO, BH, DD (0x30000),
+EE (0 only: encryption is not modelled), %V (raw, 1200/1024 mV a count, of the 3.3 V rail), NC (12, assumed).
+CE, N?, TP (PRO only) and MP (end devices only) answer "invalid command", as on a 2x7x router.
+
 Not modelled, on purpose: ZigBee mesh routing (a Series 2 unicast reaches one hop: its addressee must hear it;
 route and address discovery, source routes and broadcast relaying are absent; the 16-bit address of a neighbour
 is learned from frames it sent), the coordinator (the network is taken as formed, with the extended PAN ID and
 channel given to the constructor), association/beacons and end devices on Series 1, encryption (EE = 0; the
 APS-encryption option is refused), sleep modes (SM accepts only 0), transparent mode and command mode (+++),
-remote AT (0x17), explicit addressing (0x11), node discovery (ND), I/O sampling, CTS/RTS flow control, and
-non-standard baud rates (BD 0..7 only), AP 0 (AP accepts 1 and 2). Malformed input never raises: it is counted
+Series 1 remote AT, explicit frames and ND, I/O sampling, CTS/RTS flow control, and non-standard baud rates
+(BD 0..7 only), AP 0 (AP accepts 1 and 2). Malformed input never raises: it is counted
 in ``counters`` and answered the way the real module does, which for framing errors is silence.
 
 Assumptions where the manuals are silent (change them here if a measurement says otherwise): the DO buffer and
@@ -53,10 +67,13 @@ application header; Series 2 ``psdu_len`` = MAC 11 + NWK 8 + IEEE source 8 (+ IE
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from firmware_sim.modules import zigbee as zb
 
 MS = 1_000_000  # ns
 START, ESC, XON, XOFF = 0x7E, 0x7D, 0x11, 0x13
@@ -108,6 +125,8 @@ COUNTER_KEYS = (
     "rx_frames", "rx_filtered", "rx_duplicates", "rx_delivered", "rx_buffer_drops", "rx_malformed",
     "bad_air_events", "stale_done",
     "resets",
+    # Series 2 beyond data: explicit addressing, the ZDO server, remote AT and node discovery
+    "zdo_requests", "zdo_answered", "remote_at_served", "remote_at_timeouts", "nd_answered", "ddo_malformed",
 )
 
 
@@ -168,6 +187,10 @@ class _TxJob:
     attempts: int = 0  # air attempts made (XBee-level / APS)
     copies_ok: int = 0
     attempt_t: int = 0
+    aps: tuple[int, int, int, int] = zb.DATA_APS  # Series 2: (profile, cluster, source endpoint, destination endpoint)
+    radius: int = 0  # Series 2 broadcast radius (0: the network's maximum hops)
+    kind: str = "host"  # whose frame: "host" (a transmit status answers it), "remote_at" (its request), "internal"
+    ctx: int = 0  # kind "remote_at": the request's transaction number
 
 
 @dataclass(frozen=True)
@@ -192,11 +215,19 @@ def _params(series: int) -> dict[str, _Param]:
     else:
         p |= {"MY": _Param(2, readonly=True), "ID": _Param(8, 0, 0xFFFFFFFFFFFFFFFF), "OP": _Param(8, readonly=True),
               "OI": _Param(2, readonly=True), "CH": _Param(1, readonly=True), "SC": _Param(2, 1, 0xFFFF),
-              "NH": _Param(1, 1, 0xFF), "AO": _Param(1, 0, 3), "NP": _Param(2, readonly=True)}
+              "NH": _Param(1, 1, 0xFF), "AO": _Param(1, 0, 3), "NP": _Param(2, readonly=True),
+              "NT": _Param(1, 0x20, 0xFF), "NO": _Param(1, 0, 3), "BH": _Param(1, 0, 0x1E),
+              "DD": _Param(4, 0, 0xFFFFFFFF), "EE": _Param(1, 0, 0), "%V": _Param(2, readonly=True),
+              "NC": _Param(1, readonly=True)}
     return p
 
 
 EXEC_COMMANDS = {1: frozenset(("AC", "WR", "FR")), 2: frozenset(("AC", "WR", "FR", "NR"))}
+DISCOVERY_COMMANDS = frozenset(("ND", "DN"))  # Series 2: answered as nodes reply, not at once
+AO_VALUES = (0, 1, 3)  # Series 2 AO: native (0x90), explicit (0x91), explicit with ZDO pass-through
+SUPPLY_MV = 3300  # %V: the eSwarBot's regulated 3.3 V rail (the module reads its own supply)
+ROUTER_CHILDREN = 12  # NC: end-device children a router can still take (none ever join here; the count is assumed)
+REMOTE_AT_FAILED = 0x04  # 0x97 status: the remote command could not be sent or was not answered
 
 
 def network_pan16(epid: int) -> int:
@@ -246,7 +277,7 @@ class XBeeModule:
             if not 0 <= pan_id <= 0xFFFF:
                 raise ValueError("Series 1 pan_id is 16-bit")
         else:
-            s |= {"SC": 0x1FFE, "NH": 0x1E, "AO": 0}
+            s |= {"SC": 0x1FFE, "NH": 0x1E, "AO": 0, "NT": 0x3C, "NO": 0, "BH": 0, "DD": 0x30000, "EE": 0}
             if not 0 <= pan_id < 1 << 64:
                 raise ValueError("Series 2 pan_id is the 64-bit extended PAN ID")
         self._set = s
@@ -301,6 +332,8 @@ class XBeeModule:
         if not self._booted:
             return None
         times = [t for t in (self._join_at, self._reset_at, self._retry_at, self._pwm_until) if t is not None]
+        if self._events:
+            times.append(self._events[0][0])
         if self._uart:
             s, data, bns = self._uart[0]
             times.append(s + len(data) * bns)  # the next frame is complete
@@ -363,6 +396,12 @@ class XBeeModule:
         self._ai = 0 if self.series == 1 else 0xFF
         self._nwk = 0xFFFE
         self._ea = self._ec = 0
+        self._events: list[tuple[int, int, str, object]] = []  # (t, order, kind, arg): Series 2's own timers
+        self._n_events = 0
+        self._tsn = int(self.rng.integers(0, 256))  # transaction numbers of ZDO, remote AT and ND requests
+        self._remote_at: dict[int, tuple[int, bytes, int, int]] = {}  # tsn -> (frame id, command, dest64, due)
+        self._nd: dict | None = None  # the node discovery (ND or DN) under way
+        self._heard: dict[int, tuple[int, int]] = {}  # ieee -> (nwk, last RSSI dBm): Mgmt_Lqi's neighbour table
 
     def _power_up(self, t: int, status: int) -> None:
         if self.series == 1:
@@ -391,13 +430,18 @@ class XBeeModule:
         while True:
             cands = [(tt, k) for k, tt in (("reset", self._reset_at), ("join", self._join_at),
                                           ("retry", self._retry_at), ("pwm", self._pwm_until)) if tt is not None]
+            if self._events:
+                cands.append((self._events[0][0], "~event"))  # after the module's own timers at the same time
             if not cands:
                 return
             tt, kind = min(cands)
             if tt > upto:
                 return
             self._t = max(self._t, tt)
-            if kind == "reset":
+            if kind == "~event":
+                _, _, what, arg = heapq.heappop(self._events)
+                self._on_event(tt, what, arg)
+            elif kind == "reset":
                 self._do_reset(tt)
             elif kind == "join":
                 self._join_at = None
@@ -519,8 +563,10 @@ class XBeeModule:
         ftype = data[0]
         if ftype in (0x08, 0x09):
             self._at_frame(t, data)
-        elif (self.series == 1 and ftype in (0x00, 0x01)) or (self.series == 2 and ftype == 0x10):
+        elif (self.series == 1 and ftype in (0x00, 0x01)) or (self.series == 2 and ftype in (0x10, 0x11)):
             self._tx_frame(t, data)
+        elif self.series == 2 and ftype == 0x17:
+            self._remote_at_frame(t, data)
         else:
             self.counters["unknown_frame_type"] += 1
 
@@ -534,6 +580,9 @@ class XBeeModule:
         c["at_commands"] += 1
         fid, raw_cmd, param = data[1], data[2:4], data[4:]
         cmd = raw_cmd.decode("latin-1").upper()
+        if self.series == 2 and cmd in DISCOVERY_COMMANDS:
+            self._discover(t, fid, raw_cmd, bytes(param))
+            return
         status, value, after = self._at(t, cmd, param, queue=data[0] == 0x09)
         if status:
             c["at_errors"] += 1
@@ -571,7 +620,7 @@ class XBeeModule:
             value: int | bytes = bytes(param).rstrip(b"\x00")
         else:
             value = int.from_bytes(param, "big")
-            if not spec.lo <= value <= spec.hi:
+            if not spec.lo <= value <= spec.hi or (cmd == "AO" and value not in AO_VALUES):
                 return AT_INVALID_PARAMETER, b"", None
         self._queued[cmd] = value
         if queue:
@@ -583,7 +632,7 @@ class XBeeModule:
             "SH": self.serial64 >> 32, "SL": self.serial64 & 0xFFFFFFFF, "VR": self.prof.vr, "HV": self.prof.hv,
             "AI": self._ai, "DB": self._db, "EA": self._ea, "EC": self._ec, "MY": self.addr16(),
             "OP": self.net_epid if self.joined else 0, "OI": network_pan16(self.net_epid) if self.joined else 0xFFFF,
-            "NP": self.prof.max_unicast,
+            "NP": self.prof.max_unicast, "%V": round(SUPPLY_MV * 1024 / 1200), "NC": ROUTER_CHILDREN,
         }
         if self.series == 2:
             live["CH"] = self.net_channel if self.joined else 0
@@ -622,7 +671,7 @@ class XBeeModule:
     def _tx_frame(self, t: int, data: bytes) -> None:
         c = self.counters
         ftype = data[0]
-        hdr = {0x00: 11, 0x01: 5, 0x10: 14}[ftype]
+        hdr = {0x00: 11, 0x01: 5, 0x10: 14, 0x11: 20}[ftype]
         if len(data) < hdr:
             c["malformed_frames"] += 1
             return
@@ -645,7 +694,11 @@ class XBeeModule:
             dst, addr = ("bcast", 0xFFFF) if bcast else ("16", dest16)
         else:
             dest64, dest16 = int.from_bytes(data[2:10], "big"), int.from_bytes(data[10:12], "big")
-            opts, payload = data[13], data[14:]
+            if ftype == 0x10:
+                aps, radius, opts, payload = zb.DATA_APS, data[12], data[13], data[14:]
+            else:  # 0x11: source and destination endpoints, cluster, profile, then radius and options
+                aps = (int.from_bytes(data[16:18], "big"), int.from_bytes(data[14:16], "big"), data[12], data[13])
+                radius, opts, payload = data[18], data[19], data[20:]
             bcast = dest64 == BROADCAST64 or dest16 in (0xFFFC, 0xFFFD, 0xFFFF)
             if bcast:
                 dst, addr = "bcast", 0xFFFF if dest16 not in (0xFFFC, 0xFFFD) else dest16
@@ -654,6 +707,8 @@ class XBeeModule:
             else:
                 dst, addr = "64", dest64
         job = _TxJob(fid, ftype, dst, addr, dest64, dest16, bytes(payload), opts, size)
+        if self.series == 2:
+            job.aps, job.radius = aps, radius
         limit = self.prof.max_broadcast if bcast else self.prof.max_unicast
         if len(payload) > limit:
             c["tx_too_large"] += 1
@@ -667,8 +722,11 @@ class XBeeModule:
             if opts & 0x20:
                 self._status(t, job, 0x2E)
                 return
-            if not bcast and dest64 == self.serial64:
-                self._status(t, job, 0x23)
+            if not bcast and self._is_me(dest64, dest16):
+                if job.aps[0] == zb.ZDO_PROFILE and job.aps[3] == zb.ZDO_EP:
+                    self._local_zdo(t, job)  # a ZDO request to itself: its own ZDO answers
+                else:
+                    self._status(t, job, 0x23)
                 return
         self._txq.append(job)
 
@@ -703,7 +761,7 @@ class XBeeModule:
             "handle": job.handle, "src64": self.serial64, "src16": src16, "dst": job.dst, "dst_addr": job.dst_addr,
             "pan_id": pan, "channel": ch, "ack": ack, "mac_retries": 3 if ack else 0, "psdu_len": psdu,
             "seq": job.seq, "payload": job.payload, "opts": job.opts,
-        })
+        } | ({"aps": list(job.aps)} if self.series == 2 else {}))
         self.counters["tx_air_frames"] += 1
 
     def _done(self, t: int, ev: dict) -> None:
@@ -740,8 +798,7 @@ class XBeeModule:
         elif status == "cca_fail":
             self._finish(t, job, 0x02)
         elif self._wants_ack(job) and job.attempts < 3:  # APS retries: three attempts, each with its timeout
-            wait = (50 * int(self._set["NH"]) + 100) * MS
-            self._retry_at = max(t, job.attempt_t + wait)
+            self._retry_at = max(t, job.attempt_t + self._unicast_timeout_ns())
         else:
             self._finish(t, job, 0x21)
 
@@ -749,8 +806,19 @@ class XBeeModule:
         self._inflight = None
         self._retry_at = None
         self.counters["tx_ok" if status == 0 else "tx_failed"] += 1
-        self._status(t, job, status)
+        self._report(t, job, status)
         self._pump()
+
+    def _report(self, t: int, job: _TxJob, status: int) -> None:
+        """A transmission ended: the host's gets its transmit status; a remote AT request that did not reach its
+        node answers its host with status 4; one that did waits for its answer; the module's own say nothing."""
+        if job.kind == "host":
+            self._status(t, job, status)
+        elif job.kind == "remote_at" and job.ctx in self._remote_at:
+            if status != 0 and job.dst != "bcast":
+                self._remote_at_failed(t, job.ctx)
+            else:
+                self._at_event(t + self._unicast_timeout_ns(), "remote_at_due", job.ctx)
 
     def _status(self, t: int, job: _TxJob, status: int) -> None:
         if not job.frame_id:
@@ -760,6 +828,8 @@ class XBeeModule:
             return
         if job.dst == "bcast":
             addr16, disc = 0xFFFE, 0x00
+        elif status in (0x00, 0x23) and self._is_me(job.dest64, job.dest16):
+            addr16, disc = self._nwk, 0x00
         elif status == 0:
             known = self._addr_table.get(job.dest64)
             addr16 = known if known is not None else (job.dest16 if job.dest16 != 0xFFFE else 0xFFFE)
@@ -775,7 +845,191 @@ class XBeeModule:
         self._txq.clear()
         for j in jobs:
             self.counters["tx_failed"] += 1
-            self._status(t, j, status)
+            self._report(t, j, status)
+
+    # -- Series 2: the ZDO server, remote AT commands and node discovery ------------------------------------------
+    def _is_me(self, dest64: int, dest16: int) -> bool:
+        return dest64 == self.serial64 or (dest64 == 0xFFFFFFFFFFFFFFFF and dest16 == self._nwk)
+
+    def _me(self) -> zb.NodeInfo:
+        return zb.NodeInfo(self.serial64, self._nwk, bytes(self._set["NI"]))
+
+    def _unicast_timeout_ns(self) -> int:
+        """[ZB]: a unicast's timeout, (50 x NH + 100) ms an attempt."""
+        return (50 * int(self._set["NH"]) + 100) * MS
+
+    def _next_tsn(self) -> int:
+        self._tsn = (self._tsn + 1) & 0xFF
+        return self._tsn
+
+    def _at_event(self, t: int, what: str, arg: object) -> None:
+        self._n_events += 1
+        heapq.heappush(self._events, (t, self._n_events, what, arg))
+
+    def _on_event(self, t: int, what: str, arg: object) -> None:
+        if what == "remote_at_due":
+            if arg in self._remote_at:
+                self.counters["remote_at_timeouts"] += 1
+                self._remote_at_failed(t, int(arg))  # type: ignore[arg-type]
+        elif what == "nd_reply":
+            src64, tsn, rsp = arg  # type: ignore[misc]
+            if self.joined:
+                self.counters["nd_answered"] += 1
+                dd = int(self._set["DD"]) if int(self._set["NO"]) & 0x01 else None
+                self._internal_job(src64, bytes((tsn,)) + zb.nd_record(self._me(), dd),
+                                   (zb.DIN_PROFILE, rsp, zb.DDO_EP, zb.DDO_EP))
+        elif what == "nd_end":
+            nd = self._nd
+            if nd is not None and nd["tsn"] == arg:
+                self._nd = None
+                if nd["cmd"] == b"DN" or (nd["ni"] and not nd["found"]):  # nobody of that NI answered within NT
+                    self._emit(t, bytes((0x88, nd["fid"])) + nd["cmd"] + bytes((AT_ERROR,)))
+
+    def _internal_job(self, dest64: int, payload: bytes, aps: tuple[int, int, int, int], kind: str = "internal",
+                      ctx: int = 0, opts: int = 0, radius: int = 0) -> _TxJob:
+        """Queue a frame of the module's own (a ZDO or DDO answer, a discovery): it holds no serial buffer space."""
+        bcast = dest64 == BROADCAST64
+        dst, addr = ("bcast", 0xFFFF) if bcast else ("64", dest64)
+        job = _TxJob(0, 0x11, dst, addr, dest64, 0xFFFE, payload, opts, 0, aps=aps, radius=radius, kind=kind,
+                     ctx=ctx)
+        self._txq.append(job)
+        return job
+
+    def _neighbours(self) -> list[tuple[int, int, int]]:
+        """The nodes heard, for Mgmt_Lqi: (ieee, nwk, LQI); LQI maps sensitivity..-40 dBm onto 0..255 (assumed)."""
+        lo = self.prof.sensitivity_dbm
+        return [(ieee, nwk, round(min(max((rssi - lo) / (-40.0 - lo), 0.0), 1.0) * 255))
+                for ieee, (nwk, rssi) in sorted(self._heard.items())]
+
+    def _local_zdo(self, t: int, job: _TxJob) -> None:
+        """A ZDO request the host addressed to this module: "self-addressed" (0x23), and answered by its own ZDO,
+        whose answer reaches the host as 0x91 when AO asks for explicit output (what digi-xbee's role read needs)."""
+        self.counters["zdo_requests"] += 1
+        self._status(t, job, 0x23)
+        ans = zb.zdo_answer(job.aps[1], job.payload, self._me(), self._neighbours())
+        if ans is not None:
+            self.counters["zdo_answered"] += 1
+            if int(self._set["AO"]) & 1:
+                self._deliver(t, self.serial64, self._nwk, (zb.ZDO_PROFILE, ans[0], zb.ZDO_EP, zb.ZDO_EP), ans[1],
+                              0x01)
+
+    def _zdo_rx(self, t: int, src64: int, src16: int, aps: tuple, payload: bytes, opts: int) -> None:
+        """A ZDO frame from the air: a request is answered (unless AO 3 hands the ones the stack does not serve to the
+        host); a response goes to the host when AO asks for explicit output, else nowhere."""
+        cluster = aps[1]
+        if cluster >= 0x8000:
+            if int(self._set["AO"]) & 1:
+                self._deliver(t, src64, src16, aps, payload, opts)
+            return
+        self.counters["zdo_requests"] += 1
+        ans = zb.zdo_answer(cluster, payload, self._me(), self._neighbours())
+        if ans is None:
+            return
+        if int(self._set["AO"]) == 3 and (cluster in zb.APPLICATION_ZDO or ans[1][1:2] == bytes((
+                zb.ZDP_NOT_SUPPORTED,))):
+            self._deliver(t, src64, src16, aps, payload, opts)  # pass-through: the host answers it, if it will
+            return
+        self.counters["zdo_answered"] += 1
+        self._internal_job(src64, ans[1], (zb.ZDO_PROFILE, ans[0], zb.ZDO_EP, zb.ZDO_EP))
+
+    def _ddo_rx(self, t: int, src64: int, src16: int, cluster: int, payload: bytes, rssi: int) -> None:
+        """A frame to the Digi device endpoint: a remote AT command or its answer, a node discovery or its answer."""
+        ddo = (zb.DIN_PROFILE, 0, zb.DDO_EP, zb.DDO_EP)
+        if cluster == zb.DDO_REMOTE_AT_REQ and (req := zb.parse_remote_at_req(payload)) is not None:
+            tsn, opts, raw_cmd, param = req
+            cmd = raw_cmd.decode("latin-1").upper()
+            if cmd in DISCOVERY_COMMANDS:
+                status, value, after = AT_INVALID_COMMAND, b"", None
+            else:
+                status, value, after = self._at(t, cmd, param, queue=not opts & 0x02)
+            self.counters["remote_at_served"] += 1
+            self._internal_job(src64, zb.ddo_remote_at_rsp(tsn, raw_cmd, status, value),
+                               (ddo[0], zb.DDO_REMOTE_AT_RSP, ddo[2], ddo[3]))
+            if after is not None:
+                after()
+        elif cluster == zb.DDO_REMOTE_AT_RSP and (rsp := zb.parse_remote_at_rsp(payload)) is not None:
+            tsn, raw_cmd, status, value = rsp
+            pending = self._remote_at.get(tsn)
+            if pending is None or pending[1] != bytes(raw_cmd).upper():
+                return  # late, or not ours
+            fid, _, dest64, _ = pending
+            if dest64 != BROADCAST64:  # a broadcast request collects every answer until its time is up
+                del self._remote_at[tsn]
+            if fid:
+                self._emit(t, bytes((0x97, fid)) + src64.to_bytes(8, "big") + src16.to_bytes(2, "big") + raw_cmd
+                           + bytes((status,)) + value)
+        elif cluster in (zb.DDO_ND_REQ, zb.DDO_DN_REQ) and (req := zb.parse_nd_req(payload)) is not None:
+            tsn, nt, ni = req
+            if not ni or ni == bytes(self._set["NI"]):  # each waits a random time within NT (uniform: assumed)
+                window = max(int(nt), 1) * 100 * MS
+                rsp = zb.DDO_ND_RSP if cluster == zb.DDO_ND_REQ else zb.DDO_DN_RSP
+                self._at_event(t + int(self.rng.integers(0, window)), "nd_reply", (src64, tsn, rsp))
+        elif cluster in (zb.DDO_ND_RSP, zb.DDO_DN_RSP) and len(payload) > 11:
+            nd = self._nd
+            if nd is None or payload[0] != nd["tsn"]:
+                return
+            record = payload[1:]
+            nd["found"] = True
+            if nd["cmd"] == b"DN":
+                self._nd = None
+                self._emit(t, bytes((0x88, nd["fid"])) + b"DN" + bytes((AT_OK,)) + record[:10])
+            else:
+                self._emit(t, bytes((0x88, nd["fid"])) + b"ND" + bytes((AT_OK,)) + record)
+        else:
+            self.counters["ddo_malformed"] += 1
+
+    def _remote_at_frame(self, t: int, data: bytes) -> None:
+        """0x17 Remote AT Command Request: sent on the Digi device endpoint; 0x97 answers with the remote's reply,
+        or with status 4 when the request was not delivered or not answered in time."""
+        c = self.counters
+        if len(data) < 15:
+            c["malformed_frames"] += 1
+            return
+        c["frames_handled"] += 1
+        fid, dest64, dest16, opts = data[1], int.from_bytes(data[2:10], "big"), int.from_bytes(data[10:12], "big"), \
+            data[12]
+        raw_cmd, param = bytes(data[13:15]).upper(), bytes(data[15:])
+        tsn = self._next_tsn()
+        self._remote_at[tsn] = (fid, raw_cmd, dest64, 0)
+        if not self.joined or self._is_me(dest64, dest16):
+            self._remote_at_failed(t, tsn)
+            return
+        if dest64 == 0xFFFFFFFFFFFFFFFF and dest16 < 0xFFF8:
+            dest64 = next((a for a, (n16, _) in self._heard.items() if n16 == dest16), dest64)
+        self._internal_job(dest64, zb.ddo_remote_at_req(tsn, opts, raw_cmd, param),
+                           (zb.DIN_PROFILE, zb.DDO_REMOTE_AT_REQ, zb.DDO_EP, zb.DDO_EP), kind="remote_at", ctx=tsn,
+                           opts=opts & 0x01)
+
+    def _remote_at_failed(self, t: int, tsn: int) -> None:
+        fid, raw_cmd, dest64, _ = self._remote_at.pop(tsn)
+        if fid and dest64 != BROADCAST64:
+            self._emit(t, bytes((0x97, fid)) + dest64.to_bytes(8, "big") + b"\xff\xfe" + raw_cmd
+                       + bytes((REMOTE_AT_FAILED,)))
+
+    def _discover(self, t: int, fid: int, raw_cmd: bytes, param: bytes) -> None:
+        """ND (every node, or the one of NI ``param``) and DN (the one of NI ``param``, its addresses): a broadcast to
+        the Digi device endpoints; each node answers after a random wait within NT, and each answer that comes in
+        time reaches the host as an AT response. DN with no NI, or ND/DN when not joined, fail at once."""
+        cmd = raw_cmd.upper()
+        self.counters["at_commands"] += 1
+        self.counters["frames_handled"] += 1
+        ni = param.rstrip(b"\x00")
+        if not self.joined or (cmd == b"DN" and not ni) or not _valid_ni(ni):
+            self.counters["at_errors"] += 1
+            if fid:
+                self._emit(t, bytes((0x88, fid)) + raw_cmd + bytes((AT_ERROR,)))
+            return
+        tsn = self._next_tsn()
+        nt = int(self._set["NT"])
+        self._nd = {"tsn": tsn, "fid": fid, "cmd": cmd, "ni": ni, "found": False}
+        if cmd == b"ND" and int(self._set["NO"]) & 0x02 and (not ni or ni == bytes(self._set["NI"])):
+            dd = int(self._set["DD"]) if int(self._set["NO"]) & 0x01 else None
+            self._emit(t, bytes((0x88, fid)) + b"ND" + bytes((AT_OK,)) + zb.nd_record(self._me(), dd))
+            self._nd["found"] = True
+        req = zb.DDO_ND_REQ if cmd == b"ND" else zb.DDO_DN_REQ
+        self._internal_job(BROADCAST64, zb.ddo_nd_req(tsn, nt, ni), (zb.DIN_PROFILE, req, zb.DDO_EP, zb.DDO_EP),
+                           radius=int(self._set["BH"]))
+        self._at_event(t + nt * 100 * MS, "nd_end", tsn)
 
     # -- receive ---------------------------------------------------------------------------------------------------
     def _air_event(self, t: int, ev: object) -> None:
@@ -813,8 +1067,28 @@ class XBeeModule:
             else:
                 data = bytes((0x80,)) + src64.to_bytes(8, "big") + bytes((self._db, opts)) + payload
         else:
+            self._heard[src64] = (src16, rssi)
             opts = 0x02 if bcast else (0x01 if fr["ack"] else 0x00)
-            data = bytes((0x90,)) + src64.to_bytes(8, "big") + src16.to_bytes(2, "big") + bytes((opts,)) + payload
+            aps = tuple(fr.get("aps", zb.DATA_APS))
+            if aps[0] == zb.ZDO_PROFILE and aps[3] == zb.ZDO_EP:
+                self._zdo_rx(t, src64, src16, aps, payload, opts)
+                return
+            if aps[0] == zb.DIN_PROFILE and aps[3] == zb.DDO_EP:
+                self._ddo_rx(t, src64, src16, aps[1], payload, rssi)
+                return
+            self._deliver(t, src64, src16, aps, payload, opts)
+            return
+        if self._emit(t, data, rf_data=True):
+            self.counters["rx_delivered"] += 1
+
+    def _deliver(self, t: int, src64: int, src16: int, aps: tuple, payload: bytes, opts: int) -> None:
+        """Series 2: received data to the host, as 0x91 Explicit RX Indicator when AO asks for it, else 0x90."""
+        head = src64.to_bytes(8, "big") + src16.to_bytes(2, "big")
+        if int(self._set["AO"]) & 1:
+            data = bytes((0x91,)) + head + bytes((aps[2], aps[3])) + aps[1].to_bytes(2, "big") \
+                + aps[0].to_bytes(2, "big") + bytes((opts,)) + payload
+        else:
+            data = bytes((0x90,)) + head + bytes((opts,)) + payload
         if self._emit(t, data, rf_data=True):
             self.counters["rx_delivered"] += 1
 
@@ -855,6 +1129,7 @@ def _valid_ni(b: bytes) -> bool:
     return len(b) <= 20 and all(0x20 <= x < 0x7F for x in b)
 
 
+
 def valid_air_frame(fr: object) -> bool:
     """The shape of an air frame as modules submit and receive it (anything else is dropped and counted)."""
     if not isinstance(fr, dict):
@@ -872,4 +1147,5 @@ def valid_air_frame(fr: object) -> bool:
         and 11 <= fr["channel"] <= 26
         and 1 <= fr["psdu_len"] <= 127
         and 0 <= fr["mac_retries"] <= 7
+        and ("aps" not in fr or zb.valid_aps(fr["aps"]))
     )

@@ -17,7 +17,7 @@ from digi.xbee.devices import XBeeDevice
 from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
 from digi.xbee.models.hw import HardwareVersion
 from digi.xbee.models.mode import OperatingMode
-from digi.xbee.models.protocol import XBeeProtocol
+from digi.xbee.models.protocol import Role, XBeeProtocol
 from digi.xbee.models.status import ATCommandStatus, ModemStatus, TransmitStatus
 from digi.xbee.packets.base import XBeeAPIPacket
 from digi.xbee.packets.common import (
@@ -320,14 +320,15 @@ class LoopIface(XBeeCommunicationInterface):
 
 
 @pytest.mark.parametrize(("series", "api_mode"), [(1, 1), (1, 2), (2, 1)])
-def test_digi_xbee_device_open_identifies_module(series, api_mode, monkeypatch):
-    from digi.xbee.models.zdo import NodeDescriptorReader
-
-    # A Zigbee module without CE: digi-xbee asks its node descriptor (ZDO) for its role, which the emulation does not
-    # answer; rather than wait out that request's timeout, it hears "no descriptor" at once (the role stays unknown)
-    monkeypatch.setattr(NodeDescriptorReader, "get_node_descriptor", lambda self: None)
+def test_digi_xbee_device_open_identifies_module(series, api_mode):
+    # Series 2 (2x7x) has no CE: digi-xbee reads its role from the module's own ZDO (a node descriptor request to
+    # itself, answered as 0x91 with AO set to 1 for the while)
     m = make(series=series, node_id="eSwarBot-3", api_mode=api_mode, baud=115200, my16=0x0033)
-    dev = XBeeDevice(comm_iface=LoopIface(m))
+    iface = LoopIface(m)
+    iface.t = 2000 * MS  # opened once the module has joined (its scan takes about 1.5 s)
+    m.step(0, b"", [])  # power-up
+    m.step(iface.t, b"", [])
+    dev = XBeeDevice(comm_iface=iface)
     dev.set_sync_ops_timeout(60)  # each operation returns on its answer: the bound only catches a hang
     dev.open()
     try:
@@ -339,6 +340,8 @@ def test_digi_xbee_device_open_identifies_module(series, api_mode, monkeypatch):
         if series == 1:
             assert dev.get_16bit_addr() == XBee16BitAddress.from_hex_string("0033")
             assert dev.get_power_level().code == 4
+        else:
+            assert dev.get_role() == Role.ROUTER
     finally:
         dev.close()
 
