@@ -320,6 +320,11 @@ class XBeeCfg(_Model):
     power_level: int = Field(4, ge=0, le=4, description="PL: transmit power level, 4 is the highest")
     pan_id: int = Field(0x3332, ge=0, le=0xFFFF, description="ID: PAN id; modules hear only their own PAN")
     channel: int = Field(0x0C, ge=0x0B, le=0x1A, description="CH: 802.15.4 channel 11-26")
+    routing: Literal["mesh", "one_hop"] = Field("one_hop", description="Series 2: 'mesh', the ZigBee firmware's "
+                                                   "own routing (address and route discovery, relayed broadcasts, "
+                                                   "the broadcast table's limits); 'one_hop', a unicast reaches "
+                                                   "only a module that hears it and nobody relays. Series 1 is "
+                                                   "always one hop")
     pty: str | None = Field(None, description="expose this XBee's UART on a pseudo-terminal, linked at this path "
                                               "(relative to the session's output directory; '{id}' is replaced by "
                                               "the robot id); the robot's own logic then cannot open sitl://xbee")

@@ -216,7 +216,7 @@ class FirmwareHost:
                 self.xbees[r] = XBeeModule(
                     series=x["series"], serial64=xbee_serial64(r), node_id=rp.name, rng=stream(seed, "xbee", r),
                     api_mode=x["api_mode"], baud=x["baud"], pan_id=x["pan_id"], channel=x["channel"],
-                    power_level=x["power_level"])
+                    power_level=x["power_level"], routing=x.get("routing", "one_hop"))
                 if x.get("pty"):
                     self.ptys[r] = PtyLink(x["pty"])
                 if rp.gateway is not None:  # its relay's driver (digi-xbee) only in a process that has one

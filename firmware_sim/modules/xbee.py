@@ -47,12 +47,12 @@ the asker's own record first; BH is the discovery's radius), and the 2x7x AT com
 EE (0 only: encryption is not modelled), %V (raw, 1200/1024 mV a count, of the 3.3 V rail), NC (12, assumed).
 CE, N?, TP (PRO only) and MP (end devices only) answer "invalid command", as on a 2x7x router.
 
-Not modelled, on purpose: ZigBee mesh routing (a Series 2 unicast reaches one hop: its addressee must hear it;
-route and address discovery, source routes and broadcast relaying are absent; the 16-bit address of a neighbour
-is learned from frames it sent), the coordinator (the network is taken as formed, with the extended PAN ID and
-channel given to the constructor), association/beacons and end devices on Series 1, encryption (EE = 0; the
-APS-encryption option is refused), sleep modes (SM accepts only 0), transparent mode and command mode (+++),
-Series 1 remote AT, explicit frames and ND, I/O sampling, CTS/RTS flow control, and non-standard baud rates
+ZigBee mesh routing is ``zigbee_nwk`` (``routing="mesh"``); with ``routing="one_hop"`` (the default) a Series 2
+unicast reaches one hop (its addressee must hear it; the 16-bit address of a neighbour is learned from frames it
+sent) and nobody relays. Not modelled, on purpose: the coordinator (the network is taken as formed, with the
+extended PAN ID and channel given to the constructor), association/beacons and end devices on Series 1, encryption
+(EE = 0; the APS-encryption option is refused), sleep modes (SM accepts only 0), transparent mode and command mode
+(+++), Series 1 remote AT, explicit frames and ND, I/O sampling, CTS/RTS flow control, and non-standard baud rates
 (BD 0..7 only), AP 0 (AP accepts 1 and 2). Malformed input never raises: it is counted
 in ``counters`` and answered the way the real module does, which for framing errors is silence.
 
@@ -74,6 +74,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from firmware_sim.modules import zigbee as zb
+from firmware_sim.modules.zigbee_nwk import STAT_KEYS as NWK_STAT_KEYS
+from firmware_sim.modules.zigbee_nwk import MacFrame, Nwk, valid_nwk
 
 MS = 1_000_000  # ns
 START, ESC, XON, XOFF = 0x7E, 0x7D, 0x11, 0x13
@@ -127,6 +129,8 @@ COUNTER_KEYS = (
     "resets",
     # Series 2 beyond data: explicit addressing, the ZDO server, remote AT and node discovery
     "zdo_requests", "zdo_answered", "remote_at_served", "remote_at_timeouts", "nd_answered", "ddo_malformed",
+    # Series 2 mesh routing (zigbee_nwk): relays, route and address discoveries, the broadcast table
+    *(f"nwk_{k}" for k in NWK_STAT_KEYS),
 )
 
 
@@ -191,6 +195,8 @@ class _TxJob:
     radius: int = 0  # Series 2 broadcast radius (0: the network's maximum hops)
     kind: str = "host"  # whose frame: "host" (a transmit status answers it), "remote_at" (its request), "internal"
     ctx: int = 0  # kind "remote_at": the request's transaction number
+    disc: int = 0  # mesh: the transmit status's discovery status (0x01 address, 0x02 route)
+    dest16_found: int | None = None  # mesh: the destination's network address, once delivered
 
 
 @dataclass(frozen=True)
@@ -245,7 +251,7 @@ class XBeeModule:
 
     def __init__(self, *, series: int, serial64: int, node_id: str, rng: np.random.Generator, api_mode: int = 1,
                  baud: int = 9600, my16: int | None = None, pan_id: int = 0x3332, channel: int = 0x0C,
-                 power_level: int = 4) -> None:
+                 power_level: int = 4, routing: str = "one_hop") -> None:
         if series not in (1, 2):
             raise ValueError(f"series must be 1 or 2, got {series}")
         if api_mode not in (1, 2):
@@ -260,6 +266,9 @@ class XBeeModule:
             raise ValueError("channel must be 0x0B..0x1A and power_level 0..4")
         if my16 is not None and not 0 <= my16 <= 0xFFFF:
             raise ValueError("my16 out of range")
+        if routing not in ("mesh", "one_hop"):
+            raise ValueError(f"routing must be 'mesh' or 'one_hop', got {routing!r}")
+        self.mesh = series == 2 and routing == "mesh"  # Series 1 (802.15.4) is always one hop
         self.prof = S1 if series == 1 else S2
         self.series = series
         self.serial64 = serial64
@@ -402,6 +411,7 @@ class XBeeModule:
         self._remote_at: dict[int, tuple[int, bytes, int, int]] = {}  # tsn -> (frame id, command, dest64, due)
         self._nd: dict | None = None  # the node discovery (ND or DN) under way
         self._heard: dict[int, tuple[int, int]] = {}  # ieee -> (nwk, last RSSI dBm): Mgmt_Lqi's neighbour table
+        self.nwk: Nwk | None = Nwk(self) if self.mesh else None
 
     def _power_up(self, t: int, status: int) -> None:
         if self.series == 1:
@@ -731,7 +741,18 @@ class XBeeModule:
         self._txq.append(job)
 
     def _pump(self) -> None:
-        """Start the next queued transmission when the radio is free (one at a time)."""
+        """Start the next queued transmission when the radio is free (one at a time). With mesh routing a host's
+        transmission is one at a time (it may wait seconds for a route), the module's own go at once."""
+        if self.nwk is not None:
+            if self._reset_at is not None:
+                return
+            for job in [j for j in self._txq if j.kind != "host"]:
+                self._txq.remove(job)
+                self.nwk.start(self._t, job)
+            if self._inflight is None and self._txq:
+                self._inflight = job = self._txq.popleft()
+                self.nwk.start(self._t, job)
+            return
         if self._inflight is None and self._txq and self._reset_at is None:
             job = self._txq.popleft()
             self._seq = (self._seq + 1) & 0xFF
@@ -770,6 +791,12 @@ class XBeeModule:
         if status not in ("ok", "no_ack", "cca_fail") or not isinstance(handle, int):
             self.counters["bad_air_events"] += 1
             return
+        if self.nwk is not None:
+            if status == "cca_fail":
+                self._ec = min(self._ec + 1, 0xFFFF)
+            if not self.nwk.mac_done(t, handle, status):
+                self.counters["stale_done"] += 1
+            return
         if job is None or handle != job.handle:
             self.counters["stale_done"] += 1
             return
@@ -803,6 +830,10 @@ class XBeeModule:
             self._finish(t, job, 0x21)
 
     def _finish(self, t: int, job: _TxJob, status: int) -> None:
+        if self.nwk is not None and job is not self._inflight:  # one of the module's own, beside the host's
+            self.counters["tx_ok" if status == 0 else "tx_failed"] += 1
+            self._report(t, job, status)
+            return
         self._inflight = None
         self._retry_at = None
         self.counters["tx_ok" if status == 0 else "tx_failed"] += 1
@@ -828,6 +859,9 @@ class XBeeModule:
             return
         if job.dst == "bcast":
             addr16, disc = 0xFFFE, 0x00
+        elif self.nwk is not None and status not in (0x22, 0x23, 0x2E, 0x74):
+            addr16 = job.dest16_found if status == 0 and job.dest16_found is not None else 0xFFFD
+            disc = job.disc
         elif status in (0x00, 0x23) and self._is_me(job.dest64, job.dest16):
             addr16, disc = self._nwk, 0x00
         elif status == 0:
@@ -841,6 +875,9 @@ class XBeeModule:
 
     def _fail_pending(self, t: int, status: int) -> None:
         jobs = ([self._inflight] if self._inflight else []) + list(self._txq)
+        if self.nwk is not None:
+            jobs += [tx.job for tx in self.nwk.txs.values() if tx.job not in jobs]
+            self.nwk.reset()
         self._inflight, self._retry_at = None, None
         self._txq.clear()
         for j in jobs:
@@ -848,6 +885,30 @@ class XBeeModule:
             self._report(t, j, status)
 
     # -- Series 2: the ZDO server, remote AT commands and node discovery ------------------------------------------
+    def mac_send(self, t: int, f: MacFrame) -> int:
+        """Put one of the network layer's frames on the air; its handle (the medium's ``done`` names it)."""
+        self._handle += 1
+        self._seq = (self._seq + 1) & 0xFF
+        bcast = f.dst16 is None
+        # MAC 11 + NWK 8 + IEEE source 8 (+ IEEE destination 8 for unicast) + APS 8 (not on routing commands)
+        psdu = 27 + (0 if bcast else 8) + (8 if f.nwk[0] == 0 else 0) + len(f.payload)
+        self._out.air_tx.append({
+            "handle": self._handle, "src64": self.serial64, "src16": self._nwk, "dst": "bcast" if bcast else "16",
+            "dst_addr": 0xFFFF if bcast else f.dst16, "pan_id": network_pan16(self.net_epid),
+            "channel": self.net_channel, "ack": not bcast, "mac_retries": 0 if bcast else 3,
+            "psdu_len": min(psdu, 127), "seq": self._seq, "payload": f.payload, "opts": 0, "aps": list(f.aps),
+            "nwk": list(f.nwk),
+        })
+        self.counters["tx_air_frames"] += 1
+        return self._handle
+
+    def _zdo_nwk_addr_req(self, t: int, ieee: int) -> None:
+        """Address discovery: a NWK_addr_req for ``ieee`` to every node whose receiver is on (0xFFFD)."""
+        body = bytes((self._next_tsn(),)) + ieee.to_bytes(8, "little") + b"\x00\x00"
+        if self.nwk is not None:
+            self.nwk.broadcast(t, (zb.ZDO_PROFILE, zb.NWK_ADDR_REQ, zb.ZDO_EP, zb.ZDO_EP), body,
+                               self.nwk.radius(0), 0xFFFD)
+
     def _is_me(self, dest64: int, dest16: int) -> bool:
         return dest64 == self.serial64 or (dest64 == 0xFFFFFFFFFFFFFFFF and dest16 == self._nwk)
 
@@ -867,7 +928,22 @@ class XBeeModule:
         heapq.heappush(self._events, (t, self._n_events, what, arg))
 
     def _on_event(self, t: int, what: str, arg: object) -> None:
-        if what == "remote_at_due":
+        if what.startswith("nwk_"):
+            if self.nwk is None:
+                return
+            if what == "nwk_send":
+                self.nwk._send(t, arg)  # type: ignore[arg-type]
+            elif what == "nwk_held_due":
+                self.nwk.held_timer(t, arg)  # type: ignore[arg-type]
+            elif what == "nwk_rrep":
+                self.nwk.rrep_timer(t, arg)  # type: ignore[arg-type]
+            elif what == "nwk_rreq":
+                self.nwk.rreq_timer(t, arg)  # type: ignore[arg-type]
+            elif what == "nwk_bcast":
+                self.nwk.bcast_timer(t, arg)  # type: ignore[arg-type]
+            else:
+                self.nwk.on_timer(t, what, arg)  # type: ignore[arg-type]
+        elif what == "remote_at_due":
             if arg in self._remote_at:
                 self.counters["remote_at_timeouts"] += 1
                 self._remote_at_failed(t, int(arg))  # type: ignore[arg-type]
@@ -918,6 +994,10 @@ class XBeeModule:
         host); a response goes to the host when AO asks for explicit output, else nowhere."""
         cluster = aps[1]
         if cluster >= 0x8000:
+            if (self.nwk is not None and cluster == (zb.NWK_ADDR_REQ | 0x8000) and len(payload) >= 12
+                    and payload[1] == zb.ZDP_SUCCESS):
+                self.nwk.learned_address(t, int.from_bytes(payload[2:10], "little"),
+                                         int.from_bytes(payload[10:12], "little"))
             if int(self._set["AO"]) & 1:
                 self._deliver(t, src64, src16, aps, payload, opts)
             return
@@ -1069,6 +1149,12 @@ class XBeeModule:
         else:
             self._heard[src64] = (src16, rssi)
             opts = 0x02 if bcast else (0x01 if fr["ack"] else 0x00)
+            if self.nwk is not None:
+                up = self.nwk.on_rx(t, fr, rssi)
+                if up is None:
+                    return
+                src64, src16, bcast = up
+                opts = 0x02 if bcast else 0x01
             aps = tuple(fr.get("aps", zb.DATA_APS))
             if aps[0] == zb.ZDO_PROFILE and aps[3] == zb.ZDO_EP:
                 self._zdo_rx(t, src64, src16, aps, payload, opts)
@@ -1148,4 +1234,5 @@ def valid_air_frame(fr: object) -> bool:
         and 1 <= fr["psdu_len"] <= 127
         and 0 <= fr["mac_retries"] <= 7
         and ("aps" not in fr or zb.valid_aps(fr["aps"]))
+        and ("nwk" not in fr or valid_nwk(fr["nwk"]))
     )

@@ -87,7 +87,7 @@ class WorldIface(XBeeCommunicationInterface):
 
 def modules(n: int, *, hear=None) -> tuple[World, list[ZigBeeDevice]]:
     mods = [XBeeModule(series=2, serial64=BASE + i, node_id=NAMES[i], rng=np.random.default_rng(10 + i),
-                       baud=115200, my16=0x1000 + i) for i in range(n)]
+                       baud=115200, my16=0x1000 + i, routing="mesh") for i in range(n)]
     world = World(mods, baud=115200, link=hear, limit_s=1e6)
     world.run_until(2 * NS)  # every module has joined (scan time: about 1.5 s)
     devs = []

@@ -452,7 +452,7 @@ def joined_pair(**kw):
 
 
 def test_series2_unicast_and_broadcast_end_to_end():
-    _, b, rig = joined_pair()
+    _, b, rig = joined_pair()  # one hop: the frames on the air
     rig.send(0, TransmitPacket(1, XBee64BitAddress(B64.to_bytes(8, "big")), XBee16BitAddress.from_hex_string("FFFE"),
                                0, 0, rf_data=bytearray(b"uni")).output())
     rig.send(0, TransmitPacket(2, BCAST64, XBee16BitAddress.from_hex_string("FFFE"), 0, 0,

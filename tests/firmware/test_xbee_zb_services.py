@@ -63,8 +63,9 @@ def test_supply_voltage_dd_and_discovery_defaults() -> None:
     assert ask("DD") == bytes((0, 3, 0, 0)) and ask("NT") == b"\x3c" and ask("NO") == ask("BH") == b"\x00"
 
 
-def test_nd_collects_every_answer_within_nt_and_the_local_record_first_with_no_2() -> None:
-    rig = trio()
+@pytest.mark.parametrize("routing", ["one_hop", "mesh"])
+def test_nd_collects_every_answer_within_nt_and_the_local_record_first_with_no_2(routing: str) -> None:
+    rig = trio(routing=routing)
     at(rig, 0, "NT", b"\x20")
     at(rig, 0, "NO", b"\x03")  # local record first, DD appended (to the local record: NO is each module's own)
     rig.run(rig.t + 50 * MS)
@@ -85,8 +86,9 @@ def test_nd_collects_every_answer_within_nt_and_the_local_record_first_with_no_2
     assert rig.take(0) == []
 
 
-def test_nd_of_one_name_and_dn() -> None:
-    rig = trio()
+@pytest.mark.parametrize("routing", ["one_hop", "mesh"])
+def test_nd_of_one_name_and_dn(routing: str) -> None:
+    rig = trio(routing=routing)
     at(rig, 0, "NT", b"\x20")
     rig.run(rig.t + 50 * MS)
     rig.take(0)
@@ -113,8 +115,9 @@ def test_nd_of_one_name_and_dn() -> None:
     assert p.status == ATCommandStatus.ERROR
 
 
-def test_remote_at_applies_or_queues_and_fails_with_status_4() -> None:
-    a, b, rig = joined_pair(baud=115200)
+@pytest.mark.parametrize("routing", ["one_hop", "mesh"])
+def test_remote_at_applies_or_queues_and_fails_with_status_4(routing: str) -> None:
+    a, b, rig = joined_pair(baud=115200, routing=routing)
     rig.send(0, RemoteATCommandPacket(5, addr(B64), FFFE, 0x00, "NI", bytearray(b"queued")).output())
     rig.run(rig.t + 50 * MS)
     (p,) = rig.take(0)
@@ -125,11 +128,15 @@ def test_remote_at_applies_or_queues_and_fails_with_status_4() -> None:
     rig.run(rig.t + 50 * MS)
     rig.take(0)
     assert bytes(b._set["NI"]) == b"queued"
-    # nobody acknowledges: the APS attempts run out, then status 4
-    rig.fail[0] = ["no_ack"] * 3
+    # a node nobody has: one hop, nobody acknowledges its three attempts (1.6 s each); mesh, its address is not
+    # found (5 s of address discovery); then status 4
     t0 = rig.t
+    if routing == "one_hop":
+        rig.fail[0] = ["no_ack"] * 3
     rig.send(0, RemoteATCommandPacket(7, addr(0x0013A200DEADBEEF), FFFE, 0x02, "NI").output())
-    rig.run(t0 + 5000 * MS, dt=10 * MS)
+    rig.run(t0 + (3000 if routing == "one_hop" else 4700) * MS, dt=10 * MS)
+    assert rig.take(0) == []
+    rig.run(t0 + 5100 * MS, dt=10 * MS)
     (p,) = rig.take(0)
     assert p.status == ATCommandStatus.TX_FAILURE and p.x16bit_source_addr == FFFE
     # to itself: status 4 at once
@@ -140,8 +147,9 @@ def test_remote_at_applies_or_queues_and_fails_with_status_4() -> None:
     assert a.counters["remote_at_timeouts"] == 0 and b.counters["remote_at_served"] == 2
 
 
-def test_a_broadcast_remote_at_is_answered_by_every_node() -> None:
-    rig = trio()
+@pytest.mark.parametrize("routing", ["one_hop", "mesh"])
+def test_a_broadcast_remote_at_is_answered_by_every_node(routing: str) -> None:
+    rig = trio(routing=routing)
     rig.send(0, RemoteATCommandPacket(3, addr(0xFFFF), FFFE, 0x00, "NI").output())
     rig.run(rig.t + 100 * MS)
     names = sorted(bytes(p.command_value) for p in rig.take(0) if isinstance(p, RemoteATCommandResponsePacket))
@@ -153,8 +161,9 @@ def zdo(rig: Rig, i: int, dest: int, dest16: int, cluster: int, payload: bytes, 
                                          cluster, 0, 0, 0, bytearray(payload)).output())
 
 
-def test_the_zdo_server_answers_and_ao_decides_what_the_host_sees() -> None:
-    a, b, rig = joined_pair(baud=115200)
+@pytest.mark.parametrize("routing", ["one_hop", "mesh"])
+def test_the_zdo_server_answers_and_ao_decides_what_the_host_sees(routing: str) -> None:
+    a, b, rig = joined_pair(baud=115200, routing=routing)
     at(rig, 0, "AO", b"\x01")
     rig.run(rig.t + 50 * MS)
     rig.take(0)
