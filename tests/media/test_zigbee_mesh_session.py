@@ -20,7 +20,7 @@ pytestmark = pytest.mark.session
 CFG = """
 [session]
 name = "mesh-line"
-duration_s = 60
+duration_s = 42
 seed = 3
 [arena]
 width_m = 44
@@ -49,8 +49,8 @@ kind = "explicit"
 poses = [[41.0, 2.0, 0.0]]
 [[faults]]
 kind = "partition"
-at_s = 25
-duration_s = 12
+at_s = 20
+duration_s = 8
 groups = [[0, 1, 2], [3, 4, 5]]
 """
 
@@ -69,9 +69,9 @@ def test_a_unicast_crosses_five_hops_and_a_partition_breaks_and_heals_it(tmp_pat
     assert code == 0, s.get("error")
     tx = logs(tmp_path / "out" / "session.mcap", "/r000/log/mesh_tx")
     rx = logs(tmp_path / "out" / "session.mcap", "/r005/log/mesh_rx")
-    before = [m for t, m in tx if t < 25]
-    during = [m for t, m in tx if 27 <= t < 37]
-    after = [m for t, m in tx if t >= 45]
+    before = [m for t, m in tx if t < 20]
+    during = [m for t, m in tx if 22 <= t < 28]
+    after = [m for t, m in tx if t >= 32]
     ok_before = [m for m in before if m["status"] == 0]
     assert len(ok_before) >= 3 and ok_before[0]["discovery"] != 0  # the first found an address and/or a route
     assert during and all(m["status"] in (0x21, 0x24, 0x25) for m in during)  # partitioned: nothing gets through
@@ -85,7 +85,7 @@ def test_a_unicast_crosses_five_hops_and_a_partition_breaks_and_heals_it(tmp_pat
 def test_one_hop_the_far_end_is_out_of_reach(tmp_path: Path) -> None:
     cfg = tmp_path / "one_hop.toml"
     cfg.write_text(CFG.format(routing="one_hop", walls=WALLS))
-    code, s = run(cfg, tmp_path / "out")
+    code, s = run(cfg, tmp_path / "out", "--duration", "15")
     assert code == 0, s.get("error")
     tx = logs(tmp_path / "out" / "session.mcap", "/r000/log/mesh_tx")
     assert tx and all(m["status"] != 0 for _, m in tx)
