@@ -39,7 +39,10 @@ class Packet(Protocol):
 class Radio(Protocol):
     """A packet radio with broadcast: the XBee driver's face."""
 
-    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int: ...
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0, radius: int = 0) -> int:
+        """Hand ``data`` over for ``dest64`` (None: broadcast; ``radius`` hops, 0 the radio's default); the frame ID
+        whose report ``tx_result`` gives."""
+        ...
 
     def tx_result(self, frame_id: int) -> Any:
         """The delivery report (``.ok``) of a ``send_nowait`` once known (returned once), else None."""

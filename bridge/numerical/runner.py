@@ -87,7 +87,7 @@ class PointRadio:
         self.fid = 0
         self.done: dict[int, PointTxStatus] = {}
 
-    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0, radius: int = 0) -> int:
         self.fid = self.fid % 255 + 1
         self.world.outbox.append((self.i, dest64, bytes(data), self.fid))
         return self.fid

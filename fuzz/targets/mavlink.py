@@ -183,7 +183,7 @@ class _Radio:
 
     last_rssi_dbm = -60
 
-    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0, radius: int = 0) -> int:
         return 0
 
     def recv(self, timeout: float | None = 0.0) -> None:

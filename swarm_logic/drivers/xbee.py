@@ -385,23 +385,27 @@ class XBee:
         )
         return self.info
 
-    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0, radius: int = 0) -> int:
         """Hand ``data`` to the module for ``dest64`` (None: broadcast) in a TX64 (Series 1) or transmit request
         (Series 2, 16-bit address unknown) frame; returns the frame ID of its TX status (see ``tx_result``).
         ``options`` is the frame's transmit options byte (0x01: Series 1 no MAC ACK, Series 2 no APS retries).
-        Payload limits are the module's: Series 2 answers 0x74 beyond NP, Series 1 drops the frame silently."""
+        ``radius`` is a Series 2 broadcast's radius in hops (0: the module's BH; 1: the neighbours only, nobody
+        relays it in a ZigBee mesh); Series 1 frames have none. Payload limits are the module's: Series 2 answers
+        0x74 beyond NP, Series 1 drops the frame silently."""
         dest = BROADCAST64 if dest64 is None else dest64
         if not 0 <= dest < 1 << 64:
             raise ValueError(f"dest64 out of range: {dest64!r}")
         if not 0 <= options <= 0xFF:
             raise ValueError(f"options must be a byte: {options!r}")
+        if not 0 <= radius <= 0xFF:
+            raise ValueError(f"radius must be a byte: {radius!r}")
         addr = XBee64BitAddress(dest.to_bytes(8, "big"))
         series = self.series
         fid = self._new_frame_id("TX")
         if series == 1:
             pkt = TX64Packet(fid, addr, options, bytearray(data))
         else:
-            pkt = TransmitPacket(fid, addr, XBee16BitAddress.UNKNOWN_ADDRESS, 0, options, bytearray(data))
+            pkt = TransmitPacket(fid, addr, XBee16BitAddress.UNKNOWN_ADDRESS, radius, options, bytearray(data))
         self._write(pkt)
         return fid
 

@@ -194,3 +194,18 @@ def test_whatever_the_air_brings_the_network_layer_never_raises(frames) -> None:
         m.step(t, b"", [{"ev": "done", "t_ns": t, "handle": f["handle"], "status": "no_ack", "attempts": 4}
                         for f in out.air_tx])
     assert m.counters["bad_air_events"] == 0 and m.counters["rx_malformed"] == 0
+
+
+def test_a_radius_1_broadcast_from_the_driver_reaches_the_neighbours_and_nobody_relays_it() -> None:
+    """The driver's ``send_nowait(None, data, radius=1)``: a hello for the neighbours only, as a swarm's local
+    broadcast should be under mesh routing (radius 0 is the module's BH: the whole network)."""
+    from swarm_logic.drivers.xbee import XBee
+
+    world, mods = mesh(3, line(3))
+    drv = XBee(world.ports[0], world.clock, api_mode=1)
+    drv.send_nowait(None, b"local", radius=1)
+    drv.send_nowait(None, b"far", radius=0)
+    world.run_until(world.t_ns + 3 * NS)
+    assert [bytes(p.rf_data) for p in received(world, 1)] == [b"local", b"far"]
+    assert [bytes(p.rf_data) for p in received(world, 2)] == [b"far"]  # relayed by 1: radius 0 is the maximum
+    assert mods[1].counters["nwk_bcast_relayed"] == 1

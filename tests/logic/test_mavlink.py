@@ -256,7 +256,7 @@ class Radio:
     def __init__(self, last_rssi_dbm: int | None = None) -> None:
         self.last_rssi_dbm = last_rssi_dbm
 
-    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0, radius: int = 0) -> int:
         return 0
 
     def recv(self, timeout: float | None = 0.0) -> None:

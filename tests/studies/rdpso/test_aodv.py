@@ -72,7 +72,7 @@ class Radio:
         self.done: dict[int, Status] = {}
         self.fid = 0
 
-    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0, radius: int = 0) -> int:
         self.fid += 1
         self.out.append((self.fid, dest64, bytes(data)))
         return self.fid

@@ -65,7 +65,7 @@ class BenchRadio:
     def __init__(self) -> None:
         self.sent: list[bytes] = []
 
-    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0) -> int:
+    def send_nowait(self, dest64: int | None, data: bytes, *, options: int = 0, radius: int = 0) -> int:
         self.sent.append(bytes(data))
         return 0
 
