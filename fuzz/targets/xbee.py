@@ -16,8 +16,10 @@ from digi.xbee.models.status import ATCommandStatus, DiscoveryStatus, ModemStatu
 from digi.xbee.packets.common import (
     ATCommPacket,
     ATCommResponsePacket,
+    ExplicitAddressingPacket,
     ModemStatusPacket,
     ReceivePacket,
+    RemoteATCommandPacket,
     TransmitPacket,
     TransmitStatusPacket,
 )
@@ -31,11 +33,13 @@ from swarm_logic.drivers.xbee import XBee, XBeeError
 A64 = 0x0013A20040A1B2C3
 DONE = ("ok", "no_ack", "cca_fail")
 AT_COMMANDS = ("AP", "HV", "VR", "SH", "SL", "NI", "MY", "CE", "ID", "CH", "AI", "DB", "PL", "RP", "BD", "SM", "DH",
-               "DL", "AC", "WR", "FR", "RR", "EA", "EC", "OP", "OI", "SC", "NH", "AO", "NP", "NR")
+               "DL", "AC", "WR", "FR", "RR", "EA", "EC", "OP", "OI", "SC", "NH", "AO", "NP", "NR", "ND", "DN", "NT",
+               "NO", "BH", "DD", "EE", "%V", "NC", "N?", "TP")
 
 
-def _module(series: int, api_mode: int) -> XBeeModule:
-    return XBeeModule(series=series, serial64=A64, node_id="FUZZ", rng=np.random.default_rng(1), api_mode=api_mode)
+def _module(series: int, api_mode: int, mesh: bool = False) -> XBeeModule:
+    return XBeeModule(series=series, serial64=A64, node_id="FUZZ", rng=np.random.default_rng(1), api_mode=api_mode,
+                      routing="mesh" if mesh else "one_hop")
 
 
 def _drive(m: XBeeModule, c: Cursor, frame_of: Callable[[XBeeModule, bytes], bytes]) -> None:
@@ -68,7 +72,8 @@ def _framed(m: XBeeModule, body: bytes) -> bytes:
 def _api(api_mode: int) -> Callable[[bytes], None]:
     def run(data: bytes) -> None:
         c = Cursor(data)
-        _drive(_module(1 + (c.u8() & 1), api_mode), c, _framed)
+        first = c.u8()  # bit 0: Series 2; bit 1: its mesh routing
+        _drive(_module(1 + (first & 1), api_mode, bool(first & 2)), c, _framed)
 
     return run
 
@@ -85,7 +90,7 @@ def _at(data: bytes) -> None:
         fid = 0 if flags & 2 else 0x52
         return encode_frame(bytes((0x09 if flags & 1 else 0x08, fid)) + body[1:], m.api_mode)
 
-    _drive(_module(1 + (first & 1), 1 + (first >> 1 & 1)), c, frame_of)
+    _drive(_module(1 + (first & 1), 1 + (first >> 1 & 1), bool(first & 4)), c, frame_of)
 
 
 def _api_seeds(api_mode: int) -> list[bytes]:
@@ -97,22 +102,28 @@ def _api_seeds(api_mode: int) -> list[bytes]:
     s2 = [TransmitPacket(6, bcast, XBee16BitAddress.from_hex_string("FFFE"), 0, 0, rf_data=bytearray(8)),
           TransmitPacket(7, XBee64BitAddress.from_hex_string("0013A20040A1B2C4"),
                          XBee16BitAddress.from_hex_string("FFFE"), 0, 0, rf_data=bytearray(b"unicast")),
-          ATCommPacket(8, "SC", bytearray([0x1F, 0xFE])), ATCommPacket(9, "NR", None)]
+          ATCommPacket(8, "SC", bytearray([0x1F, 0xFE])), ATCommPacket(9, "NR", None),
+          ExplicitAddressingPacket(10, XBee64BitAddress.from_hex_string("0013A20040A1B2C3"),
+                                   XBee16BitAddress.from_hex_string("FFFE"), 0, 0, 0x0002, 0, 0, 0,
+                                   bytearray(b"\x0a\xfe\xff")),
+          RemoteATCommandPacket(11, XBee64BitAddress.from_hex_string("0013A20040A1B2C4"),
+                                XBee16BitAddress.from_hex_string("FFFE"), 0x02, "NI", bytearray(b"R9")),
+          ATCommPacket(12, "ND", None)]
     out = []
-    for series, pkts in ((1, s1), (2, s2)):
-        join = [(0xFE, b""), (0xFE, b"")] if series == 2 else []  # a Series 2 module sends once it has joined
+    for first, pkts in ((0, s1), (1, s2), (3, s2)):  # Series 1; Series 2 one hop; Series 2 mesh
+        join = [(0xFE, b""), (0xFE, b"")] if first else []  # a Series 2 module sends once it has joined
         raw = [(0x14, bytes(p.output(escaped=api_mode == 2))) for p in pkts]
         framed = [(0x15, bytes(p.output()[3:-1])) for p in pkts]
-        out.append(bytes((series - 1,)) + chunks(*join, *raw, (0x40, b"\x7e\x00\x00\x7e\x00\x05")))
-        out.append(bytes((series - 1,)) + chunks(*join, *framed, (0xFE, b"")))
+        out.append(bytes((first,)) + chunks(*join, *raw, (0x40, b"\x7e\x00\x00\x7e\x00\x05")))
+        out.append(bytes((first,)) + chunks(*join, *framed, (0xFE, b"")))
     return out
 
 
 def _at_seeds() -> list[bytes]:
     out = []
-    for series in (1, 2):
+    for series, mesh in ((1, 0), (2, 0), (2, 1)):
         for api_mode in (1, 2):
-            first = (series - 1) | (api_mode - 1) << 1
+            first = (series - 1) | (api_mode - 1) << 1 | mesh << 2
             queries = [(0x03, b"\x00" + cmd.encode()) for cmd in AT_COMMANDS]
             sets = [(0x03, b"\x01CH\x0e"), (0x03, b"\x00AC"), (0x03, b"\x00RP\xff"), (0x03, b"\x00NIROBOT 7"),
                     (0x03, b"\x00PL\x09"), (0x03, b"\x00AP\x02"), (0x03, b"\x02ID\x12\x34"), (0x03, b"\x00WR"),
