@@ -375,23 +375,31 @@ class Nwk:
         for _, f in self.held.pop(dst16, []):
             hop = self._next_hop(t, dst16)
             if hop is not None:
-                f.handle = hop
-                self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, f.on_done))
+                self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, self._hop_failed(hop, dst16, f.nwk[1])))
         for tx in list(self.txs.values()):
             if tx.state == "route" and tx.dst16 == dst16:
                 self._send_data(t, tx)
 
     def _forward(self, t: int, f: MacFrame, dst16: int) -> None:
-        """Send ``f`` towards ``dst16`` (its next hop set here), or hold it while this node discovers a route; held
-        longer than a route discovery lasts, it is dropped and its source told."""
+        """Send ``f`` towards ``dst16`` (through its next hop), or hold it while this node discovers a route; held
+        longer than a route discovery lasts, it is dropped and its source told. A hop that does not acknowledge it
+        loses its routes, and the source is told (link failure)."""
         hop = self._next_hop(t, dst16)
         if hop is not None:
-            f.handle = hop
-            self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, f.on_done))
+            self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, self._hop_failed(hop, dst16, f.nwk[1])))
             return
         self.held.setdefault(dst16, []).append((t, f))
         self._discover(t, dst16)
         self.m._at_event(t + ROUTE_DISCOVERY_NS, "nwk_held_due", dst16)
+
+    def _hop_failed(self, hop: int, dst16: int, src: int) -> Callable[[int, str], None]:
+        def done(t: int, status: str) -> None:
+            if status != "ok":
+                self.stats["relay_link_failures"] += 1
+                self._forget(dst16, hop)
+                self._tell_source(t, src, dst16, LINK_FAILURE)
+
+        return done
 
     def held_timer(self, t: int, dst16: int) -> None:
         keep = []
@@ -551,17 +559,8 @@ class Nwk:
                 self.stats["relay_no_route"] += 1
                 return None
             self.stats["relayed"] += 1
-            f = MacFrame(None, fr["payload"], tuple(fr.get("aps", (0, 0, 0, 0))),
-                         [kind, src, dst, radius - 1, seq, src64, counter, flags])
-
-            def relayed(t2: int, status: str, f: MacFrame = f) -> None:
-                if status != "ok":
-                    self.stats["relay_link_failures"] += 1
-                    self._forget(f.nwk[2], f.handle)  # (``handle`` holds the hop it went to: see _forward)
-                    self._tell_source(t2, f.nwk[1], f.nwk[2], LINK_FAILURE)
-
-            f.on_done = relayed
-            self._forward(t, f, dst)
+            self._forward(t, MacFrame(None, fr["payload"], tuple(fr.get("aps", (0, 0, 0, 0))),
+                                      [kind, src, dst, radius - 1, seq, src64, counter, flags]), dst)
             return None
         if src != mac_src:
             self._learn_route(src, mac_src, cost)  # the way back to the source, for its acknowledgement
