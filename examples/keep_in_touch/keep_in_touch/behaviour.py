@@ -46,7 +46,7 @@ class KeepInTouch(RssiKeeper):
         if now >= self.next_hello:
             self.next_hello += self.p["hello_s"]
             self.hello_seq = (self.hello_seq + 1) & 0xFFFF
-            r.xbee.send_nowait(None, HELLO + HELLO_BODY.pack(r.id & 0xFFFF, self.hello_seq))
+            r.xbee.send_nowait(None, HELLO + HELLO_BODY.pack(r.id & 0xFFFF, self.hello_seq), radius=1)
 
     def neighbours(self) -> list[int]:
         return sorted(self.heard_at)

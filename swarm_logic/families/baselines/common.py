@@ -212,7 +212,7 @@ class Iterated(IterationSchedule, Controller):
         self.outgoing = self.tell()
 
     def _send(self) -> None:
-        self.robot.xbee.send_nowait(None, self.outgoing)
+        self.robot.xbee.send_nowait(None, self.outgoing, radius=1)  # a local broadcast: the neighbours
 
     def _phase_b(self) -> None:
         self.heard = self._listen()

@@ -57,4 +57,4 @@ class RadioSurvey(RandomWalk):
                 x.send_nowait(self.peer64, b"S" + struct.pack("<I", self.seq), options=opts)
         else:
             self.next_radio += self.p["announce_s"]
-            x.send_nowait(None, ANNOUNCE)
+            x.send_nowait(None, ANNOUNCE, radius=1)

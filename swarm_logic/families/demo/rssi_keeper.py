@@ -101,7 +101,7 @@ class RssiKeeper(RandomWalk):
         if now >= self.next_hello:
             self.next_hello += self.p["hello_s"]
             self.hello_seq = (self.hello_seq + 1) & 0xFFFF
-            r.xbee.send_nowait(None, HELLO + struct.pack("<HH", r.id & 0xFFFF, self.hello_seq))
+            r.xbee.send_nowait(None, HELLO + struct.pack("<HH", r.id & 0xFFFF, self.hello_seq), radius=1)
 
     def _good(self, margin: float = 0.0) -> int:
         q = self.p["q_min_dbm"] + margin

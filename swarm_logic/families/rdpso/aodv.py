@@ -255,7 +255,8 @@ class Router:
         s = self.stats
         while self.txq and (not self.inflight or held + len(self.txq[0].frame) + API_OVERHEAD <= self.module_buffer):
             out = self.txq.popleft()
-            fid = self.radio.send_nowait(out.dest64, out.frame)
+            # a broadcast (hello, RREQ, RERR) is for the neighbours: this layer relays what must go further
+            fid = self.radio.send_nowait(out.dest64, out.frame, radius=1 if out.dest64 is None else 0)
             self.inflight[fid] = (out, now)
             held += len(out.frame) + API_OVERHEAD
             s["tx_frames"] += 1

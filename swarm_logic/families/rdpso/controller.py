@@ -392,7 +392,7 @@ class Rdpso(IterationSchedule, Controller):
     def _send(self) -> None:
         router = self.router
         if router is None:
-            self.robot.xbee.send_nowait(None, self.outgoing)
+            self.robot.xbee.send_nowait(None, self.outgoing, radius=1)  # a local broadcast: the neighbours
             return
         router.hello(self.outgoing)
         # regular: position and solution to every mate every iteration; optimised: only on an improvement, or

@@ -105,13 +105,14 @@ class ScoutDeployment:
                 r.log("deployment", event="landed", ranger=m.ranger, x=m.x, y=m.y, theta=m.theta)
             elif m.kind == START and self.state == "beacon" and m.ranger == self.ranger:
                 self.state = "started"
-                r.xbee.send_nowait(None, encode(Msg(START, m.ranger, hops=min(255, m.hops + 1))))  # relay once
+                relayed = encode(Msg(START, m.ranger, hops=min(255, m.hops + 1)))
+                r.xbee.send_nowait(None, relayed, radius=1)  # relay once
                 r.log("deployment", event="start", ranger=m.ranger, hops=m.hops, malformed=self.malformed)
                 return
         if self.state == "beacon" and now >= self.next_beacon:
             self.next_beacon = now + self.BEACON_S
             x, y, _ = self.pose or (0.0, 0.0, 0.0)
-            r.xbee.send_nowait(None, encode(Msg(BEACON, self.ranger or 0, r.id, x, y)))
+            r.xbee.send_nowait(None, encode(Msg(BEACON, self.ranger or 0, r.id, x, y)), radius=1)
 
 
 class EstRanger(Controller):
@@ -235,7 +236,7 @@ class EstRanger(Controller):
             if now >= self.next_pose and self.starts < 3:
                 self.next_pose = now + 0.5
                 self.starts += 1
-                r.xbee.send_nowait(None, encode(Msg(START, r.id)))
+                r.xbee.send_nowait(None, encode(Msg(START, r.id)), radius=1)
             if self.starts >= 3:
                 self.state = "done"
                 r.log("deployment", event="done", scouts=len(self.dropped), t=now - self.t0)
@@ -351,7 +352,7 @@ class EstRanger(Controller):
         r = self.robot
         _, x, y, th = self.dropped[-1]
         self.next_pose = r.clock.now() + 0.5
-        r.xbee.send_nowait(None, encode(Msg(POSE, r.id, scout, x, y, th)))
+        r.xbee.send_nowait(None, encode(Msg(POSE, r.id, scout, x, y, th)), radius=1)
 
     def _next_leg(self, now: float) -> None:
         r, p = self.robot, self.p
