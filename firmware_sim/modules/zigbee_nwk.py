@@ -9,28 +9,27 @@ Silicon Labs' "constants from the ZigBee specification" as its stack sets them):
   0x01), a route by AODV route discovery when the destination is not a neighbour and no route is known (0x02): a
   route request (RREQ) broadcast, each router adding its link cost and rebroadcasting a better request after a
   jitter of 2-128 ms, the destination answering each better request with a route reply (RREP) unicast back along
-  the reverse path, each node on it learning the route. A request goes out four times from its originator and three
-  times from each relay, 254 ms apart (nwkcInitialRREQRetries 3, nwkcRREQRetries 2, nwkcRREQRetryInterval).
-  A route reply a hop did not acknowledge is sent again after 400 ms, twice at most (EmberZNet). Route discovery
-  gives up after 5 s (EmberZNet). The data
-  then goes hop by hop (each hop acknowledged by the MAC, three MAC retries in the medium); the destination
-  acknowledges end to end; an unacknowledged attempt is retried after the unicast timeout (50 x NH + 100) ms, three
-  attempts in all; a hop that fails its MAC acknowledgement loses its route, and the next attempt discovers a new
-  one. Transmit status: 0x00, 0x21 (network ACK failure), 0x24 (address not found), 0x25 (route not found); its
-  retry count and discovery status (0x01 | 0x02) say what the delivery cost.
+  the reverse path, each node on it learning the route. A request goes out four times from its originator and
+  three times from each relay, 254 ms apart (nwkcInitialRREQRetries 3, nwkcRREQRetries 2, nwkcRREQRetryInterval);
+  a route reply a hop did not acknowledge is sent again after 400 ms, twice at most; route discovery gives up after
+  5 s (both EmberZNet's). The data then goes hop by hop (each hop acknowledged by the MAC, three MAC retries in the
+  medium); the destination acknowledges end to end; an unacknowledged attempt is retried after the unicast timeout
+  (50 x NH + 100) ms, three attempts in all. Transmit status: 0x00, 0x21 (network ACK failure), 0x24 (address not
+  found), 0x25 (route not found); its retry count and discovery status (0x01 | 0x02) say what the delivery cost.
+- Route repair: a router that has no route for a frame it must forward discovers one itself and holds the frame
+  meanwhile (the NWK header's "discover route" flag, on by default); a frame held longer than a discovery lasts is
+  dropped and its source told (network status, no route). A hop that does not acknowledge a frame loses its routes,
+  and the source is told (link failure): it forgets its route and discovers a new one for its next attempt.
 - Broadcast: every router relays a broadcast it has not seen (radius decremented; BH 0 is the maximum, 2 x NH), after
   a jitter of 0-63 ms, and sends it up to three times in all, 500 ms apart, stopping early once it has heard every
-  neighbour relay it (passive acknowledgement). Each broadcast seen takes an entry of the broadcast transmission
-  table (8 entries, each kept 8 s); a full table relays nothing new, and refuses a broadcast from the host (status
-  0x32, resource error).
+  neighbour relay it (passive acknowledgement). Each broadcast a node originates or relays takes an entry of its
+  broadcast transmission table (8 entries, each kept 8 s); a full table relays nothing new, and refuses a broadcast
+  from the host (status 0x32, resource error). A broadcast of radius 1 is not relayed, and takes no entry at its
+  receivers (an assumption: whether EmberZNet enters one is not published).
 - Tables: 16 routes (the least recently used goes first), 8 route discoveries at once (a request beyond that is
   dropped, as Ember drops it), neighbours learned from every frame heard (link cost 1-7 from the received power, as
   Ember maps its LQI) and forgotten after 45 s of silence (three link-status periods; link-status frames themselves
   are not sent, which is an approximation).
-
-- A relay that cannot forward (no route, or its next hop did not acknowledge) drops the frame and sends a network
-  status (no route, link failure) back to the source, which forgets that route and discovers a new one for its
-  next attempt (the stack's route repair, from the source).
 
 Not modelled: many-to-one routes and source routing (AR 0xFF, the default, sends none), route records, link-status
 frames, end devices and their parents, security, fragmentation.
