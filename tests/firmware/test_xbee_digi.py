@@ -13,7 +13,6 @@ import time
 
 import numpy as np
 import pytest
-from digi.xbee.comm_interface import XBeeCommunicationInterface
 from digi.xbee.devices import RemoteZigBeeDevice, ZigBeeDevice
 from digi.xbee.exception import XBeeException
 from digi.xbee.models.address import XBee64BitAddress
@@ -21,39 +20,22 @@ from digi.xbee.models.mode import APIOutputModeBit
 from digi.xbee.models.protocol import Role
 
 from firmware_sim.modules.xbee import XBeeModule
+from tests.firmware.test_xbee_module import LoopIface
 from tests.support.xbee_loop import NS, World
 
 BASE = 0x0013A20040A1B200
 NAMES = ("alpha", "bravo", "charlie", "delta")
 
 
-class WorldIface(XBeeCommunicationInterface):
+class WorldIface(LoopIface):
     """digi-xbee's view of one module of a ``World``: whole API frames in, frames out; a poll with nothing to read
-    moves the shared world 1 ms."""
+    moves the shared world 1 ms (``LoopIface``'s open/close/timeout, another source of frames)."""
 
     lock = threading.Lock()
 
     def __init__(self, world: World, index: int) -> None:
         self.world, self.port = world, world.ports[index]
         self._open = False
-
-    def open(self):
-        self._open = True
-
-    def close(self):
-        self._open = False
-
-    @property
-    def is_interface_open(self):
-        return self._open
-
-    @property
-    def timeout(self):
-        return 0.01
-
-    @timeout.setter
-    def timeout(self, value):
-        pass
 
     def _frame(self) -> bytes | None:
         rx = self.port.rx
