@@ -84,9 +84,16 @@ def session_procs(out: Path) -> list[psutil.Process]:
     return found
 
 
+# the launcher as a terminal starts it: SIGHUP at its default whatever this test run inherited (``nohup`` ignores
+# it, and an ignored signal stays ignored across exec); set in a fresh interpreter that then execs the CLI
+_AS_FROM_A_TERMINAL = ("import os, signal, sys; signal.signal(signal.SIGHUP, signal.SIG_DFL); "
+                       "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])")
+
+
 def start(cfg: Path, out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen(cli("run", str(cfg), "--out", str(out), *extra), cwd=ROOT,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen([sys.executable, "-c", _AS_FROM_A_TERMINAL, *cli("run", str(cfg), "--out", str(out),
+                                                                              *extra)[1:]],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
 def wait_line(p: subprocess.Popen, text: str) -> str:
@@ -298,8 +305,10 @@ def test_ctrl_c_leaves_no_process_and_a_readable_recording(tmp_path: Path, sig: 
 
 def test_under_nohup_a_closed_terminal_does_not_stop_the_session() -> None:
     """``nohup swarm-sitl run ...``: SIGHUP ignored on purpose, the launcher leaves it so."""
-    code = ("import signal; from bridge.core.launcher import _stop_signals; a = _stop_signals(); "
-            "signal.signal(signal.SIGHUP, signal.SIG_IGN); print(signal.SIGHUP in a, signal.SIGHUP in _stop_signals())")
+    code = ("import signal; from bridge.core.launcher import _stop_signals; "
+            "signal.signal(signal.SIGHUP, signal.SIG_DFL); a = _stop_signals(); "
+            "signal.signal(signal.SIGHUP, signal.SIG_IGN); "
+            "print(signal.SIGHUP in a, signal.SIGHUP in _stop_signals())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["True", "False"]
 
