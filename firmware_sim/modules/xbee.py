@@ -401,7 +401,6 @@ class XBeeModule:
         self._seq = int(self.rng.integers(0, 256))  # macDSN starts at a random value (IEEE 802.15.4)
         self._handle = 0
         self._seen: dict[int, tuple[int, int]] = {}
-        self._addr_table: dict[int, int] = {}
         self._ai = 0 if self.series == 1 else 0xFF
         self._nwk = 0xFFFE
         self._ea = self._ec = 0
@@ -865,7 +864,8 @@ class XBeeModule:
         elif status in (0x00, 0x23) and self._is_me(job.dest64, job.dest16):
             addr16, disc = self._nwk, 0x00
         elif status == 0:
-            known = self._addr_table.get(job.dest64)
+            heard = self._heard.get(job.dest64)
+            known = heard[0] if heard is not None and heard[0] < 0xFFF8 else None
             addr16 = known if known is not None else (job.dest16 if job.dest16 != 0xFFFE else 0xFFFE)
             disc = 0x00 if known is not None or job.dest16 != 0xFFFE else 0x01
         else:
@@ -1131,8 +1131,6 @@ class XBeeModule:
         self._db = min(max(-rssi, self.prof.db_min), 0xFF)
         self._pwm_rx(t, rssi)
         src64, src16 = fr["src64"], fr["src16"]
-        if self.series == 2 and src16 < 0xFFF8:
-            self._addr_table[src64] = src16
         prev = self._seen.get(src64)
         if prev is not None and prev[0] == fr["seq"] and t - prev[1] < DUP_WINDOW_NS:
             self.counters["rx_duplicates"] += 1
