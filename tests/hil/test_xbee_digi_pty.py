@@ -22,6 +22,7 @@ from swarm_logic.clock import WallClock
 from swarm_logic.drivers.xbee import XBee
 from tests.conftest import ROOT
 from tests.core.test_session import cli, wait_started
+from tests.firmware.test_xbee_digi import discover
 
 pytestmark = pytest.mark.session
 
@@ -86,11 +87,7 @@ def test_digi_xbee_s_zigbee_device_on_the_session_s_ptys(tmp_path: Path, capsys:
         rc = RemoteZigBeeDevice(a, x64bit_addr=devs[2].get_64bit_addr())
         assert bytes(rc.get_parameter("NI")) == b"r002"
         a.set_parameter("NT", bytearray((0x20,)))
-        net = a.get_network()
-        net.start_discovery_process()
-        while net.is_discovery_running():
-            time.sleep(0.1)  # digi-xbee waits out NT (3.2 s) in a thread of its own
-        assert sorted(d.get_node_id() for d in net.get_devices()) == ["r001", "r002", "r003"]
+        assert sorted(discover(a, {"r001", "r002", "r003"})) == ["r001", "r002", "r003"]
     finally:
         for d in devs:
             if d.is_open():
