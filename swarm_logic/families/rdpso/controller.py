@@ -115,7 +115,7 @@ class Rdpso(IterationSchedule, Controller):
         "subgroups_min": 0,
         "subgroups_max": 3,
         "n_init": 0,  # N_I; 0: n_total // subgroups_init
-        "n_min": 0,  # 0: max(2, N_I // 2) (A28)
+        "n_min": 0,  # 0: max(1, N_I // 2) (A28)
         "n_max": 0,  # 0: 2 * N_I (A28)
         "miss_limit": 3,  # missed hellos that break a link (section 6.2)
         "speed_mps": 0.2,  # wheel speed of the rotate-then-go moves
@@ -212,7 +212,7 @@ class Rdpso(IterationSchedule, Controller):
         motion.memory_weights(p["alpha"], p["fractional_form"], int(p["truncation_r"]))  # form and r must fit
         n_i = p["n_init"] or (p["n_total"] // g_init if g_init else max(2, p["n_total"] // max(1, g_max)))
         p["n_init"] = n_i
-        p["n_min"] = p["n_min"] or max(2, n_i // 2)
+        p["n_min"] = p["n_min"] or max(1, n_i // 2)
         p["n_max"] = p["n_max"] or 2 * n_i
         if not 1 <= p["n_min"] <= p["n_max"]:
             raise ValueError(f"n_min/n_max: need 1 <= n_min <= n_max, got {p['n_min']}/{p['n_max']}")
