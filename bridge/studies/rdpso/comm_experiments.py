@@ -62,7 +62,7 @@ class E6Comm(Experiment):
     x_label = "time [s]"
     curves = (("packets", "packets sent per robot (cumulative)"),)
     boxes = (("packets_per_robot", "packets per robot"), ("delivery_ratio", "packet delivery ratio"),
-             ("pause_share", "share of the mission paused on the radio"))
+             ("radio_busy_share", "share of the mission sending and receiving"))
     CELLS: ClassVar[list[dict[str, Any]]] = [
         {"comm": "regular", "routing": "rdpso", "group": 5},
         {"comm": "optimised", "routing": "rdpso", "group": 5},
@@ -88,8 +88,9 @@ class E6Comm(Experiment):
         return [
             Target("R8a", "packets per robot, regular vs optimised (subgroups of 5)", "742 +- 24 vs 415 +- 37 "
                    "(-44 %)", "optimised 35-55 % fewer", self._packets),
-            Target("R8b", "share of the mission paused on the radio, regular vs optimised", "126 +- 4 s (35 %) vs "
-                   "39 +- 7 s (10 %) of 360 s", "regular 30-40 %, optimised 8-15 %", self._pause),
+            Target("R8b", "share of the mission spent sending and receiving on the radio, regular vs optimised",
+                   "126 +- 4 s (35 %) vs 39 +- 7 s (10 %) of 360 s", "regular 30-40 %, optimised 8-15 %",
+                   self._pause),
             Target("R9", "packet delivery ratio at 15 robots per subgroup, regular vs optimised", "about 65 % vs "
                    "above 90 % (regular about 100 % up to 10 robots)", "optimised >= 90 % and above regular",
                    self._pdr),
@@ -109,10 +110,15 @@ class E6Comm(Experiment):
         return f"{reg:.0f} vs {opt:.0f} ({-cut:+.0%})", 0.35 <= cut <= 0.55, "medians over trials"
 
     def _pause(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
-        reg, opt = self._pair(outcomes, "pause_share", self.CELLS[0], self.CELLS[1])
+        reg, opt = self._pair(outcomes, "radio_busy_share", self.CELLS[0], self.CELLS[1])
         if not (np.isfinite(reg) and np.isfinite(opt)):
             return "no data", None, "needs both subgroup-of-5 cells"
-        return f"{reg:.0%} vs {opt:.0%}", 0.30 <= reg <= 0.40 and 0.08 <= opt <= 0.15, "medians over trials"
+        preg, popt = self._pair(outcomes, "pause_share", self.CELLS[0], self.CELLS[1])
+        return (f"{reg:.0%} vs {opt:.0%} (the move delayed past the hello window: {preg:.0%} vs {popt:.0%})",
+                0.30 <= reg <= 0.40 and 0.08 <= opt <= 0.15,
+                "medians over trials; the thesis timed its send-and-receive function, during which a robot does "
+                "nothing else: here the time its radio has its packets to send (the receive reads what the module "
+                "has buffered, at once)")
 
     def _pdr(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
         reg, opt = self._pair(outcomes, "delivery_ratio", self.CELLS[2], self.CELLS[3])

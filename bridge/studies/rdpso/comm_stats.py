@@ -28,6 +28,7 @@ def comm_metrics(tot: collections.Counter, n: int, duration_s: float) -> dict[st
         "pause_s": round(tot["paused_s"] / n, 2),
         "pause_share": round(tot["paused_s"] / n / duration_s, 4),
         "radio_busy_s": round(tot["busy_s"] / n, 2),
+        "radio_busy_share": round(tot["busy_s"] / n / duration_s, 4),
         "delivery_ratio": round(tot["data_delivered"] / tot["data_originated"], 4) if tot["data_originated"] else None,
         "overhead": round(sum(tot[k] for k in CONTROL) / data_frames, 4) if data_frames else None,
         "discoveries_per_data": round(tot["route_discoveries"] / tot["data_originated"], 4)

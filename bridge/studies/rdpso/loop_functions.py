@@ -3,8 +3,10 @@
 - the rangers' marsupial deployment (chapter 5): when each ranger says it is done (its ``deployment`` log), where its
   scouts are, their dispersion (eq. 5.11) and the arena they cover; ``session.end_after_deployment`` ends the session
   1 s after the last ranger;
-- each ranger's subgroup in the radio graph: its partition events, and after its START the thesis' Table 5.2 link
-  statistics (RSSI, hops, relays, lambda2) as its scouts judge links (their q_min);
+- each ranger's subgroup in the radio graph: its partition events, before and after its START;
+- the thesis' Table 5.2 link statistics of the deployed scouts' RDPSO subgroups as they are at each sample (their
+  members by the ``rdpso`` log's ``sid``, links as the scouts judge them, by q_min): hops, relays, lambda2, and the
+  one-hop signal quality the scouts measured (the log's ``mate_rssi``);
 - the chapter 6 routing layer's counters (the ``rdpso`` log's ``comm``), summed in ``comm_stats``;
 - the chapter 8 mapping objective (``[objective] kind = "mapping"``): the light sensors read it, the robots scan from
   where they stand every ``scan_period_s`` (``/world/mapping``), and eta_exp with its AUC go to the summary.
@@ -59,8 +61,11 @@ class RdpsoLoopFunctions(LoopFunctions):
         self.group_of = {rp.id: rp.carrier for rp in robots if rp.carrier is not None}  # scout -> its ranger
         self.carriers = set(self.group_of.values())  # rangers with scouts on board
         self.group_pieces: dict[int, list[int]] = defaultdict(list)
-        # each deployed subgroup's radio graph after its START, per sample (Table 5.2; link_stats)
+        self.mission_pieces: dict[int, list[int]] = defaultdict(list)  # ranger -> its scouts' pieces after START
+        # each RDPSO subgroup of deployed scouts, per sample (Table 5.2; link_stats)
         self.mission_links: list[dict[str, Any]] = []
+        self.sid_of: dict[int, int] = {}  # robot -> its subgroup in its latest rdpso record (0: excluded)
+        self.mate_rssi: list[int] = []  # dBm of every hello a deployed scout heard from a subgroup mate
         self.q_min = {rp.carrier: float(rp.params["q_min_dbm"]) for rp in robots if rp.carrier is not None
                       and rp.params.get("link_mode") == "rssi" and "q_min_dbm" in rp.params}  # ranger -> its scouts'
         self.deployed: dict[int, dict[str, Any]] = {}  # ranger -> its deployment as it ended (deployment_report)
@@ -85,6 +90,10 @@ class RdpsoLoopFunctions(LoopFunctions):
         elif topic == "rdpso":
             if isinstance(values.get("comm"), dict):
                 self.comm[robot] = values["comm"]
+            if isinstance(values.get("sid"), int):
+                self.sid_of[robot] = values["sid"]
+            if robot in self.group_of and isinstance(values.get("mate_rssi"), list):
+                self.mate_rssi += [v for v in values["mate_rssi"] if isinstance(v, int | float)]
             chi2 = values.get("chi2")
             if isinstance(values.get("sid"), int) and isinstance(chi2, list | tuple) and len(chi2) == 2:
                 self.particles[robot] = (values["sid"], (float(chi2[0]), float(chi2[1])))
@@ -123,32 +132,52 @@ class RdpsoLoopFunctions(LoopFunctions):
             self.hub.end_ns = min(self.hub.end_ns, t + 1_000_000_000)
 
     def on_radio_sample(self, t: int, live: list[int], adj: np.ndarray) -> None:
-        """Each ranger's subgroup (its live scouts off the conveyor): how many pieces, and after its START the links
-        as its scouts judge them (the mean RSSI clears their q_min both ways, else any link)."""
+        """Each ranger's group (its live scouts off the conveyor): how many pieces, before and after its START; after
+        it, each RDPSO subgroup of two or more of its scouts, with links as they judge them (the mean RSSI clears
+        their q_min both ways, else any link)."""
         if not self.group_of:
             return
         world = self.hub.world
         idx = {r: i for i, r in enumerate(live)}
+        rssi_live = None
+        subgroups: dict[tuple[int, int], list[int]] = defaultdict(list)  # (ranger, sid) -> members
         for g in sorted(self.carriers):
-            members = [idx[r] for r, c in self.group_of.items() if c == g and r in idx and r not in world.carried]
-            self.group_pieces[g].append(components(adj[np.ix_(members, members)]) if members else 0)
-            if g in self.deployed and members:  # the mission has begun for this subgroup (its START)
-                rssi = self.hub.medium("radio").medium.mean_rssi()[np.ix_(live, live)][np.ix_(members, members)]
-                q = self.q_min.get(g)
-                sub = adj[np.ix_(members, members)] if q is None else (rssi >= q) & (rssi >= q).T
-                self.mission_links.append({"group": g, **link_stats(sub, rssi)})
+            members = [r for r, c in self.group_of.items() if c == g and r in idx and r not in world.carried]
+            ix = [idx[r] for r in members]
+            self.group_pieces[g].append(components(adj[np.ix_(ix, ix)]) if members else 0)
+            if g in self.deployed and members:  # the mission has begun for this group (its START)
+                if rssi_live is None:
+                    rssi_live = self.hub.medium("radio").medium.mean_rssi()[np.ix_(live, live)]
+                self.mission_pieces[g].append(components(self._judged(g, ix, adj, rssi_live)))
+                for r in members:
+                    if self.sid_of.get(r):
+                        subgroups[(g, self.sid_of[r])].append(idx[r])
+        for (g, sid), ix in sorted(subgroups.items()):
+            if len(ix) >= 2:
+                sub = self._judged(g, ix, adj, rssi_live)
+                self.mission_links.append({"group": g, "sid": sid, **link_stats(sub, rssi_live[np.ix_(ix, ix)])})
+
+    def _judged(self, g: int, ix: list[int], adj: np.ndarray, rssi_live: np.ndarray) -> np.ndarray:
+        """The links among ``ix`` (indices into the live robots) as ranger ``g``'s scouts judge them: the mean RSSI
+        clears their q_min both ways (else any link of the radio graph)."""
+        q = self.q_min.get(g)
+        if q is None:
+            return adj[np.ix_(ix, ix)]
+        good = rssi_live[np.ix_(ix, ix)] >= q
+        return good & good.T
 
     def radio_report(self, connectivity: dict[str, Any]) -> None:
         if self.group_pieces:
             connectivity["subgroups"] = {str(g): {"partition_events": splits(v), "pieces_max": max(v)}
                                          for g, v in sorted(self.group_pieces.items())}
-        if self.mission_links:  # each ranger's live scouts after its START, once a second (mean, sd)
+        if self.mission_pieces:  # the deployed scouts' subgroups, once a second (mean, sd)
             ml = self.mission_links
             connectivity["mission"] = {
                 "q_min_dbm": {str(g): q for g, q in sorted(self.q_min.items())},
-                **{k: mean_sd([s[k] for s in ml]) for k in ("rssi_dbm", "hops", "relays", "lambda2")},
-                "partition_events": sum(splits([s["pieces"] for s in ml if s["group"] == g])
-                                        for g in sorted({s["group"] for s in ml}))}
+                "rssi_dbm": mean_sd(self.mate_rssi),  # over every hello from a mate: the scouts' own measure
+                "link_rssi_dbm": mean_sd([s["rssi_dbm"] for s in ml]),  # the mean link budget of the q_min graph
+                **{k: mean_sd([s[k] for s in ml]) for k in ("hops", "relays", "lambda2")},
+                "partition_events": sum(splits(v) for _, v in sorted(self.mission_pieces.items()))}
 
     def summary(self) -> dict[str, Any]:
         sim_s = self.hub.sim_end_ns / 1e9

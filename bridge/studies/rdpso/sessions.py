@@ -98,3 +98,19 @@ def score_arena(out: Path, cfg: Path, n: int, duration: float) -> TrialResult:
         "robots": n,
     }
     return TrialResult(metrics, {"best_light": curve.tolist()}, {"best_light": list(range(len(curve)))})
+
+
+def mission_curve(logs: dict[int, list[dict[str, Any]]], length_s: int) -> list[float]:
+    """The swarm's best light reading (subgroup ledgers) by second of mission time, each robot's time counted from
+    its own START (its first ``rdpso`` record), so subgroups that start at different times line up as the thesis'
+    Fig. 5.9 and 5.12 do; 0 before any reading."""
+    best = np.zeros(max(0, length_s))
+    for recs in logs.values():
+        if not recs:
+            continue
+        t0 = recs[0]["t"]
+        for rec in recs:
+            s = int(rec["t"] - t0)
+            if rec["sid"] and rec["ledger_h"] is not None and 0 <= s < len(best):
+                best[s] = max(best[s], rec["ledger_h"])
+    return np.maximum.accumulate(best).tolist() if len(best) else []

@@ -155,10 +155,15 @@ class Router:
         self._queue(_Out(None, frame, "hello"), front=True)
 
     def heard(self, rid: int, addr64: int | None, k: int, x: float, y: float,
-              chi2: tuple[float, float] | None) -> None:
-        """A hello from neighbour ``rid`` in iteration ``k`` (its position; its subgroup best)."""
+              chi2: tuple[float, float] | None, link: bool = True) -> None:
+        """A hello from ``rid`` in iteration ``k`` (its position; its subgroup best). ``link``: it came over a link
+        the swarm counts (its q_min or d_max), so ``rid`` is a one-hop neighbour; otherwise only its address and
+        position are noted, and a neighbour heard only so goes silent (a link break after ``miss_limit``)."""
         if addr64 is not None:
             self.addr[rid] = addr64
+        if not link:
+            self.where[rid] = (x, y)
+            return
         nb = self.neighbours.get(rid)
         if nb is None:
             nb = self.neighbours[rid] = Neighbour(self.addr.get(rid, rid), k, deque(maxlen=5))

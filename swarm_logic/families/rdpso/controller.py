@@ -294,6 +294,7 @@ class Rdpso(IterationSchedule, Controller):
         self.g = float(p["r_w_m"])
         self.rssi: dict[int, float] = {}
         self.heard: dict[int, Hello] = {}
+        self.mate_rssi: list[int] = []  # dBm of this iteration's hellos from subgroup mates (logged)
         self.last_centre: tuple[float, float] | None = None
         self.led: tuple[int, int, int] | None = None
         self.events: list[str] = []
@@ -419,6 +420,7 @@ class Rdpso(IterationSchedule, Controller):
             self.robot.log("rdpso", k=self.k, sid=self.sid, x=self.x, y=self.y, h=_f(self.h), hbest=_f(self.hbest),
                            improved=self.improved, ledger_h=_f(self.ledger_h), chi2=self.chi2, sc=self.sc,
                            n_kill=self.n_kill, n_s=self._group_size(), heard=len(self.heard), chosen=self.chosen,
+                           mate_rssi=self.mate_rssi,
                            alpha=self.alpha, rho=self.rho, events=self.events, worst=self.worst,
                            dropped=self.dropped, **({"comm": self.comm_stats()} if self.router else {}))
 
@@ -427,12 +429,15 @@ class Rdpso(IterationSchedule, Controller):
         r = self.robot
         heard: dict[int, Hello] = {}
         addrs: dict[int, int | None] = {}  # each hello's sender's radio address
+        rssi: dict[int, float] = {}  # this iteration's
         for msg, pkt in self._frames_of_iteration(decode, "foreign"):
             heard[msg.robot] = msg
             addrs[msg.robot] = pkt.src64
             if pkt.rssi_dbm is not None:
-                self.rssi[msg.robot] = float(pkt.rssi_dbm)
+                rssi[msg.robot] = self.rssi[msg.robot] = float(pkt.rssi_dbm)
         self.heard = heard
+        # the signal quality of this iteration's one-hop links within the subgroup (Table 5.2 measures it so)
+        self.mate_rssi = [round(v) for rid, v in sorted(rssi.items()) if self.sid and heard[rid].sid == self.sid]
         table = self.table
         k = self.k
         if self.router is not None:
@@ -610,7 +615,7 @@ class Rdpso(IterationSchedule, Controller):
         router = self.router
         k = self.k
         for rid, msg in heard.items():
-            router.heard(rid, addrs[rid], k, msg.x, msg.y, (msg.ledger_x, msg.ledger_y))
+            router.heard(rid, addrs[rid], k, msg.x, msg.y, (msg.ledger_x, msg.ledger_y), self._is_link(msg))
         router.tick(k)
         self.data_heard = {}
         for src, hops, x, y, payload in router.take_delivered():
@@ -690,6 +695,15 @@ class Rdpso(IterationSchedule, Controller):
         if self.p["link_mode"] == "distance":
             return math.hypot(h.x - self.x, h.y - self.y)
         return self.rssi.get(h.robot)
+
+    def _is_link(self, h: Hello) -> bool:
+        """Whether ``h`` came over a link of the MANET as the RDPSO judges it (q_min, or d_max from positions):
+        the routing layer's one-hop neighbours are those, so a robot heard only faintly is reached through relays.
+        A hello with no measure (a module that reports no RSSI) counts."""
+        link = self._link(h)
+        if link is None:
+            return True
+        return link <= self.p["d_max_m"] if self.p["link_mode"] == "distance" else link >= self.p["q_min_dbm"]
 
     def _connectivity(self) -> tuple[float, float]:
         """chi_4 (eq. 5.12, Algorithm 5.2): k mates that did not choose me, nearest (or strongest) first."""

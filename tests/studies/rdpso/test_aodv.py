@@ -174,6 +174,28 @@ def test_silent_neighbour_breaks_the_link_after_miss_limit_iterations() -> None:
     assert 1 not in rs[0].neighbours and rs[0].stats["link_breaks"] == 1
 
 
+def test_a_robot_heard_below_the_link_threshold_is_no_neighbour_and_is_reached_through_a_relay() -> None:
+    # 0 hears 2 faintly (the radio carries it, the swarm's q_min does not count it): its route to 2 goes via 1
+    air, clock, rs = net(3, {(0, 1), (1, 2), (0, 2)})
+    pos = [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0)]
+    for k in (1, 2, 3, 4, 5):
+        for me, other, link in ((0, 1, True), (1, 0, True), (1, 2, True), (2, 1, True), (0, 2, False), (2, 0, False)):
+            rs[me].heard(other, other + 100, k, *pos[other], None, link)
+        for r in rs:
+            r.tick(k)
+    assert set(rs[0].neighbours) == {1} and rs[0].where[2] == (2.0, 0.0)  # its address and place are known
+    air.links.discard(frozenset((0, 2)))  # (the frames of a faint link are lost)
+    rs[0].send(2, b"far", 0.0, 0.0)
+    run(air, clock, rs, 1.0)
+    assert list(rs[2].take_delivered()) == [(0, 2, 0.0, 0.0, b"far")]
+    assert rs[1].stats["tx_forward"] == 1
+    # a neighbour heard only faintly from now on goes as a silent one does
+    rs[0].heard(1, 101, 6, 1.0, 0.0, None, link=False)
+    for k in (7, 8, 9, 10):
+        rs[0].tick(k)
+    assert 1 not in rs[0].neighbours and rs[0].stats["link_breaks"] == 1
+
+
 def test_malformed_routing_frames_are_counted_and_dropped() -> None:
     air, _clock, rs = net(2, {(0, 1)})
     bad = [

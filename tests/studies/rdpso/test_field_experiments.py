@@ -7,6 +7,7 @@ import json
 import math
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -228,3 +229,54 @@ def test_a_deployment_only_session_ends_after_the_start_and_reports_links(tmp_pa
     mission = s["radio"]["connectivity"]["mission"]
     assert mission["lambda2"]["samples"] >= 1 and mission["rssi_dbm"]["mean"] < -30
     assert mission["partition_events"] == 0
+
+
+def _loop_functions(rssi: np.ndarray) -> Any:
+    """The study's loop functions on a hub of one ranger (robot 0) and five scouts (1-5) judging links at -75 dBm."""
+    from types import SimpleNamespace
+
+    from bridge.studies.rdpso.loop_functions import RdpsoLoopFunctions
+
+    robots = [SimpleNamespace(id=0, carrier=None, params={})] + [
+        SimpleNamespace(id=i, carrier=0, params={"link_mode": "rssi", "q_min_dbm": -75.0}) for i in range(1, 6)]
+    medium = SimpleNamespace(medium=SimpleNamespace(mean_rssi=lambda: rssi))
+    hub = SimpleNamespace(plan=SimpleNamespace(robots=robots),
+                          cfg=SimpleNamespace(section=lambda name: SimpleNamespace(kind="light")),
+                          world=SimpleNamespace(carried=set()), medium=lambda name: medium)
+    lf = RdpsoLoopFunctions(hub)
+    lf.deployed[0] = {"t_s": 1.0}
+    return lf
+
+
+def test_link_statistics_follow_the_rdpso_subgroups_of_the_sample_not_the_rangers_groups() -> None:
+    # scouts 1-5 on a line 2 m apart: -70 dBm to a neighbour on the line, -90 dBm to anyone farther
+    n = 6
+    rssi = np.full((n, n), -90.0)
+    for i in range(1, 5):
+        rssi[i, i + 1] = rssi[i + 1, i] = -70.0
+    lf = _loop_functions(rssi)
+    for robot, sid in ((1, 7), (2, 7), (3, 7), (4, 0), (5, 9)):  # 4 excluded, 5 alone in subgroup 9
+        lf.on_log(robot, "rdpso", {"sid": sid, "mate_rssi": [-70, -71] if sid == 7 else []}, 0)
+    lf.on_radio_sample(0, list(range(n)), np.ones((n, n)))
+    assert [(s["sid"], s["n"]) for s in lf.mission_links] == [(7, 3)]  # the one subgroup of two or more
+    s = lf.mission_links[0]
+    assert s["relays"] == 1.0 and s["lambda2"] == pytest.approx(1.0)  # 1-2-3: one relay between 1 and 3
+    conn: dict[str, Any] = {}
+    lf.radio_report(conn)
+    mission = conn["mission"]
+    assert mission["rssi_dbm"]["mean"] == pytest.approx(-70.5) and mission["rssi_dbm"]["samples"] == 6
+    assert mission["relays"]["mean"] == 1.0 and mission["partition_events"] == 0  # the five are one chain
+    rssi[3, 4] = rssi[4, 3] = -90.0  # the chain breaks between 3 and 4: the ranger's scouts fall in two
+    lf.on_radio_sample(1, list(range(n)), np.ones((n, n)))
+    lf.radio_report(conn)
+    assert conn["mission"]["partition_events"] == 1
+
+
+def test_the_mission_curve_counts_each_robot_from_its_own_start() -> None:
+    from bridge.studies.rdpso.sessions import mission_curve
+
+    logs = {1: [{"t": 10.2, "sid": 1, "ledger_h": 100.0}, {"t": 12.2, "sid": 1, "ledger_h": 300.0}],
+            2: [{"t": 50.0, "sid": 2, "ledger_h": 200.0}, {"t": 51.0, "sid": 0, "ledger_h": 900.0},
+                {"t": 53.5, "sid": 2, "ledger_h": 400.0}]}
+    assert mission_curve(logs, 5) == [200.0, 200.0, 300.0, 400.0, 400.0]
+    assert mission_curve(logs, 0) == []
