@@ -140,7 +140,8 @@ class RdpsoLoopFunctions(LoopFunctions):
         world = self.hub.world
         idx = {r: i for i, r in enumerate(live)}
         rssi_live = None
-        subgroups: dict[tuple[int, int], list[int]] = defaultdict(list)  # (ranger, sid) -> members
+        subgroups: dict[int, list[int]] = defaultdict(list)  # sid -> members (recruits may come from any ranger)
+        judge: dict[int, int] = {}  # sid -> the ranger whose scouts' q_min judges its links (its first member's)
         for g in sorted(self.carriers):
             members = [r for r, c in self.group_of.items() if c == g and r in idx and r not in world.carried]
             ix = [idx[r] for r in members]
@@ -150,12 +151,13 @@ class RdpsoLoopFunctions(LoopFunctions):
                     rssi_live = self.hub.medium("radio").medium.mean_rssi()[np.ix_(live, live)]
                 self.mission_pieces[g].append(components(self._judged(g, ix, adj, rssi_live)))
                 for r in members:
-                    if self.sid_of.get(r):
-                        subgroups[(g, self.sid_of[r])].append(idx[r])
-        for (g, sid), ix in sorted(subgroups.items()):
+                    if sid := self.sid_of.get(r):
+                        subgroups[sid].append(idx[r])
+                        judge.setdefault(sid, g)
+        for sid, ix in sorted(subgroups.items()):
             if len(ix) >= 2:
-                sub = self._judged(g, ix, adj, rssi_live)
-                self.mission_links.append({"group": g, "sid": sid, **link_stats(sub, rssi_live[np.ix_(ix, ix)])})
+                sub = self._judged(judge[sid], ix, adj, rssi_live)
+                self.mission_links.append({"sid": sid, **link_stats(sub, rssi_live[np.ix_(ix, ix)])})
 
     def _judged(self, g: int, ix: list[int], adj: np.ndarray, rssi_live: np.ndarray) -> np.ndarray:
         """The links among ``ix`` (indices into the live robots) as ranger ``g``'s scouts judge them: the mean RSSI

@@ -231,20 +231,23 @@ def test_a_deployment_only_session_ends_after_the_start_and_reports_links(tmp_pa
     assert mission["partition_events"] == 0
 
 
-def _loop_functions(rssi: np.ndarray) -> Any:
-    """The study's loop functions on a hub of one ranger (robot 0) and five scouts (1-5) judging links at -75 dBm."""
+def _loop_functions(rssi: np.ndarray, carriers: dict[int, int | None]) -> Any:
+    """The study's loop functions on a hub of rangers and scouts (robot -> its ranger, None for a ranger), the scouts
+    judging links at -75 dBm; every ranger has broadcast its START."""
     from types import SimpleNamespace
 
     from bridge.studies.rdpso.loop_functions import RdpsoLoopFunctions
 
-    robots = [SimpleNamespace(id=0, carrier=None, params={})] + [
-        SimpleNamespace(id=i, carrier=0, params={"link_mode": "rssi", "q_min_dbm": -75.0}) for i in range(1, 6)]
+    robots = [SimpleNamespace(id=r, carrier=c, params={} if c is None else {"link_mode": "rssi", "q_min_dbm": -75.0})
+              for r, c in carriers.items()]
     medium = SimpleNamespace(medium=SimpleNamespace(mean_rssi=lambda: rssi))
     hub = SimpleNamespace(plan=SimpleNamespace(robots=robots),
                           cfg=SimpleNamespace(section=lambda name: SimpleNamespace(kind="light")),
                           world=SimpleNamespace(carried=set()), medium=lambda name: medium)
     lf = RdpsoLoopFunctions(hub)
-    lf.deployed[0] = {"t_s": 1.0}
+    for r, c in carriers.items():
+        if c is None:
+            lf.deployed[r] = {"t_s": 1.0}
     return lf
 
 
@@ -254,7 +257,7 @@ def test_link_statistics_follow_the_rdpso_subgroups_of_the_sample_not_the_ranger
     rssi = np.full((n, n), -90.0)
     for i in range(1, 5):
         rssi[i, i + 1] = rssi[i + 1, i] = -70.0
-    lf = _loop_functions(rssi)
+    lf = _loop_functions(rssi, {0: None, 1: 0, 2: 0, 3: 0, 4: 0, 5: 0})
     for robot, sid in ((1, 7), (2, 7), (3, 7), (4, 0), (5, 9)):  # 4 excluded, 5 alone in subgroup 9
         lf.on_log(robot, "rdpso", {"sid": sid, "mate_rssi": [-70, -71] if sid == 7 else []}, 0)
     lf.on_radio_sample(0, list(range(n)), np.ones((n, n)))
@@ -270,6 +273,17 @@ def test_link_statistics_follow_the_rdpso_subgroups_of_the_sample_not_the_ranger
     lf.on_radio_sample(1, list(range(n)), np.ones((n, n)))
     lf.radio_report(conn)
     assert conn["mission"]["partition_events"] == 1
+
+
+def test_a_subgroup_that_recruited_another_rangers_scout_is_sampled_whole() -> None:
+    # rangers 0 and 3; scouts 1 and 2 (ranger 0's) and 4 (ranger 3's) form subgroup 7, on a chain 1-2-4
+    rssi = np.full((5, 5), -90.0)
+    rssi[1, 2] = rssi[2, 1] = rssi[2, 4] = rssi[4, 2] = -70.0
+    lf = _loop_functions(rssi, {0: None, 1: 0, 2: 0, 3: None, 4: 3})
+    for robot in (1, 2, 4):
+        lf.on_log(robot, "rdpso", {"sid": 7}, 0)
+    lf.on_radio_sample(0, list(range(5)), np.ones((5, 5)))
+    assert [(s["sid"], s["n"], s["relays"]) for s in lf.mission_links] == [(7, 3, 1.0)]
 
 
 def test_the_mission_curve_counts_each_robot_from_its_own_start() -> None:
