@@ -140,8 +140,20 @@ def _local_cluster(scratch: Path, n_workers: int) -> LocalCluster:
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Any:
-    """Two worker processes on this machine; a task is given up after the third worker died under it."""
+    """Two worker processes on this machine; a task is given up after the third worker died under it. The tests
+    that share it kill no worker: on a loaded machine a nanny may not bring one back before the next test."""
     scratch = tmp_path_factory.mktemp("dask")
+    with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 2, "temporary-directory": str(scratch)}),
+        _local_cluster(scratch, 2) as c,
+    ):
+        yield c
+
+
+@pytest.fixture
+def killable_cluster(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """A cluster like ``cluster``, of this test's own: for a test whose trials kill their workers."""
+    scratch = tmp_path_factory.mktemp("dask-killable")
     with (
         dask.config.set({"distributed.scheduler.allowed-failures": 2, "temporary-directory": str(scratch)}),
         _local_cluster(scratch, 2) as c,
@@ -177,8 +189,9 @@ def test_a_cluster_run_writes_what_a_local_run_writes(tmp_path: Path, cluster: L
 
 
 def test_a_lost_worker_s_trial_runs_on_another_and_a_raising_trial_fails_once(
-    tmp_path: Path, cluster: LocalCluster
+    tmp_path: Path, killable_cluster: LocalCluster
 ) -> None:
+    cluster = killable_cluster
     local, remote = tmp_path / "local", tmp_path / "remote"
     (local / "attempts").mkdir(parents=True)
     (local / "attempts" / "2").write_text("a worker died here before\n")  # so that this process does not exit
@@ -356,8 +369,9 @@ def test_a_worker_that_fails_the_code_check_did_not_answer() -> None:
 
 
 def test_a_trial_that_kills_every_worker_fails_in_the_same_words_each_run(
-    tmp_path: Path, cluster: LocalCluster
+    tmp_path: Path, killable_cluster: LocalCluster
 ) -> None:
+    cluster = killable_cluster
     a, b = tmp_path / "a", tmp_path / "b"
     for out in (a, b):
         assert _experiment("test-killing", "--cluster", cluster.scheduler_address, "--out", str(out)) == 1
