@@ -138,10 +138,8 @@ def _local_cluster(scratch: Path, n_workers: int) -> LocalCluster:
     )
 
 
-@pytest.fixture(scope="module")
-def cluster(tmp_path_factory: pytest.TempPathFactory) -> Any:
-    """Two worker processes on this machine; a task is given up after the third worker died under it. The tests
-    that share it kill no worker: on a loaded machine a nanny may not bring one back before the next test."""
+def _two_workers(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """Two worker processes on this machine; a task is given up after the third worker died under it."""
     scratch = tmp_path_factory.mktemp("dask")
     with (
         dask.config.set({"distributed.scheduler.allowed-failures": 2, "temporary-directory": str(scratch)}),
@@ -150,15 +148,17 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Any:
         yield c
 
 
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """The module's shared cluster. The tests that share it kill no worker: on a loaded machine a nanny may not bring
+    one back before the next test."""
+    yield from _two_workers(tmp_path_factory)
+
+
 @pytest.fixture
 def killable_cluster(tmp_path_factory: pytest.TempPathFactory) -> Any:
-    """A cluster like ``cluster``, of this test's own: for a test whose trials kill their workers."""
-    scratch = tmp_path_factory.mktemp("dask-killable")
-    with (
-        dask.config.set({"distributed.scheduler.allowed-failures": 2, "temporary-directory": str(scratch)}),
-        _local_cluster(scratch, 2) as c,
-    ):
-        yield c
+    """A cluster of this test's own, for a test whose trials kill their workers."""
+    yield from _two_workers(tmp_path_factory)
 
 
 def _experiment(*args: str) -> int:

@@ -25,6 +25,7 @@ from bridge.core.recorder import register_schema
 from bridge.media.radio import splits
 from bridge.studies.rdpso.comm_stats import comm_report
 from bridge.studies.rdpso.deployment import covered_share, dispersion, link_stats, mean_sd
+from swarm_logic.families.rdpso.graph import adjacency
 from swarm_logic.graph import components
 
 if TYPE_CHECKING:
@@ -165,7 +166,7 @@ class RdpsoLoopFunctions(LoopFunctions):
         q = self.q_min.get(g)
         if q is None:
             return adj[np.ix_(ix, ix)]
-        good = rssi_live[np.ix_(ix, ix)] >= q
+        good = adjacency(rssi_live[np.ix_(ix, ix)], "rssi", q)
         return good & good.T
 
     def radio_report(self, connectivity: dict[str, Any]) -> None:

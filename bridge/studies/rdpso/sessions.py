@@ -67,20 +67,16 @@ def score_arena(out: Path, cfg: Path, n: int, duration: float) -> TrialResult:
     """R1/R2 figures of one arena session from its recording."""
     (ox, oy), peak, sub_peak = arena_peaks(cfg)
     logs, ts, xs, ys = read_rdpso_session(out)
-    best_by_second = np.full(int(duration), np.nan)
     t_light = None
     improved = total = 0
     for recs in logs.values():
         for rec in recs:
             total += 1
             improved += bool(rec["improved"])
-            if rec["sid"] and rec["ledger_h"] is not None:
-                s = int(rec["t"])
-                if 0 <= s < len(best_by_second):
-                    best_by_second[s] = max(np.nan_to_num(best_by_second[s], nan=-1), rec["ledger_h"])
-                if rec["ledger_h"] >= 0.95 * peak and (t_light is None or rec["t"] < t_light):
-                    t_light = rec["t"]
-    curve = np.fmax.accumulate(np.nan_to_num(best_by_second, nan=0.0))
+            if rec["sid"] and rec["ledger_h"] is not None and rec["ledger_h"] >= 0.95 * peak and \
+                    (t_light is None or rec["t"] < t_light):
+                t_light = rec["t"]
+    curve = mission_curve(logs, int(duration), from_start=False)
     t_near = None
     if len(ts):
         d = np.hypot(xs - ox, ys - oy)
@@ -90,25 +86,25 @@ def score_arena(out: Path, cfg: Path, n: int, duration: float) -> TrialResult:
         "converged": t_light is not None,
         "t_converge": None if t_light is None else round(t_light, 2),
         "t_near_025": None if t_near is None else round(t_near, 2),
-        "final_best": float(curve[-1]) if len(curve) else None,
+        "final_best": curve[-1] if curve else None,
         "peak_counts": peak,
         "suboptimal_counts": sub_peak,
         "improvement_rate": round(improved / max(1, total), 4),
         "robot_iterations": total,
         "robots": n,
     }
-    return TrialResult(metrics, {"best_light": curve.tolist()}, {"best_light": list(range(len(curve)))})
+    return TrialResult(metrics, {"best_light": curve}, {"best_light": list(range(len(curve)))})
 
 
-def mission_curve(logs: dict[int, list[dict[str, Any]]], length_s: int) -> list[float]:
-    """The swarm's best light reading (subgroup ledgers) by second of mission time, each robot's time counted from
-    its own START (its first ``rdpso`` record), so subgroups that start at different times line up as the thesis'
-    Fig. 5.9 and 5.12 do; 0 before any reading."""
+def mission_curve(logs: dict[int, list[dict[str, Any]]], length_s: int, from_start: bool = True) -> list[float]:
+    """The swarm's best light reading (subgroup ledgers) by second, of the session or (``from_start``) of mission
+    time, each robot's counted from its own START (its first ``rdpso`` record), so subgroups that start at
+    different times line up as the thesis' Fig. 5.9 and 5.12 do; 0 before any reading."""
     best = np.zeros(max(0, length_s))
     for recs in logs.values():
         if not recs:
             continue
-        t0 = recs[0]["t"]
+        t0 = recs[0]["t"] if from_start else 0.0
         for rec in recs:
             s = int(rec["t"] - t0)
             if rec["sid"] and rec["ledger_h"] is not None and 0 <= s < len(best):

@@ -701,9 +701,8 @@ class Rdpso(IterationSchedule, Controller):
         the routing layer's one-hop neighbours are those, so a robot heard only faintly is reached through relays.
         A hello with no measure (a module that reports no RSSI) counts."""
         link = self._link(h)
-        if link is None:
-            return True
-        return link <= self.p["d_max_m"] if self.p["link_mode"] == "distance" else link >= self.p["q_min_dbm"]
+        mode = self.p["link_mode"]
+        return link is None or bool(graph.linked(link, mode, self.p["d_max_m" if mode == "distance" else "q_min_dbm"]))
 
     def _connectivity(self) -> tuple[float, float]:
         """chi_4 (eq. 5.12, Algorithm 5.2): k mates that did not choose me, nearest (or strongest) first."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Hashable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -27,6 +28,11 @@ def _check_mode(mode: str) -> None:
         raise ValueError(f"unknown link mode {mode!r}; allowed: {', '.join(MODES)}")
 
 
+def linked(link: Any, mode: str, threshold: float) -> Any:
+    """Eq. 4.12's link rule, for one link measure or an array of them: l <= d_max (distance) or l >= q_min (rssi)."""
+    return link <= threshold if mode == "distance" else link >= threshold
+
+
 def adjacency(links: np.ndarray, mode: str, threshold: float) -> np.ndarray:
     """Adjacency matrix A_c of eq. 4.12: a_ij = 1 if l_ij <= d_max (distance) or l_ij >= q_min (rssi), a_ii = 0.
 
@@ -39,7 +45,7 @@ def adjacency(links: np.ndarray, mode: str, threshold: float) -> np.ndarray:
         raise ValueError(f"links must be a square N x N array, got shape {lk.shape}")
     present = lk != 0.0  # NaN != 0 is True, but NaN fails both threshold comparisons below
     with np.errstate(invalid="ignore"):
-        ok = lk <= threshold if mode == "distance" else lk >= threshold
+        ok = linked(lk, mode, threshold)
     a = (present & ok).astype(np.int64)
     np.fill_diagonal(a, 0)
     return a
