@@ -14,6 +14,13 @@ position broadcast is the AODV hello); a neighbour silent for ``miss_limit`` (3)
 that the module reports undelivered, breaks the link: routes over it are invalidated and a route error (RERR,
 the thesis' unsolicited route reply with an infinite metric) tells the upstream nodes.
 
+Route requests and replies count only from a neighbour, a robot whose hellos arrive over a link the swarm judges
+good (eq. 4.12: RSSI >= q_min, or within d_max). A faint frame still gets through now and then; a route built on
+one is a route into the "communication gray zone" (Lundgren et al., WoWMoM 2002), where broadcasts arrive and
+unicasts fail, and would make every route one hop. Their remedy, a signal-strength threshold on control packets,
+is this rule; such frames are counted (``control_not_neighbour``) and dropped. Data and route errors are taken
+from anyone: a packet that arrived is delivered, and an error only touches routes through its sender.
+
 RDPSO-AODV (``mode = "rdpso"``, Algorithm 6.1): a node forwards a data packet to the neighbour whose *predicted*
 next position is nearest the destination's predicted position (eq. 6.3), each neighbour's prediction being one
 deterministic step of the RDPSO (eq. 4.11 with r = 1/2, only the cognitive and social terms, digest A on the
@@ -100,7 +107,8 @@ STAT_NAMES = ("tx_frames", "tx_hello", "tx_data", "tx_forward", "tx_control", "t
               "rreq_sent", "rreq_forwarded", "rrep_sent", "rerr_sent", "rreq_duplicate", "route_discoveries",
               "discovery_failed", "data_originated", "data_delivered", "data_duplicate", "data_dropped_buffer",
               "data_dropped_no_route", "control_dropped_buffer", "data_dropped_ttl", "data_dropped_link", "loops",
-              "geo_forwarded", "aodv_forwarded", "hops_delivered", "link_breaks", "malformed", "rx_frames")
+              "geo_forwarded", "aodv_forwarded", "hops_delivered", "link_breaks", "malformed", "rx_frames",
+              "control_not_neighbour")
 
 
 class Router:
@@ -405,8 +413,17 @@ class Router:
         else:
             self.stats["malformed"] += 1
 
+    def _from_neighbour(self, sender: int) -> bool:
+        """Route control counts only over a link the swarm judges good; a faint one is a gray-zone link."""
+        if sender in self.neighbours:
+            return True
+        self.stats["control_not_neighbour"] += 1
+        return False
+
     def _on_rreq(self, data: bytes, sender: int) -> None:
         _, _, _, ttl, hops, orig, orig_seq, dst, dst_seq, flags, rid = RREQ.unpack(data)
+        if not self._from_neighbour(sender):
+            return
         if orig == self.me or (orig, rid) in self.seen_rreq:
             self.stats["rreq_duplicate"] += 1
             return
@@ -442,6 +459,8 @@ class Router:
 
     def _on_rrep(self, data: bytes, sender: int) -> None:
         _, _, _, hops, dst, dst_seq, orig, ttl = RREP.unpack(data)
+        if not self._from_neighbour(sender):
+            return
         hops += 1
         self._update_route(dst, sender, hops, dst_seq, True)
         if orig == self.me:

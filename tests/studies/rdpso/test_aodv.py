@@ -184,11 +184,14 @@ def test_a_robot_heard_below_the_link_threshold_is_no_neighbour_and_is_reached_t
         for r in rs:
             r.tick(k)
     assert set(rs[0].neighbours) == {1} and rs[0].where[2] == (2.0, 0.0)  # its address and place are known
-    air.links.discard(frozenset((0, 2)))  # (the frames of a faint link are lost)
+    # the faint link still carries frames: 2 hears 0's route request directly and through 1, and answers only
+    # the one from its neighbour, so the route is two hops and no reply crosses the faint link
     rs[0].send(2, b"far", 0.0, 0.0)
     run(air, clock, rs, 1.0)
     assert list(rs[2].take_delivered()) == [(0, 2, 0.0, 0.0, b"far")]
     assert rs[1].stats["tx_forward"] == 1
+    assert (rs[0].routes[2].next_hop, rs[0].routes[2].hops) == (1, 2) and rs[2].routes[0].next_hop == 1
+    assert rs[2].stats["control_not_neighbour"] == 1 and rs[2].stats["rrep_sent"] == 1
     # a neighbour heard only faintly from now on goes as a silent one does
     rs[0].heard(1, 101, 6, 1.0, 0.0, None, link=False)
     for k in (7, 8, 9, 10):
