@@ -16,10 +16,11 @@ the thesis' unsolicited route reply with an infinite metric) tells the upstream 
 
 Route requests and replies count only from a neighbour, a robot whose hellos arrive over a link the swarm judges
 good (eq. 4.12: RSSI >= q_min, or within d_max). A faint frame still gets through now and then; a route built on
-one is a route into the "communication gray zone" (Lundgren et al., WoWMoM 2002), where broadcasts arrive and
-unicasts fail, and would make every route one hop. Their remedy, a signal-strength threshold on control packets,
-is this rule; such frames are counted (``control_not_neighbour``) and dropped. Data and route errors are taken
-from anyone: a packet that arrived is delivered, and an error only touches routes through its sender.
+one leaves the MANET the swarm keeps and makes nearly every route one hop, and on real radios such a link is the
+"communication gray zone" (Lundgren et al., WoWMoM 2002), where broadcasts arrive and unicasts are often lost.
+Their remedy, a signal-strength threshold on control packets, is this rule; such frames are counted
+(``control_not_neighbour``) and dropped. Data and route errors are taken from anyone: a packet that arrived is
+delivered, and an error only touches routes through its sender.
 
 RDPSO-AODV (``mode = "rdpso"``, Algorithm 6.1): a node forwards a data packet to the neighbour whose *predicted*
 next position is nearest the destination's predicted position (eq. 6.3), each neighbour's prediction being one
