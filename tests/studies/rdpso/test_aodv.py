@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import pytest
 
+from bridge.experiments.runner import Outcome, Trial, TrialResult, get_experiment
 from bridge.numerical import runner as numerical
 from bridge.numerical.objectives import make_field
 from swarm_logic.families.rdpso import aodv
@@ -348,3 +349,33 @@ def test_routed_sharing_in_the_co_simulation(tmp_path) -> None:
     for r in summary["per_robot"]:
         assert r["xbee_module"]["serial_rx_overflow"] == 0  # flow control: nothing lost in the module's buffer
         assert r["xbee_module"]["malformed_frames"] == 0
+
+
+def _e6(cell: dict, **metrics: float) -> Outcome:
+    return Outcome(Trial("e6-comm", cell, 0, 1, False, ""), TrialResult(metrics), None)
+
+
+def test_e6_judges_the_thesis_regular_set_over_aodv_against_the_optimised_set_over_rdpso_aodv() -> None:
+    # the thesis' "regular" RDPSO is regular sharing over the XBee's own AODV; its "optimized" one adds both
+    # section 6.1's sharing and 6.2's RDPSO-AODV (section 6.3.1); regular sharing over RDPSO-AODV is an extra cell
+    def cell(comm: str, routing: str, group: int, packets: float, busy: float, pdr: float, hops: float,
+             overhead: float) -> Outcome:
+        return _e6({"comm": comm, "routing": routing, "group": group}, packets_per_robot=packets,
+                   radio_busy_share=busy, pause_share=busy / 2, delivery_ratio=pdr, hops=hops, overhead=overhead)
+
+    outs = [cell("regular", "aodv", 5, 740, 0.35, 0.99, 1.3, 1.0), cell("optimised", "rdpso", 5, 420, 0.10, 0.99,
+            1.3, 0.3), cell("regular", "aodv", 15, 1500, 0.6, 0.65, 1.6, 1.2), cell("optimised", "rdpso", 15, 600,
+            0.2, 0.93, 1.3, 0.4),
+            # regular sharing over RDPSO-AODV: judged against instead, every verdict would turn
+            cell("regular", "rdpso", 5, 500, 0.5, 0.99, 1.0, 0.2), cell("regular", "rdpso", 15, 900, 0.5, 0.95, 1.0,
+            0.2)]
+    e6 = get_experiment("e6-comm")()
+    verdict = {t.id: t.evaluate(outs) for t in e6.targets()}
+    assert verdict["R8a"][:2] == ("740 vs 420 (-43%); regular sharing over RDPSO-AODV: 500", True)
+    assert verdict["R8b"][1] is True and "regular sharing over RDPSO-AODV: 50%" in verdict["R8b"][0]
+    assert verdict["R9"][:2] == ("65% vs 93% (regular at 5: 99%)", True)
+    ours, passed, _ = verdict["R10"]
+    assert passed is True and "15: hops 1.60 vs 1.30 (-19%), overhead 1.20 vs 0.40" in ours
+    assert "AODV 1.30 vs RDPSO-AODV 1.00 hops" in ours
+    # without the optimised set's cells there is nothing to judge
+    assert all(t.evaluate(outs[4:])[1] is None for t in e6.targets())
