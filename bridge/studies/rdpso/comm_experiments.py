@@ -124,8 +124,11 @@ class E6Comm(Experiment):
             return "no data", None, "needs both subgroup-of-5 cells"
         cut = 1 - opt / reg
         split = self._split(outcomes, "packets_per_robot", ".0f")
-        return (f"{reg:.0f} vs {opt:.0f} ({-cut:+.0%})" + (f"; {split}" if split else ""), 0.35 <= cut <= 0.55,
-                "medians over trials")
+        dreg, dopt = self._pair(outcomes, "data_per_robot", 5)
+        return (f"{reg:.0f} vs {opt:.0f} ({-cut:+.0%}); data packets originated {dreg:.0f} vs {dopt:.0f}"
+                + (f"; {split}" if split else ""), 0.35 <= cut <= 0.55,
+                "medians over trials; packets are every frame a robot handed its module (hellos, data, forwards, "
+                "routing control); the thesis counted a regular robot's 4 data packets to its subgroup each iteration")
 
     def _pause(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
         reg, opt = self._pair(outcomes, "radio_busy_share", 5)

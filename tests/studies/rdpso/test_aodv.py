@@ -361,6 +361,7 @@ def test_e6_judges_the_thesis_regular_set_over_aodv_against_the_optimised_set_ov
     def cell(comm: str, routing: str, group: int, packets: float, busy: float, pdr: float, hops: float,
              overhead: float) -> Outcome:
         return _e6({"comm": comm, "routing": routing, "group": group}, packets_per_robot=packets,
+                   data_per_robot=700 if comm == "regular" else 100,
                    radio_busy_share=busy, pause_share=busy / 2, delivery_ratio=pdr, hops=hops, overhead=overhead)
 
     outs = [cell("regular", "aodv", 5, 740, 0.35, 0.99, 1.3, 1.0), cell("optimised", "rdpso", 5, 420, 0.10, 0.99,
@@ -371,7 +372,8 @@ def test_e6_judges_the_thesis_regular_set_over_aodv_against_the_optimised_set_ov
             0.2)]
     e6 = get_experiment("e6-comm")()
     verdict = {t.id: t.evaluate(outs) for t in e6.targets()}
-    assert verdict["R8a"][:2] == ("740 vs 420 (-43%); regular sharing over RDPSO-AODV: 500", True)
+    assert verdict["R8a"][:2] == ("740 vs 420 (-43%); data packets originated 700 vs 100; regular sharing over "
+                                  "RDPSO-AODV: 500", True)
     assert verdict["R8b"][1] is True and "regular sharing over RDPSO-AODV: 50%" in verdict["R8b"][0]
     assert verdict["R9"][:2] == ("65% vs 93% (regular at 5: 99%)", True)
     ours, passed, _ = verdict["R10"]
