@@ -897,7 +897,7 @@ class XBeeModule:
             "dst_addr": 0xFFFF if bcast else f.dst16, "pan_id": network_pan16(self.net_epid),
             "channel": self.net_channel, "ack": not bcast, "mac_retries": 0 if bcast else 3,
             "psdu_len": min(psdu, 127), "seq": self._seq, "payload": f.payload, "opts": 0, "aps": list(f.aps),
-            "nwk": list(f.nwk),
+            "nwk": list(f.nwk), "hops": f.hops,  # (hops: the statistics' count, left out of psdu_len: not on air)
         })
         self.counters["tx_air_frames"] += 1
         return self._handle

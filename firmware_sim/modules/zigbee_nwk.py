@@ -65,6 +65,13 @@ def valid_nwk(n: object) -> bool:
             and 0 <= n[4] <= 0xFF and 0 <= n[5] < 1 << 64 and 0 <= n[6] <= 0xFF and 0 <= n[7] <= 0x03)
 
 
+def air_hops(fr: dict) -> int:
+    """The hops a unicast took to get here: the simulation's count that travels with the frame (``hops``), which a
+    real frame does not carry (its NWK radius only counts down from a value the receiver does not know)."""
+    h = fr.get("hops")
+    return h if type(h) is int and 0 < h < 256 else 1
+
+
 def link_cost(rssi_dbm: float, sensitivity_dbm: float) -> int:
     """ZigBee link cost 1 (strong) .. 7 (at the edge): Ember's LQI-to-cost steps, the LQI taken from the margin
     over the sensitivity (assumed: a 30 dB margin is a perfect link)."""
@@ -77,7 +84,7 @@ def link_cost(rssi_dbm: float, sensitivity_dbm: float) -> int:
 
 STAT_KEYS = ("relayed", "relay_no_route", "relay_link_failures", "status_sent", "bcast_relayed", "btt_full",
              "rreq_sent", "rrep_sent", "route_found", "route_not_found", "address_not_found", "aps_acks",
-             "aps_duplicates", "discovery_table_full")
+             "aps_duplicates", "discovery_table_full", "data_delivered", "data_hops")
 
 
 class StatsView:
@@ -104,6 +111,7 @@ class MacFrame:
     nwk: list[int]
     on_done: Callable[[int, str], None] | None = None
     handle: int = -1
+    hops: int = 1  # transmissions this frame has taken so far, this one included (the statistics' count, not on air)
 
 
 @dataclass
@@ -374,7 +382,8 @@ class Nwk:
         for _, f in self.held.pop(dst16, []):
             hop = self._next_hop(t, dst16)
             if hop is not None:
-                self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, self._hop_failed(hop, dst16, f.nwk[1])))
+                self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, self._hop_failed(hop, dst16, f.nwk[1]),
+                                       hops=f.hops))
         for tx in list(self.txs.values()):
             if tx.state == "route" and tx.dst16 == dst16:
                 self._send_data(t, tx)
@@ -385,7 +394,7 @@ class Nwk:
         loses its routes, and the source is told (link failure)."""
         hop = self._next_hop(t, dst16)
         if hop is not None:
-            self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, self._hop_failed(hop, dst16, f.nwk[1])))
+            self._send(t, MacFrame(hop, f.payload, f.aps, f.nwk, self._hop_failed(hop, dst16, f.nwk[1]), hops=f.hops))
             return
         self.held.setdefault(dst16, []).append((t, f))
         self._discover(t, dst16)
@@ -559,7 +568,8 @@ class Nwk:
                 return None
             self.stats["relayed"] += 1
             self._forward(t, MacFrame(None, fr["payload"], tuple(fr.get("aps", (0, 0, 0, 0))),
-                                      [kind, src, dst, radius - 1, seq, src64, counter, flags]), dst)
+                                      [kind, src, dst, radius - 1, seq, src64, counter, flags],
+                                      hops=air_hops(fr) + 1), dst)
             return None
         if src != mac_src:
             self._learn_route(src, mac_src, cost)  # the way back to the source, for its acknowledgement
@@ -581,4 +591,7 @@ class Nwk:
                 return None
             if len(self.seen_aps) > 256:
                 self.seen_aps = {k: v for k, v in self.seen_aps.items() if t - v < APS_DUP_NS}
+        if fr.get("aps", (0,))[0] != 0:  # data for the host (not the ZDO's): how many hops it took
+            self.stats["data_delivered"] += 1
+            self.stats["data_hops"] += air_hops(fr)
         return src64, src, False

@@ -83,6 +83,9 @@ def test_a_unicast_crosses_a_line_of_six_and_the_status_says_what_it_cost() -> N
     assert bytes(rx.rf_data) == b"end to end" and rx.x64bit_source_addr.address == bytearray((BASE).to_bytes(8, "big"))
     assert rx.x16bit_source_addr == XBee16BitAddress.from_hex_string("0100")
     assert [m.nwk.stats["relayed"] > 0 for m in mods[1:5]] == [True] * 4  # each middle router relayed
+    # the destination counts the hops its host's data took (five), and nothing for the acknowledgements or the ZDO
+    assert (mods[5].nwk.stats["data_delivered"], mods[5].nwk.stats["data_hops"]) == (1, 5)
+    assert mods[0].nwk.stats["data_delivered"] == 0 and mods[0].counters["nwk_data_hops"] == 0
     # known now: no discovery the second time
     send(world, 0, 5, b"again", fid=2)
     st = status_of(world, 0, 2)
@@ -95,16 +98,18 @@ def test_a_unicast_crosses_a_line_of_six_and_the_status_says_what_it_cost() -> N
 
 def test_a_broken_link_reroutes_through_another_router() -> None:
     links = line(6) | {frozenset((2, 6)), frozenset((6, 3))}  # node 6 bridges 2 and 3 too
-    world, _ = mesh(7, links)
+    world, mods = mesh(7, links)
     send(world, 0, 5, b"first", fid=1)
     assert status_of(world, 0, 1).transmit_status == TransmitStatus.SUCCESS
     received(world, 5)
+    assert mods[5].nwk.stats["data_hops"] == 5
     links.discard(frozenset((2, 3)))  # the direct link between 2 and 3 breaks
     send(world, 0, 5, b"around", fid=2)
     st = status_of(world, 0, 2)
     assert st.transmit_status == TransmitStatus.SUCCESS
     assert st.transmit_retry_count >= 1 and st.discovery_status.code & 0x02  # a retry, after a new route discovery
     assert [bytes(p.rf_data) for p in received(world, 5)] == [b"around"]
+    assert mods[5].nwk.stats["data_delivered"] == 2 and mods[5].nwk.stats["data_hops"] == 5 + 6  # round by 6
 
 
 def test_a_broken_line_fails_with_a_network_ack_failure_or_no_route() -> None:

@@ -8,6 +8,8 @@ sent, optimised over regular, per window of iterations (target B11).
 
 from __future__ import annotations
 
+import json
+import math
 import tomllib
 from pathlib import Path
 from typing import Any, ClassVar
@@ -22,15 +24,19 @@ from bridge.studies.rdpso.comm_stats import comm_metrics, comm_totals
 from bridge.studies.rdpso.sessions import CONFIGS, read_rdpso_session, run_checked
 
 
-def pavilion_variant(path: Path, seed: int, duration: float, comm: str, routing: str, group: int) -> Path:
+def pavilion_variant(path: Path, seed: int, duration: float, comm: str, routing: str, group: int,
+                     xbee: str = "one_hop") -> Path:
     """hil_configs/rdpso/rdpso_pavilion.toml (15 eSwarBots, three subgroups of 5) with the sharing mode and routing, or
-    with one subgroup of 15 (``group = 15``: the three groups placed together in the pavilion's first half)."""
+    with one subgroup of 15 (``group = 15``: the three groups placed together in the pavilion's first half); ``xbee``:
+    the modules' own routing (``one_hop``, or ``mesh`` as a Series 2's ZigBee firmware routes)."""
     from bridge.core.config import to_toml
 
     raw = tomllib.loads((CONFIGS / "rdpso_pavilion.toml").read_text())
     raw["session"] |= {"seed": seed, "duration_s": duration}
     for g in raw["robots"]:
         g["params"] |= {"comm": comm, "routing": routing, "swarm_seed": seed % (1 << 31)}
+        if xbee != "one_hop":
+            g["xbee"] |= {"routing": xbee}
         if group == 15:
             g["params"] |= {"subgroups_init": 1, "subgroups_max": 3}
     if group == 15:
@@ -73,6 +79,11 @@ class E6Comm(Experiment):
         {"comm": "optimised", "routing": "rdpso", "group": 15},
         {"comm": "regular", "routing": "aodv", "group": 5},
         {"comm": "regular", "routing": "aodv", "group": 15},
+        # the thesis' two sets on modules that route, as its eSwarBots' XBee Series 2 did
+        {"comm": "regular", "routing": "module", "group": 5, "xbee": "mesh"},
+        {"comm": "optimised", "routing": "rdpso", "group": 5, "xbee": "mesh"},
+        {"comm": "regular", "routing": "module", "group": 15, "xbee": "mesh"},
+        {"comm": "optimised", "routing": "rdpso", "group": 15, "xbee": "mesh"},
     ]
 
     def cells(self, smoke: bool) -> list[dict[str, Any]]:
@@ -82,16 +93,22 @@ class E6Comm(Experiment):
         duration = 30.0 if trial.smoke else 360.0
         c = trial.cell
         cfg = pavilion_variant(Path(trial.workdir) / "pavilion.toml", trial.seed, duration, c["comm"], c["routing"],
-                               c["group"])
+                               c["group"], c.get("xbee", "one_hop"))
         out = Path(trial.workdir) / "session"
         run_checked(cfg, out)
         return score_comm(out, duration)
 
     # The thesis' two sets of 20 trials (section 6.3.1): the "regular" RDPSO of chapters 4-5 (every iteration's data
-    # to every mate, over the XBee firmware's own AODV) and the "optimized" one (section 6.1's sharing and 6.2's
-    # RDPSO-based AODV). Every chapter 6 figure compares these two; the other cells split the two changes apart.
-    REGULAR: ClassVar[dict[str, str]] = {"comm": "regular", "routing": "aodv"}
-    OPTIMISED: ClassVar[dict[str, str]] = {"comm": "optimised", "routing": "rdpso"}
+    # to every mate, routed by the AODV inside the XBee ZigBee firmware) and the "optimized" one (section 6.1's
+    # sharing and 6.2's RDPSO-AODV). Every chapter 6 figure compares these two, on modules that route as the
+    # eSwarBots' Series 2 did. The one-hop cells, with all routing in the logic, split the changes apart.
+    REGULAR: ClassVar[dict[str, str]] = {"comm": "regular", "routing": "module", "xbee": "mesh"}
+    OPTIMISED: ClassVar[dict[str, str]] = {"comm": "optimised", "routing": "rdpso", "xbee": "mesh"}
+    ONE_HOP: ClassVar[list[tuple[str, dict[str, Any]]]] = [
+        ("regular/AODV", {"comm": "regular", "routing": "aodv", "xbee": None}),
+        ("regular/RDPSO-AODV", {"comm": "regular", "routing": "rdpso", "xbee": None}),
+        ("optimised/RDPSO-AODV", {"comm": "optimised", "routing": "rdpso", "xbee": None}),
+    ]
 
     def targets(self) -> list[Target]:
         return [
@@ -103,20 +120,35 @@ class E6Comm(Experiment):
             Target("R9", "packet delivery ratio at 15 robots per subgroup, regular vs optimised", "about 65 % vs "
                    "above 90 % (regular about 100 % up to 10 robots)", "optimised >= 90 % and above regular",
                    self._pdr),
-            Target("R10", "hop count and routing overhead, regular (AODV) vs optimised (RDPSO-AODV) RDPSO",
+            Target("R10", "hop count and routing overhead, regular (the module's AODV) vs optimised (RDPSO-AODV)",
                    "not significant for small subgroups; about 20 % fewer hops and a lower overhead at 15",
                    "optimised: fewer hops and a lower overhead than regular at 15", self._routing),
         ]
 
     def _pair(self, outcomes: list[Outcome], metric: str, group: int) -> tuple[float, float]:
         """The metric's medians, regular vs optimised RDPSO, in subgroups of ``group``."""
-        return (median(ok(outcomes, **self.REGULAR, group=group), metric),
-                median(ok(outcomes, **self.OPTIMISED, group=group), metric))
+        return (self._median(outcomes, self.REGULAR, group, metric),
+                self._median(outcomes, self.OPTIMISED, group, metric))
+
+    @staticmethod
+    def _median(outcomes: list[Outcome], cell: dict[str, Any], group: int, metric: str) -> float:
+        results = ok(outcomes, **cell, group=group)
+        if metric == "route_overhead":  # the modules' route discovery too, when they route
+            vals = [r.metrics["overhead_all"] if r.metrics.get("overhead_all") is not None else r.metrics["overhead"]
+                    for r in results if r.metrics.get("overhead") is not None]
+            return float(np.median(vals)) if vals else math.nan
+        if metric != "path_hops":
+            return median(results, metric)
+        # the radio transmissions a delivered packet took: the logic's hops, each as many on the air as the modules'
+        hops = [r.metrics["hops"] * (r.metrics.get("air_hops") or 1.0) for r in results
+                if r.metrics.get("hops") is not None]
+        return float(np.median(hops)) if hops else math.nan
 
     def _split(self, outcomes: list[Outcome], metric: str, fmt: str) -> str:
-        """The median of regular sharing over RDPSO-AODV (subgroups of 5): which of the two changes moves it."""
-        v = median(ok(outcomes, comm="regular", routing="rdpso", group=5), metric)
-        return f"regular sharing over RDPSO-AODV: {format(v, fmt)}" if np.isfinite(v) else ""
+        """The one-hop cells' medians (subgroups of 5): which of the two changes moves the metric."""
+        parts = [f"{name} {format(v, fmt)}" for name, cell in self.ONE_HOP
+                 if np.isfinite(v := self._median(outcomes, cell, 5, metric))]
+        return "one-hop modules, routing in the logic: " + ", ".join(parts) if parts else ""
 
     def _packets(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
         reg, opt = self._pair(outcomes, "packets_per_robot", 5)
@@ -154,18 +186,32 @@ class E6Comm(Experiment):
     def _routing(self, outcomes: list[Outcome]) -> tuple[str, bool | None, str]:
         parts = []
         for g in (5, 15):
-            hr, ho = self._pair(outcomes, "hops", g)
-            orr, oo = self._pair(outcomes, "overhead", g)
+            hr, ho = self._pair(outcomes, "path_hops", g)
+            orr, oo = self._pair(outcomes, "route_overhead", g)
             if not all(np.isfinite(v) for v in (hr, ho, orr, oo)):
                 return "no data", None, "needs the regular and the optimised cells of both subgroup sizes"
             parts.append(f"{g}: hops {hr:.2f} vs {ho:.2f} ({ho / hr - 1:+.0%}), overhead {orr:.2f} vs {oo:.2f}")
             if g == 15:
                 verdict = bool(ho < hr and oo < orr)
-        ra, rg = (median(ok(outcomes, comm="regular", routing=r, group=5), "hops") for r in ("aodv", "rdpso"))
-        if np.isfinite(ra) and np.isfinite(rg):
-            parts.append(f"routing alone (regular sharing, 5): AODV {ra:.2f} vs RDPSO-AODV {rg:.2f} hops")
-        return "; ".join(parts), verdict, ("regular vs optimised RDPSO, medians over trials; hops are averaged over "
-                                           "the packets delivered, as the thesis does")
+        split = self._split(outcomes, "path_hops", ".2f")
+        return ("; ".join(parts) + (f"; {split}" if split else ""), verdict,
+                "regular vs optimised RDPSO, medians over trials; hops: the transmissions a delivered packet took "
+                "(the logic's hops times the modules' hops on the air), averaged over the packets delivered, as the "
+                "thesis does; overhead: route requests, replies and errors per data packet, the logic's and the "
+                "modules' (the requests they originate, not those they relay)")
+
+
+def module_routing(out: Path) -> dict[str, float | None]:
+    """What the modules' own routing did, when they route (mesh; None for modules that deliver one hop), from the
+    session's summary: the hops on the air of the unicasts they delivered to their robots (``air_hops``), and the
+    route requests and replies they originated (``module_route_frames``, relays of requests not counted)."""
+    per_robot = json.loads((out / "summary.json").read_text()).get("per_robot", [])
+    mods = [r.get("xbee_module") or {} for r in per_robot]
+    delivered = sum(m.get("nwk_data_delivered", 0) for m in mods)
+    if not delivered:
+        return {"air_hops": None, "module_route_frames": None}
+    return {"air_hops": round(sum(m.get("nwk_data_hops", 0) for m in mods) / delivered, 4),
+            "module_route_frames": sum(m.get("nwk_rreq_sent", 0) + m.get("nwk_rrep_sent", 0) for m in mods)}
 
 
 def score_comm(out: Path, duration: float) -> TrialResult:
@@ -186,6 +232,11 @@ def score_comm(out: Path, duration: float) -> TrialResult:
     n = len(last)
     metrics: dict[str, Any] = comm_metrics(comm_totals(last), n, duration)
     metrics["improvement_rate"] = round(improved / max(1, total), 4)
+    metrics.update(module_routing(out))
+    data_frames = sum(c.get("tx_data", 0) + c.get("tx_forward", 0) for c in last.values())
+    if metrics["module_route_frames"] is not None and data_frames:  # the routing overhead, the modules' included
+        metrics["overhead_all"] = round(((metrics["overhead"] or 0.0) * data_frames
+                                         + metrics["module_route_frames"]) / data_frames, 4)
     grid = np.arange(0.0, duration + 1e-9, 10.0)
     per_robot = [np.interp(grid, [t for t, _ in s], [v for _, v in s], left=0.0) for s in series.values()]
     return TrialResult(metrics, {"packets": np.round(np.mean(per_robot, axis=0), 1).tolist()},

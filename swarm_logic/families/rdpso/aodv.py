@@ -29,6 +29,13 @@ sign of eq. 6.2) from its last five positions, its personal best chi_1 (from its
 subgroup best chi_2 (from its hello). A packet that comes back to a node that already forwarded it, or for whose
 destination no position is known, falls back to AODV route discovery.
 
+``mode = "module"`` leaves the routing to the radio, as the thesis' "regular" robots did with the AODV inside their
+XBee ZigBee firmware: each data packet goes straight to its destination's 64-bit address (learnt from any frame it
+sent, the hellos included), and the module finds the address and the route, relays and retries; its transmit
+status says whether the packet arrived. It needs modules that route (an XBee's ``routing = "mesh"``); over one-hop
+modules a destination out of range is simply not reached. The logic sees one hop; the hops on the air are the
+modules' count (``nwk_data_hops`` over ``nwk_data_delivered`` in the session's summary).
+
 The router owns the radio's transmit side: frames go to the module while their transmit requests fit in its
 serial receive buffer (``module_buffer``, 202 bytes: the host honours the module's flow control, as a real host
 does with CTS), each until its TX status; the rest wait in a queue of ``buffer`` packets, and a packet that does
@@ -60,6 +67,9 @@ CCA_TRIES = 3  # a frame the channel was too busy for is handed to the module ag
 TX_STATUS_TIMEOUT_S = 6.0  # longer than three APS attempts of a Series 2 module (NH = 30: 1.6 s each)
 SEEN_MAX = 512
 API_OVERHEAD = 18  # bytes of a Series 2 transmit request around its payload, as the module's buffer holds it
+
+
+ROUTING_MODES = ("aodv", "rdpso", "module")
 
 
 def seq_newer(a: int, b: int) -> bool:
@@ -120,8 +130,8 @@ class Router:
                  module_buffer: int = 202,
                  predict: Callable[[Sequence[tuple[float, float]], tuple[float, float] | None,
                                     tuple[float, float] | None], tuple[float, float]] | None = None) -> None:
-        if mode not in ("aodv", "rdpso"):
-            raise ValueError(f"routing: {mode!r} is not one of aodv, rdpso")
+        if mode not in ROUTING_MODES:
+            raise ValueError(f"routing: {mode!r} is not one of {', '.join(ROUTING_MODES)}")
         self.me = me
         self.radio = radio
         self.clock = clock
@@ -216,7 +226,8 @@ class Router:
                 elif not st.ok:
                     self.stats["tx_failed"] += 1
                     if out.hop is not None:
-                        self._link_break(out.hop)
+                        if self.mode != "module":  # (a module that routes has tried its own routes already)
+                            self._link_break(out.hop)
                         if out.data is not None:
                             self.stats["data_dropped_link"] += 1
             elif now - t0 > TX_STATUS_TIMEOUT_S:
@@ -294,6 +305,12 @@ class Router:
         if dst in self.neighbours:  # the destination is a neighbour: straight to it
             self._unicast(dst, frame, kind, key)
             return
+        if self.mode == "module":  # the module routes: straight to the destination's address, if it is known
+            if dst in self.addr:
+                self._unicast(dst, frame, kind, key)
+            else:
+                self.stats["data_dropped_no_route"] += 1
+            return
         if self.mode == "rdpso" and not flags_aodv:
             if key in self.forwarded or (key[0] == self.me and prev is not None):
                 self.stats["loops"] += 1  # it came back: fall back to AODV
@@ -370,6 +387,8 @@ class Router:
         if self.neighbours.pop(rid, None) is not None or any(r.next_hop == rid and r.valid
                                                             for r in self.routes.values()):
             self.stats["link_breaks"] += 1
+        if self.mode == "module":  # the module keeps its own routes: nothing of the logic's to repair or report
+            return
         broken = []
         for dst, r in self.routes.items():
             if r.valid and r.next_hop == rid:

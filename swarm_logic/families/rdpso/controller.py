@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 
 from swarm_logic.controller import DBM_RANGE, MAX_SPEED_MPS, Controller
 from swarm_logic.families.rdpso import fuzzy, graph, motion
-from swarm_logic.families.rdpso.aodv import Router
+from swarm_logic.families.rdpso.aodv import ROUTING_MODES, Router
 from swarm_logic.families.rdpso.est import ScoutDeployment
 from swarm_logic.families.rdpso.messages import (
     F_CALL,
@@ -132,7 +132,7 @@ class Rdpso(IterationSchedule, Controller):
         # regular (the hello, and position and solution to every mate every iteration, routed multi-hop) or
         # optimised (the hello; position and solution to every mate only when the personal best improved)
         "comm": "gossip",
-        "routing": "rdpso",  # rdpso (geographic next hop, eq. 6.3, AODV as fallback) | aodv
+        "routing": "rdpso",  # rdpso (geographic next hop, eq. 6.3, AODV as fallback) | aodv | module (the XBee's mesh)
         "route_buffer": 16,  # packets the routing layer holds for the radio; more are dropped
         "route_ttl": 10,  # hops a route request or data packet may travel
         "discovery_timeout_s": 1.0,  # wait for a route reply (doubled on each of two retries)
@@ -198,8 +198,8 @@ class Rdpso(IterationSchedule, Controller):
                              f"got {p['comm_window_s']!r}")
         if p["comm"] not in ("gossip", "regular", "optimised"):
             raise ValueError(f"comm: {p['comm']!r} is not one of gossip, regular, optimised")
-        if p["routing"] not in ("aodv", "rdpso"):
-            raise ValueError(f"routing: {p['routing']!r} is not one of aodv, rdpso")
+        if p["routing"] not in ROUTING_MODES:
+            raise ValueError(f"routing: {p['routing']!r} is not one of {', '.join(ROUTING_MODES)}")
         if not 0 <= p["send_jitter_s"] < p["comm_window_s"]:
             raise ValueError(f"send_jitter_s: must lie in [0, comm_window_s = {p['comm_window_s']}), "
                              f"got {p['send_jitter_s']!r}")
