@@ -75,7 +75,7 @@ import numpy as np
 
 from firmware_sim.modules import zigbee as zb
 from firmware_sim.modules.zigbee_nwk import STAT_KEYS as NWK_STAT_KEYS
-from firmware_sim.modules.zigbee_nwk import MacFrame, Nwk, valid_nwk
+from firmware_sim.modules.zigbee_nwk import MacFrame, Nwk, air_hops, valid_nwk
 
 MS = 1_000_000  # ns
 START, ESC, XON, XOFF = 0x7E, 0x7D, 0x11, 0x13
@@ -1160,6 +1160,9 @@ class XBeeModule:
             if aps[0] == zb.DIN_PROFILE and aps[3] == zb.DDO_EP:
                 self._ddo_rx(t, src64, src16, aps[1], payload, rssi)
                 return
+            if self.nwk is not None and not bcast:  # a unicast for the host: how many hops it took
+                self.nwk.stats["data_delivered"] += 1
+                self.nwk.stats["data_hops"] += air_hops(fr)
             self._deliver(t, src64, src16, aps, payload, opts)
             return
         if self._emit(t, data, rf_data=True):

@@ -591,7 +591,4 @@ class Nwk:
                 return None
             if len(self.seen_aps) > 256:
                 self.seen_aps = {k: v for k, v in self.seen_aps.items() if t - v < APS_DUP_NS}
-        if fr.get("aps", (0,))[0] != 0:  # data for the host (not the ZDO's): how many hops it took
-            self.stats["data_delivered"] += 1
-            self.stats["data_hops"] += air_hops(fr)
         return src64, src, False

@@ -20,7 +20,7 @@ from bridge.experiments.runner import Experiment, Outcome, Target, Trial, TrialR
 from bridge.experiments.stats import median, ok
 from bridge.numerical import runner as numerical
 from bridge.numerical.objectives import LightField
-from bridge.studies.rdpso.comm_stats import comm_metrics, comm_totals
+from bridge.studies.rdpso.comm_stats import CONTROL, comm_metrics, comm_totals
 from bridge.studies.rdpso.sessions import CONFIGS, read_rdpso_session, run_checked
 
 
@@ -132,17 +132,8 @@ class E6Comm(Experiment):
 
     @staticmethod
     def _median(outcomes: list[Outcome], cell: dict[str, Any], group: int, metric: str) -> float:
-        results = ok(outcomes, **cell, group=group)
-        if metric == "route_overhead":  # the modules' route discovery too, when they route
-            vals = [r.metrics["overhead_all"] if r.metrics.get("overhead_all") is not None else r.metrics["overhead"]
-                    for r in results if r.metrics.get("overhead") is not None]
-            return float(np.median(vals)) if vals else math.nan
-        if metric != "path_hops":
-            return median(results, metric)
-        # the radio transmissions a delivered packet took: the logic's hops, each as many on the air as the modules'
-        hops = [r.metrics["hops"] * (r.metrics.get("air_hops") or 1.0) for r in results
-                if r.metrics.get("hops") is not None]
-        return float(np.median(hops)) if hops else math.nan
+        vals = [v for r in ok(outcomes, **cell, group=group) if (v := _trial_value(r.metrics, metric)) is not None]
+        return float(np.median(vals)) if vals else math.nan
 
     def _split(self, outcomes: list[Outcome], metric: str, fmt: str) -> str:
         """The one-hop cells' medians (subgroups of 5): which of the two changes moves the metric."""
@@ -201,6 +192,18 @@ class E6Comm(Experiment):
                 "modules' (the requests they originate, not those they relay)")
 
 
+def _trial_value(m: dict[str, Any], metric: str) -> float | None:
+    """One trial's metric, or one R10 derives from its metrics: ``path_hops``, the radio transmissions a delivered
+    packet took (the logic's hops, each as many on the air as the modules'), and ``route_overhead``, the modules'
+    route discovery included when they route."""
+    if metric == "path_hops":
+        return None if m.get("hops") is None else m["hops"] * (m.get("air_hops") or 1.0)
+    if metric == "route_overhead":
+        metric = "overhead_all" if m.get("overhead_all") is not None else "overhead"
+    v = m.get(metric)
+    return None if v is None else float(v)
+
+
 def module_routing(out: Path) -> dict[str, float | None]:
     """What the modules' own routing did, when they route (mesh; None for modules that deliver one hop), from the
     session's summary: the hops on the air of the unicasts they delivered to their robots (``air_hops``), and the
@@ -230,13 +233,14 @@ def score_comm(out: Path, duration: float) -> TrialResult:
     if not last:
         raise RuntimeError("no routing counters in the robots' logs (comm = gossip?)")
     n = len(last)
-    metrics: dict[str, Any] = comm_metrics(comm_totals(last), n, duration)
+    tot = comm_totals(last)
+    metrics: dict[str, Any] = comm_metrics(tot, n, duration)
     metrics["improvement_rate"] = round(improved / max(1, total), 4)
     metrics.update(module_routing(out))
-    data_frames = sum(c.get("tx_data", 0) + c.get("tx_forward", 0) for c in last.values())
+    data_frames = tot["tx_data"] + tot["tx_forward"]
     if metrics["module_route_frames"] is not None and data_frames:  # the routing overhead, the modules' included
-        metrics["overhead_all"] = round(((metrics["overhead"] or 0.0) * data_frames
-                                         + metrics["module_route_frames"]) / data_frames, 4)
+        metrics["overhead_all"] = round((sum(tot[k] for k in CONTROL) + metrics["module_route_frames"])
+                                        / data_frames, 4)
     grid = np.arange(0.0, duration + 1e-9, 10.0)
     per_robot = [np.interp(grid, [t for t, _ in s], [v for _, v in s], left=0.0) for s in series.values()]
     return TrialResult(metrics, {"packets": np.round(np.mean(per_robot, axis=0), 1).tolist()},

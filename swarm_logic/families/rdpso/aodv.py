@@ -226,8 +226,7 @@ class Router:
                 elif not st.ok:
                     self.stats["tx_failed"] += 1
                     if out.hop is not None:
-                        if self.mode != "module":  # (a module that routes has tried its own routes already)
-                            self._link_break(out.hop)
+                        self._link_break(out.hop)
                         if out.data is not None:
                             self.stats["data_dropped_link"] += 1
             elif now - t0 > TX_STATUS_TIMEOUT_S:
