@@ -408,17 +408,20 @@ def _start_method() -> str:
 
 @contextlib.contextmanager
 def _no_interrupts():
-    """Ignore Ctrl-C while shutting down, so a second one cannot leave workers behind."""
+    """Ignore Ctrl-C and SIGTERM while shutting down: a second one (a user pressing Ctrl-C twice, a supervisor's
+    repeated TERM) would cut the shutdown short, and the runner would then wait on trials still running, or die
+    leaving its workers behind."""
     from bridge.core.launcher import on_main_thread
 
     if not on_main_thread():
         yield
         return
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    old = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old)
+        for s, handler in old.items():
+            signal.signal(s, handler)
 
 
 def _abort(pool: ProcessPoolExecutor, grace_s: float = 5.0) -> None:

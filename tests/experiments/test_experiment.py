@@ -10,6 +10,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -328,6 +329,23 @@ def test_in_process_interrupt_ends_the_run_even_when_a_trial_catches_it(tmp_path
     done = _rows(out / "trials.csv")
     assert len(done) == FINISHING and "interrupted" in stdout
     assert not [r for r in done if r["error"]]  # the trial cut short is not reported as a failure
+
+
+def test_a_second_interrupt_cannot_cut_the_shutdown_short() -> None:
+    # the runner's handlers turn Ctrl-C and SIGTERM into KeyboardInterrupt; were one to raise inside the shutdown,
+    # the workers would be left running (a user pressing Ctrl-C twice, a supervisor sending TERM again)
+    got: list[int] = []
+    old = {s: signal.signal(s, lambda n, f: got.append(n)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with ex._no_interrupts():
+            for s in old:
+                assert signal.getsignal(s) == signal.SIG_IGN
+                signal.pthread_kill(threading.main_thread().ident, s)
+        assert got == []
+        assert all(signal.getsignal(s) not in (signal.SIG_IGN, signal.SIG_DFL) for s in old)  # restored
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 def test_a_session_hands_a_caught_signal_on_to_the_program_that_ran_it() -> None:
