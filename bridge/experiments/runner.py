@@ -228,9 +228,19 @@ def _worker_init() -> None:
     # the parent owns Ctrl-C: it cancels what is pending and terminates the workers; and should the parent die
     # without that (SIGKILL), the kernel stops the worker, whose session then stops its own processes
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _worker_terminated)
     from bridge.hosts.parent import die_with_parent
 
     die_with_parent(signal.SIGTERM)
+
+
+def _worker_terminated(signum: int, frame: Any) -> None:
+    """A worker ends on SIGTERM, as with the default action. A handler and not the default, because a session
+    running in the worker takes the signal first to stop its processes and write its recording, then hands it to
+    the handler it found (``launcher._pass_on``); the default there would be no handler, and a worker whose runner
+    had died would live on, waiting for work."""
+    signal.signal(signum, signal.SIG_DFL)
+    os.kill(os.getpid(), signum)
 
 
 # the directory holding the packages (the checkout): error texts name files relative to it, so that they do not

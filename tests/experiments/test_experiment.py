@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -126,6 +127,26 @@ class Swallowing(Sleepy):
             return _slow_trial(trial)
         except KeyboardInterrupt:
             raise RuntimeError("session interrupted") from None
+
+
+@register
+class SessionInWorker(Experiment):
+    name = "test-session-in-worker"
+    title = "A long session as a trial, in a worker process"
+    description = "For killing its runner."
+    trials = 1
+
+    def cells(self, smoke: bool) -> list[dict[str, Any]]:
+        return [{"s": 1}]
+
+    def run(self, trial: Trial) -> TrialResult:
+        from bridge.core.launcher import run_session
+
+        (Path(trial.workdir) / "pid").write_text(str(os.getpid()))
+        config = ROOT / "hil_configs" / "demos" / "random_walk.toml"  # no radios: the quickest start
+        run_session(str(config), {"session.duration_s": 3600}, str(Path(trial.workdir) / "session"), progress=None,
+                    plot=False)
+        return TrialResult(metrics={})
 
 
 def wait_until(cond, what: str, within_s: float = 120) -> None:
@@ -329,6 +350,33 @@ def test_in_process_interrupt_ends_the_run_even_when_a_trial_catches_it(tmp_path
     done = _rows(out / "trials.csv")
     assert len(done) == FINISHING and "interrupted" in stdout
     assert not [r for r in done if r["error"]]  # the trial cut short is not reported as a failure
+
+
+@pytest.mark.session
+def test_a_runner_killed_while_a_worker_runs_a_session_takes_the_worker_and_the_session_with_it(
+        tmp_path: Path) -> None:
+    # SIGKILL leaves the runner no say: the kernel sends its workers SIGTERM (PR_SET_PDEATHSIG); the session in the
+    # worker takes that signal to stop its processes, then hands it on, and the worker ends too
+    out = tmp_path / "killed"
+    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import tests.experiments.test_experiment; "
+            f"from bridge.tools.cli import main; main(['experiment', 'test-session-in-worker', '--jobs', '2', "
+            f"'--quiet', '--out', {str(out)!r}])")
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    pid_file = out / "work" / "s-1" / "0" / "pid"
+    wait_until(pid_file.exists, "the trial did not start")
+    worker = psutil.Process(int(pid_file.read_text()))
+    wait_until(lambda: len(worker.children()) > 1, "the session did not start its processes")
+    procs = [worker, *worker.children(recursive=True)]
+    p.kill()
+    p.wait()
+    try:
+        wait_until(lambda: not any(q.is_running() and q.status() != psutil.STATUS_ZOMBIE for q in procs),
+                   "the worker and its session's processes did not go")
+    finally:  # a failing run leaves nothing behind either
+        for q in procs:
+            with contextlib.suppress(psutil.Error):
+                q.kill()
 
 
 def test_a_second_interrupt_cannot_cut_the_shutdown_short() -> None:
