@@ -130,14 +130,11 @@ class Swallowing(Sleepy):
 
 
 @register
-class SessionInWorker(Experiment):
+class SessionInWorker(Sleepy):
     name = "test-session-in-worker"
     title = "A long session as a trial, in a worker process"
     description = "For killing its runner."
     trials = 1
-
-    def cells(self, smoke: bool) -> list[dict[str, Any]]:
-        return [{"s": 1}]
 
     def run(self, trial: Trial) -> TrialResult:
         from bridge.core.launcher import run_session
